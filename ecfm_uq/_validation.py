@@ -1,0 +1,56 @@
+"""Argument checks shared by the public API (validate once, at the boundary)."""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+
+
+def as_finite_array(name, value, *, ndim=None, shape=None, dtype=float):
+    """Return ``value`` as a finite ndarray or raise a ValueError naming ``name``.
+
+    ``shape`` may contain ``None`` for free axes.
+    """
+    try:
+        arr = np.asarray(value, dtype=dtype)
+    except (TypeError, ValueError) as e:
+        raise TypeError(f"`{name}` must be array-like of numbers, got {type(value).__name__}") from e
+    if ndim is not None and arr.ndim != ndim:
+        raise ValueError(f"`{name}` must be {ndim}-D, got shape {arr.shape}")
+    if shape is not None:
+        if arr.ndim != len(shape) or any(
+            s is not None and s != a for s, a in zip(shape, arr.shape, strict=True)
+        ):
+            want = tuple("any" if s is None else s for s in shape)
+            raise ValueError(f"`{name}` must have shape {want}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"`{name}` contains NaN or inf; pass finite values only")
+    return arr
+
+
+def check_int(name, value, *, minimum=None):
+    """Return ``value`` as int, raising TypeError/ValueError naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"`{name}` must be an integer, got {value!r}")
+    value = int(value)
+    if minimum is not None and value < minimum:
+        raise ValueError(f"`{name}` must be >= {minimum}, got {value}")
+    return value
+
+
+def check_positive(name, value):
+    """Return ``value`` as a positive finite float."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"`{name}` must be a real number, got {value!r}")
+    value = float(value)
+    if not np.isfinite(value) or value <= 0:
+        raise ValueError(f"`{name}` must be positive and finite, got {value}")
+    return value
+
+
+def check_choice(name, value, choices):
+    """Raise ValueError unless ``value`` is one of ``choices``."""
+    if value not in choices:
+        raise ValueError(f"unknown `{name}` {value!r}; choose one of {sorted(choices)}")
+    return value

@@ -1,0 +1,28 @@
+"""Polynomial chaos on a uniform germ: shifted Legendre basis, quadrature, expectation tensors.
+
+The germ is omega ~ U(0, 1)^dim with independent components (paper Section 3.3, where
+dim = 1). A field is expanded as theta_i(omega) = Theta_ij Psi_j(omega) and projected with
+the expectations computed here (paper Eq. ``pce``). Deterministic problems are the P = 1
+case, ``ChaosBasis(0)``, for which every tensor is the scalar 1.
+
+Public API
+----------
+ChaosBasis           basis terms Psi_k, multi-indices, evaluation, quadrature
+gauss_legendre       Gauss-Legendre nodes and probability weights on [0, 1]
+expectation_tensor   E[Psi_k], E[Psi_i Psi_j], E[Psi_i Psi_j Psi_k] (dense or sparse)
+weighted_gram        E[g(omega) Psi_k Psi_l]
+SparseTensor3        coordinate-form third-order tensor with contractions
+"""
+
+from .basis import ChaosBasis
+from .quadrature import gauss_legendre
+from .tensors import SparseTensor3, expectation_tensor, triple_product_1d, weighted_gram
+
+__all__ = [
+    "ChaosBasis",
+    "SparseTensor3",
+    "expectation_tensor",
+    "gauss_legendre",
+    "triple_product_1d",
+    "weighted_gram",
+]

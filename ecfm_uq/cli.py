@@ -1,0 +1,132 @@
+"""The ``ecfm-uq`` command: ``ecfm-uq reproduce STUDY --out DIR [options]``.
+
+Each study writes ``DIR/STUDY/result.json`` (atomically) and its figures; ``all`` runs
+every study and writes ``DIR/summary.md``. User mistakes end with a one-line message and
+a non-zero exit code, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+import time
+from pathlib import Path
+
+from .errors import ConvergenceError, SingularSystemError
+from .studies import STUDY_NAMES
+from .studies._common import Progress, write_json
+
+EXIT_USAGE = 2
+EXIT_FAILED = 1
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports errors on one line."""
+
+    def error(self, message):
+        self.exit(EXIT_USAGE, f"ecfm-uq: error: {message}\n")
+
+
+def load_study(name):
+    """Import ``ecfm_uq.studies.<name>``."""
+    return importlib.import_module(f"ecfm_uq.studies.{name}")
+
+
+def available_studies():
+    """Names of the studies whose modules are installed."""
+    names = []
+    for name in STUDY_NAMES:
+        try:
+            load_study(name)
+        except ModuleNotFoundError as e:
+            if e.name != f"ecfm_uq.studies.{name}":
+                raise
+            continue
+        names.append(name)
+    return names
+
+
+def _add_common(p):
+    p.add_argument("--out", required=True, type=Path, help="output folder (created if missing)")
+    p.add_argument("--seed", type=int, default=None, help="random seed (study default if omitted)")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+
+
+def build_parser():
+    parser = _Parser(
+        prog="ecfm-uq",
+        description=(
+            "Polynomial chaos and the explicit constraint force method (ECFM) for inverse "
+            "problems. `ecfm-uq reproduce STUDY --out DIR` reproduces a section of the paper "
+            "and writes DIR/STUDY/result.json plus figures; `reproduce all` runs every study "
+            "and writes DIR/summary.md (paper value beside ours)."
+        ),
+    )
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    rep = sub.add_parser(
+        "reproduce",
+        help="reproduce a study of the paper",
+        description="Reproduce one study of the paper (or all of them).",
+    )
+    studies = rep.add_subparsers(dest="study", required=True, metavar="STUDY", parser_class=_Parser)
+    for name in available_studies():
+        mod = load_study(name)
+        p = studies.add_parser(name, help=mod.DESCRIPTION, description=mod.DESCRIPTION)
+        _add_common(p)
+        mod.add_arguments(p)
+    p = studies.add_parser("all", help="every study, plus summary.md")
+    _add_common(p)
+    return parser
+
+
+def run_study(name, settings, out_root, progress):
+    """Run one study with ``settings`` and write ``out_root/name/result.json``."""
+    mod = load_study(name)
+    out_dir = Path(out_root) / name
+    out_dir.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    result = mod.run(settings, out_dir, progress)
+    result.setdefault("settings", settings)
+    result["wall_time_s"] = round(time.perf_counter() - t0, 3)
+    write_json(out_dir / "result.json", result)
+    return result
+
+
+def _check_out(out):
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".ecfm_uq_write_test"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as e:
+        raise OSError(f"--out {out}: cannot write there ({e.strerror or e})") from e
+
+
+def main(argv=None):
+    """Console entry point."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    progress = Progress(quiet=args.quiet)
+    try:
+        _check_out(args.out)
+        if args.study == "all":
+            from .summary import reproduce_all
+
+            reproduce_all(args.out, progress, seed=args.seed)
+        else:
+            mod = load_study(args.study)
+            settings = mod.settings_from_args(args)
+            run_study(args.study, settings, args.out, progress)
+    except (ValueError, TypeError, ConvergenceError, SingularSystemError, OSError) as e:
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        print(f"ecfm-uq: error: {msg}", file=sys.stderr)
+        return EXIT_FAILED
+    except KeyboardInterrupt:
+        print("ecfm-uq: interrupted", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

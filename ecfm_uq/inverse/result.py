@@ -1,0 +1,47 @@
+"""The common result of every inverse formulation."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class InverseResult:
+    """Outcome of an inverse solve.
+
+    Attributes
+    ----------
+    eps : (n_eps,) ndarray
+        Final model parameters.
+    loss : float
+        Objective at ``eps``.
+    success : bool
+        Whether the optimizer (and every inner solve) reported success.
+    message : str
+    nit : int
+        Optimizer iterations (epochs for Adam).
+    method : str
+        ``"standard"``, ``"ecfm"``, ``"noisy-ecfm"``, ...
+    eps_history : (nit + 1, n_eps) ndarray
+    loss_history : (nit + 1,) ndarray
+    extra : dict
+        Formulation-specific outputs (state, forces, diagnostics).
+    """
+
+    eps: np.ndarray
+    loss: float
+    success: bool
+    message: str
+    nit: int
+    method: str
+    eps_history: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    loss_history: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    extra: dict = field(default_factory=dict)
+
+    def __repr__(self):
+        return (
+            f"InverseResult(method={self.method!r}, eps={np.array2string(self.eps, precision=6)}, "
+            f"loss={self.loss:.3e}, success={self.success}, nit={self.nit}, message={self.message!r})"
+        )

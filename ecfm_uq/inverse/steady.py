@@ -1,0 +1,150 @@
+"""Standard and ECFM inverse problems for steady systems (paper Eqs. traditional, ecfm;
+Section 4).
+
+Both are reduced to unconstrained problems in :math:`\\epsilon` by treating the state
+(and, for ECFM, the forces) as functions of :math:`\\epsilon` through the system and its
+sensitivities:
+
+* standard: :math:`z^{INV}(\\epsilon) = \\tfrac12\\|\\mathcal M\\,\\mathbb E[\\theta(\\epsilon)] - v\\|^2`,
+  :math:`\\nabla z = e^T \\mathcal M\\,\\partial\\mathbb E[\\theta]/\\partial\\epsilon`;
+* ECFM (inner-outer): :math:`(\\theta, \\lambda)(\\epsilon)` solve
+  :math:`R(\\theta;\\epsilon) - \\Gamma\\lambda = 0,\\ \\mathcal M\\theta = v`, and
+  :math:`z^{ECFM}(\\epsilon) = \\tfrac12\\|\\lambda(\\epsilon)\\|^2`,
+  :math:`\\nabla z = \\lambda^T\\partial\\lambda/\\partial\\epsilon`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.optimize as sopt
+
+from .._validation import as_finite_array
+from ..errors import ConvergenceError
+from ..system import solve_steady
+from .result import InverseResult
+
+
+def _data(system, M_obs, v):
+    M_obs = as_finite_array("M_obs", M_obs, ndim=2)
+    if M_obs.shape[1] != system.N:
+        raise ValueError(f"`M_obs` must have {system.N} columns (N), got {M_obs.shape}")
+    v = as_finite_array("v", v, shape=(M_obs.shape[0],))
+    return M_obs, v
+
+
+def standard_objective(system, M_obs, v, eps, **solve_kw):
+    """:math:`z^{INV}` and its gradient at ``eps``.
+
+    Returns
+    -------
+    z : float
+    grad : (n_eps,) ndarray
+    sol : SteadySolution
+    """
+    sol = solve_steady(system, eps, strict=True, **solve_kw)
+    e = M_obs @ system.mean(sol.Theta) - v
+    dTheta, _ = sol.eps_sensitivity()
+    dmean = np.einsum("ikm,k->im", dTheta, system.E1)
+    return 0.5 * float(e @ e), (M_obs @ dmean).T @ e, sol
+
+
+def ecfm_objective(system, M_obs, v, eps, **solve_kw):
+    """:math:`z^{ECFM}` and its gradient at ``eps`` (equality-constrained forces).
+
+    Returns
+    -------
+    z : float
+    grad : (n_eps,) ndarray
+    sol : SteadySolution
+        With ``sol.lam`` the constraint forces :math:`\\lambda(\\epsilon)`.
+    """
+    sol = solve_steady(system, eps, constraint=(M_obs, v), strict=True, **solve_kw)
+    _, dlam = sol.eps_sensitivity()
+    return 0.5 * float(sol.lam @ sol.lam), dlam.T @ sol.lam, sol
+
+
+_OBJECTIVES = {"standard": standard_objective, "ecfm": ecfm_objective}
+
+
+def fit_steady(
+    system,
+    M_obs,
+    v,
+    eps0,
+    formulation="ecfm",
+    *,
+    method="BFGS",
+    gtol=1e-10,
+    maxiter=500,
+    bounds=None,
+    solve_options=None,
+):
+    """Fit :math:`\\epsilon` of a steady system to data by the standard or ECFM formulation.
+
+    Parameters
+    ----------
+    system : GalerkinSystem
+        With ``Gamma`` for ``formulation="ecfm"``.
+    M_obs : (C, N) array_like
+    v : (C,) array_like
+    eps0 : (n_eps,) array_like
+        Starting point.
+    formulation : {"standard", "ecfm"}
+    method : str
+        A gradient-based ``scipy.optimize.minimize`` method (BFGS, L-BFGS-B, ...).
+    gtol : float
+    maxiter : int
+    bounds : sequence of (lo, hi), optional
+        For bounded methods; keeps trial parameters physical (e.g. a positive length).
+    solve_options : dict, optional
+        Passed to :func:`solve_steady` (``tol``, ``maxiter``).
+
+    Returns
+    -------
+    InverseResult
+        ``extra`` holds ``Theta`` and ``lam`` at the optimum (``lam`` is the ECFM
+        constraint force, zero-length for the standard formulation).
+    """
+    if formulation not in _OBJECTIVES:
+        raise ValueError(f"unknown `formulation` {formulation!r}; choose 'standard' or 'ecfm'")
+    if formulation == "ecfm" and system.Gamma is None:
+        raise ValueError("formulation='ecfm' needs a system with constraint forces (Gamma)")
+    M_obs, v = _data(system, M_obs, v)
+    eps0 = system.check_eps(eps0)
+    objective = _OBJECTIVES[formulation]
+    solve_kw = dict(solve_options or {})
+    hist_eps, hist_loss = [], []
+    failures = []
+
+    def fun(eps):
+        try:
+            z, g, _ = objective(system, M_obs, v, eps, **solve_kw)
+        except ConvergenceError as e:
+            failures.append(str(e))
+            return np.inf, np.zeros_like(eps)
+        return z, g
+
+    def callback(xk, *args):
+        hist_eps.append(np.array(xk))
+        hist_loss.append(fun(xk)[0])
+
+    callback(eps0)
+    opts = {"maxiter": maxiter}
+    if method.upper() in {"BFGS", "CG", "L-BFGS-B", "TNC"}:
+        opts["gtol"] = gtol
+    res = sopt.minimize(fun, eps0, jac=True, method=method, bounds=bounds, options=opts, callback=callback)
+    z, _, sol = objective(system, M_obs, v, res.x, **solve_kw)
+    msg = str(res.message)
+    if failures:
+        msg += f" ({len(failures)} inner solves failed; first: {failures[0]})"
+    return InverseResult(
+        eps=np.asarray(res.x),
+        loss=z,
+        success=bool(res.success),
+        message=msg,
+        nit=int(res.nit),
+        method=formulation,
+        eps_history=np.array(hist_eps),
+        loss_history=np.array(hist_loss),
+        extra={"Theta": sol.Theta, "lam": sol.lam if formulation == "ecfm" else np.zeros(0)},
+    )

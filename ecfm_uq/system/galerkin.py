@@ -1,0 +1,162 @@
+"""The stochastic Galerkin system :math:`R(\\Theta; \\epsilon, \\lambda) = 0`.
+
+.. math::
+
+    R_{i\\ell} = \\sum_{\\text{terms}} (\\ldots)_{i\\ell}
+        - \\Gamma_{ij}\\lambda_j\\,\\mathbb E[\\Psi_\\ell],
+
+the paper's Eq. (pce) in general form: linear operators with random coefficients,
+polynomial nonlinearities and loads (see :mod:`.terms`), plus constraint forces
+:math:`\\Gamma\\lambda` (Eqs. parameterized_bvp_ecfm, random_govern). With no chaos basis
+(``P = 1``, :math:`\\Psi_0 = 1`) it is the deterministic discretized system of Sections
+3.1, 3.2 and 4, solved by the same code.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._validation import as_finite_array, check_int
+from .terms import LinearTerm, LoadTerm, QuadraticTerm
+
+
+class GalerkinSystem:
+    """A discretized, parameterized (stochastic) model.
+
+    Parameters
+    ----------
+    terms : sequence of LinearTerm, QuadraticTerm, LoadTerm
+        Residual contributions; they are summed.
+    n_eps : int
+        Number of model parameters :math:`\\epsilon`.
+    basis : ChaosBasis, optional
+        Stochastic basis; ``None`` for a deterministic system (``P = 1``).
+    Gamma : (N, C) array_like, optional
+        Constraint-force vectors :math:`\\Gamma_{ij} = \\int f_i\\Gamma(x - x_j)`.
+    M : (N, N) array_like, optional
+        Mass matrix for time-dependent systems :math:`M\\dot\\theta + R = 0`.
+    name : str
+
+    Notes
+    -----
+    Shapes: :math:`\\Theta` is ``(N, P)``, flattened row-major (index ``i * P + k``) in
+    Jacobians; :math:`\\epsilon` is ``(n_eps,)``; :math:`\\lambda` is ``(C,)``.
+    """
+
+    def __init__(self, terms, n_eps, basis=None, Gamma=None, M=None, name="system"):
+        self.terms = list(terms)
+        if not self.terms:
+            raise ValueError("`terms` must contain at least one term")
+        for term in self.terms:
+            if not isinstance(term, LinearTerm | QuadraticTerm | LoadTerm):
+                raise TypeError(f"unsupported term {term!r}; use LinearTerm, QuadraticTerm, LoadTerm")
+        self.n_eps = check_int("n_eps", n_eps, minimum=0)
+        self.basis = basis
+        if basis is None:
+            self.E1 = np.ones(1)
+            self.E2 = np.ones((1, 1))
+            self.E3 = np.ones((1, 1, 1))
+        else:
+            from ..chaos import expectation_tensor
+
+            self.E1 = np.asarray(expectation_tensor(basis, 1), dtype=float)
+            self.E2 = np.asarray(expectation_tensor(basis, 2), dtype=float)
+            needs3 = any(isinstance(t, QuadraticTerm) for t in self.terms)
+            self.E3 = np.asarray(expectation_tensor(basis, 3), dtype=float) if needs3 else None
+        self.P = self.E1.size
+        sizes = {t.K.shape[0] for t in self.terms if isinstance(t, LinearTerm)}
+        sizes |= {t.form.size for t in self.terms if isinstance(t, QuadraticTerm)}
+        if len(sizes) != 1:
+            raise ValueError(f"terms disagree on the state size N: {sorted(sizes)}")
+        self.N = sizes.pop()
+        for term in self.terms:
+            if isinstance(term, LinearTerm):
+                term.bind(self.E2)
+            elif isinstance(term, QuadraticTerm):
+                term.bind(self.E3)
+            else:
+                term.bind(self.E1)
+        self.Gamma = None if Gamma is None else as_finite_array("Gamma", Gamma, ndim=2)
+        if self.Gamma is not None and self.Gamma.shape[0] != self.N:
+            raise ValueError(f"`Gamma` must have {self.N} rows (N), got {self.Gamma.shape}")
+        self.M = None if M is None else as_finite_array("M", M, shape=(self.N, self.N))
+        self.name = name
+
+    # -- sizes -------------------------------------------------------------------------
+    @property
+    def n_forces(self):
+        """Number of constraint forces C (0 without Gamma)."""
+        return 0 if self.Gamma is None else self.Gamma.shape[1]
+
+    @property
+    def shape(self):
+        """State shape (N, P)."""
+        return (self.N, self.P)
+
+    def zeros(self):
+        """A zero state of shape (N, P)."""
+        return np.zeros(self.shape)
+
+    def check_eps(self, eps):
+        """Validate ``eps`` as a finite (n_eps,) vector."""
+        return as_finite_array("eps", np.atleast_1d(eps), shape=(self.n_eps,))
+
+    def check_lam(self, lam):
+        """Validate ``lam`` (None means zero forces)."""
+        if lam is None:
+            return np.zeros(self.n_forces)
+        if self.Gamma is None:
+            raise ValueError("`lam` given but the system has no constraint forces (Gamma=None)")
+        return as_finite_array("lam", np.atleast_1d(lam), shape=(self.n_forces,))
+
+    # -- residual and derivatives ------------------------------------------------------
+    def residual(self, Theta, eps, lam=None, t=None):
+        """:math:`R(\\Theta; \\epsilon, \\lambda)` of shape (N, P)."""
+        R = np.zeros(self.shape)
+        for term in self.terms:
+            R += term.apply(Theta, eps, t)
+        if lam is not None and self.Gamma is not None:
+            R -= np.outer(self.Gamma @ lam, self.E1)
+        return R
+
+    def jacobian(self, Theta, eps, t=None):
+        """:math:`\\partial\\,\\mathrm{vec}R / \\partial\\,\\mathrm{vec}\\Theta`, shape (NP, NP)."""
+        n = self.N * self.P
+        J = np.zeros((n, n))
+        for term in self.terms:
+            Jt = term.jacobian(Theta, eps, t)
+            if Jt is not None:
+                J += Jt
+        return J
+
+    def eps_jacobian(self, Theta, eps, t=None):
+        """:math:`\\partial\\,\\mathrm{vec}R / \\partial\\epsilon`, shape (NP, n_eps)."""
+        D = np.zeros((self.N * self.P, self.n_eps))
+        for term in self.terms:
+            D += term.eps_jacobian(Theta, eps, t)
+        return D
+
+    def lam_jacobian(self):
+        """:math:`\\partial\\,\\mathrm{vec}R / \\partial\\lambda = -\\Gamma\\otimes\\mathbb E[\\Psi]`, (NP, C)."""
+        if self.Gamma is None:
+            return np.zeros((self.N * self.P, 0))
+        return -(self.Gamma[:, None, :] * self.E1[None, :, None]).reshape(self.N * self.P, -1)
+
+    def mass_matrix(self):
+        """:math:`M \\otimes \\mathbb E[\\Psi_k\\Psi_\\ell]`, shape (NP, NP)."""
+        if self.M is None:
+            raise ValueError(f"system {self.name!r} has no mass matrix; pass M= for time stepping")
+        return np.kron(self.M, self.E2.T)
+
+    # -- statistics --------------------------------------------------------------------
+    def mean(self, Theta):
+        """:math:`\\mathbb E[\\theta] = \\Theta\\,\\mathbb E[\\Psi]`, shape (N,)."""
+        return Theta @ self.E1
+
+    def covariance(self, Theta):
+        """:math:`\\mathrm{Cov}[\\theta] = \\Theta\\,\\mathbb E[\\Psi\\Psi^T]\\,\\Theta^T - \\mu\\mu^T`, (N, N)."""
+        mu = self.mean(Theta)
+        return Theta @ self.E2 @ Theta.T - np.outer(mu, mu)
+
+    def __repr__(self):
+        return f"GalerkinSystem({self.name!r}, N={self.N}, P={self.P}, n_eps={self.n_eps}, C={self.n_forces})"

@@ -1,0 +1,408 @@
+"""Newton solvers for steady and backward-Euler systems, with forward sensitivities.
+
+Steady problems solve :math:`R(\\Theta;\\epsilon,\\lambda) = 0`, optionally augmented with
+the data constraint :math:`\\mathcal M\\,\\mathbb E[\\theta] - v = 0` for the unknowns
+:math:`(\\Theta, \\lambda)` (the ECFM inner problem, Eq. ecfm and ecfm_solve).
+Dynamic problems march
+
+.. math::
+
+    \\frac{M}{\\Delta t}(\\Theta_{t+1} - \\Theta_t) + R(\\Theta_{t+1}; \\epsilon,
+    \\lambda_{t+1}, t_{t+1}) = 0
+
+(Eq. backward_euler), with the same optional constraint at every step. Forward
+sensitivities (Eqs. discrete_sens, discrete_sens_ecfm, stochastic_sens) reuse the
+factorized Jacobian at the converged state: after convergence the Jacobian is evaluated
+and factorized once more, used for one last Newton correction and for all
+sensitivity right-hand sides.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg as sla
+
+from .._validation import as_finite_array, check_int, check_positive
+from ..errors import ConvergenceError
+
+
+@dataclass
+class NewtonInfo:
+    """Outcome of one Newton solve."""
+
+    success: bool
+    nit: int
+    residual_norm: float
+    message: str
+
+
+def _factor(J):
+    lu = sla.lu_factor(J, check_finite=False)
+    # lu_factor only warns on exact singularity; detect it ourselves
+    d = np.abs(np.diag(lu[0]))
+    if d.min() <= 1e-14 * max(d.max(), 1e-300):
+        return None
+    return lu
+
+
+def newton(fun, z0, tol=1e-10, maxiter=50):
+    """Newton's method on ``fun(z) -> (r, J)``.
+
+    Returns ``(z, lu, info)`` where ``lu`` factorizes the Jacobian at the returned
+    ``z`` (``None`` when the iteration failed).
+
+    Convergence is declared when :math:`\\|r\\|_2 < \\mathrm{tol}`; the Jacobian is then
+    evaluated at the converged point, factorized, and used for one final correction
+    (so the returned ``lu`` is exact for sensitivities).
+    """
+    z = np.array(z0, dtype=float)
+    rnorm = np.inf
+    for k in range(maxiter + 1):
+        r, J = fun(z)
+        rnorm = float(np.linalg.norm(r))
+        if not np.isfinite(rnorm):
+            return z, None, NewtonInfo(False, k, rnorm, "residual became non-finite")
+        lu = _factor(J)
+        if lu is None:
+            return z, None, NewtonInfo(False, k, rnorm, "Jacobian is singular")
+        dz = sla.lu_solve(lu, r, check_finite=False)
+        z = z - dz
+        if rnorm < tol:
+            return z, lu, NewtonInfo(True, k, rnorm, "converged")
+    return z, None, NewtonInfo(False, maxiter, rnorm, f"no convergence in {maxiter} iterations")
+
+
+def _check_constraint(system, constraint, n_rows=None):
+    if constraint is None:
+        return None, None
+    if system.Gamma is None:
+        raise ValueError("a data `constraint` needs constraint forces: build the system with Gamma")
+    try:
+        M_obs, v = constraint
+    except (TypeError, ValueError) as e:
+        raise TypeError("`constraint` must be a pair (M_obs, v)") from e
+    M_obs = as_finite_array("M_obs", M_obs, shape=(system.n_forces, system.N))
+    v = as_finite_array("v", v)
+    want = (system.n_forces,) if n_rows is None else (n_rows, system.n_forces)
+    if v.shape != want:
+        raise ValueError(f"`v` must have shape {want}, got {v.shape}")
+    return M_obs, v
+
+
+# --------------------------------------------------------------------------------------
+# steady
+# --------------------------------------------------------------------------------------
+@dataclass
+class SteadySolution:
+    """Result of :func:`solve_steady`.
+
+    Attributes
+    ----------
+    Theta : (N, P) ndarray
+    lam : (C,) ndarray
+        Constraint forces (given, or solved for under a data constraint).
+    success, nit, residual_norm, message
+        Newton outcome; a failed solve keeps its last iterate for diagnosis only.
+    """
+
+    system: object
+    eps: np.ndarray
+    Theta: np.ndarray
+    lam: np.ndarray
+    success: bool
+    nit: int
+    residual_norm: float
+    message: str
+    constrained: bool = False
+    _lu: object = field(default=None, repr=False)
+    _M_obs: object = field(default=None, repr=False)
+
+    def _require(self):
+        if not self.success:
+            raise ConvergenceError(f"sensitivities of a failed solve: {self.message}")
+
+    def _solve(self, rhs):
+        return sla.lu_solve(self._lu, rhs, check_finite=False)
+
+    def eps_sensitivity(self):
+        """:math:`\\partial\\Theta/\\partial\\epsilon` (N, P, n_eps) and, under a data
+        constraint, :math:`\\partial\\lambda/\\partial\\epsilon` (C, n_eps) (else ``None``)."""
+        self._require()
+        sysm = self.system
+        n = sysm.N * sysm.P
+        D = sysm.eps_jacobian(self.Theta, self.eps)
+        if self.constrained:
+            D = np.vstack([D, np.zeros((sysm.n_forces, sysm.n_eps))])
+        S = -self._solve(D)
+        dTheta = S[:n].reshape(sysm.N, sysm.P, sysm.n_eps)
+        return dTheta, (S[n:] if self.constrained else None)
+
+    def lam_sensitivity(self):
+        """:math:`\\partial\\Theta/\\partial\\lambda` (N, P, C) for given forces (Eq. stochastic_sens)."""
+        self._require()
+        if self.constrained:
+            raise ValueError("lam is an unknown of a constrained solve; it has no sensitivity")
+        sysm = self.system
+        S = -self._solve(sysm.lam_jacobian())
+        return S.reshape(sysm.N, sysm.P, sysm.n_forces)
+
+
+def solve_steady(
+    system,
+    eps,
+    lam=None,
+    *,
+    constraint=None,
+    Theta0=None,
+    tol=1e-10,
+    maxiter=50,
+    strict=False,
+):
+    """Solve the steady system :math:`R(\\Theta; \\epsilon, \\lambda) = 0` by Newton's method.
+
+    Parameters
+    ----------
+    system : GalerkinSystem
+    eps : (n_eps,) array_like
+    lam : (C,) array_like, optional
+        Given constraint forces (ignored with ``constraint``).
+    constraint : (M_obs, v), optional
+        Data constraint :math:`\\mathcal M\\,\\Theta\\,\\mathbb E[\\Psi] = v` with
+        ``M_obs`` (C, N) and ``v`` (C,); :math:`\\lambda` becomes an unknown.
+    Theta0 : (N, P) array_like, optional
+        Initial guess (zero by default).
+    tol : float
+        Newton tolerance on :math:`\\|R\\|_2`.
+    maxiter : int
+    strict : bool
+        Raise :class:`ConvergenceError` instead of returning ``success=False``.
+
+    Returns
+    -------
+    SteadySolution
+    """
+    eps = system.check_eps(eps)
+    tol = check_positive("tol", tol)
+    maxiter = check_int("maxiter", maxiter, minimum=1)
+    M_obs, v = _check_constraint(system, constraint)
+    N, P = system.shape
+    n = N * P
+    Theta0 = system.zeros() if Theta0 is None else as_finite_array("Theta0", Theta0, shape=(N, P))
+    if M_obs is None:
+        lam = system.check_lam(lam)
+
+        def fun(z):
+            Th = z.reshape(N, P)
+            return system.residual(Th, eps, lam).ravel(), system.jacobian(Th, eps)
+
+        z, lu, info = newton(fun, Theta0.ravel(), tol, maxiter)
+        Theta, lam_out = z.reshape(N, P), lam
+    else:
+        Cth = np.kron(M_obs, system.E1[None, :])
+        Jl = system.lam_jacobian()
+        C = system.n_forces
+
+        def fun(z):
+            Th, lm = z[:n].reshape(N, P), z[n:]
+            r = np.concatenate([system.residual(Th, eps, lm).ravel(), Cth @ z[:n] - v])
+            J = np.block([[system.jacobian(Th, eps), Jl], [Cth, np.zeros((C, C))]])
+            return r, J
+
+        z0 = np.concatenate([Theta0.ravel(), np.zeros(C)])
+        z, lu, info = newton(fun, z0, tol, maxiter)
+        Theta, lam_out = z[:n].reshape(N, P), z[n:]
+    sol = SteadySolution(
+        system,
+        eps,
+        Theta,
+        lam_out,
+        info.success,
+        info.nit,
+        info.residual_norm,
+        info.message,
+        constrained=M_obs is not None,
+        _lu=lu,
+        _M_obs=M_obs,
+    )
+    if strict and not sol.success:
+        raise ConvergenceError(f"{system.name}: steady Newton failed at eps={eps}: {info.message}")
+    return sol
+
+
+# --------------------------------------------------------------------------------------
+# backward Euler
+# --------------------------------------------------------------------------------------
+@dataclass
+class Trajectory:
+    """Result of :func:`march`.
+
+    Attributes
+    ----------
+    times : (n_steps + 1,) ndarray
+    Theta : (n_steps + 1, N, P) ndarray
+        States. After a failure the arrays stop at the last converged step, so no
+        unconverged state is ever returned.
+    lam : (n_steps + 1, C) ndarray
+        Constraint forces (zero at t = 0).
+    dTheta : (n_steps + 1, N, P, n_eps) ndarray or None
+        :math:`\\partial\\Theta_t/\\partial\\epsilon` (Eq. discrete_sens / discrete_sens_ecfm).
+    dlam : (n_steps + 1, C, n_eps) ndarray or None
+    success : bool
+    message : str
+    failed_step : int or None
+        Index of the step whose Newton solve failed.
+    nit : (n_steps,) ndarray
+        Newton iterations per step.
+    """
+
+    times: np.ndarray
+    Theta: np.ndarray
+    lam: np.ndarray
+    dTheta: np.ndarray | None
+    dlam: np.ndarray | None
+    success: bool
+    message: str
+    failed_step: int | None
+    nit: np.ndarray
+
+
+def march(
+    system,
+    eps,
+    Theta0,
+    dt,
+    n_steps,
+    *,
+    t0=0.0,
+    constraint=None,
+    sensitivities=False,
+    tol=1e-10,
+    maxiter=30,
+    strict=False,
+):
+    """Integrate :math:`M\\dot\\Theta + R(\\Theta; \\epsilon, \\lambda, t) = 0` by backward Euler.
+
+    Parameters
+    ----------
+    system : GalerkinSystem
+        Must have a mass matrix ``M``.
+    eps : (n_eps,) array_like
+    Theta0 : (N, P) or (N,) array_like
+        Initial state (independent of :math:`\\epsilon`).
+    dt : float
+    n_steps : int
+    t0 : float
+    constraint : (M_obs, V), optional
+        Data constraint at every step, ``V`` of shape (n_steps + 1, C) with row ``t`` the
+        data at time ``t0 + t dt`` (row 0 unused). :math:`\\lambda_t` become unknowns
+        (Eq. ecfm_solve).
+    sensitivities : bool
+        Also integrate :math:`\\partial\\Theta/\\partial\\epsilon` (and
+        :math:`\\partial\\lambda/\\partial\\epsilon`) with the factorized step Jacobian.
+    tol, maxiter : Newton settings per step.
+    strict : bool
+        Raise :class:`ConvergenceError` on failure instead of returning ``success=False``.
+
+    Returns
+    -------
+    Trajectory
+    """
+    eps = system.check_eps(eps)
+    dt = check_positive("dt", dt)
+    n_steps = check_int("n_steps", n_steps, minimum=1)
+    tol = check_positive("tol", tol)
+    maxiter = check_int("maxiter", maxiter, minimum=1)
+    N, P = system.shape
+    n = N * P
+    Theta0 = as_finite_array("Theta0", Theta0)
+    if Theta0.shape == (N,):
+        Theta0 = np.outer(Theta0, np.eye(P)[0])
+    if Theta0.shape != (N, P):
+        raise ValueError(f"`Theta0` must have shape {(N, P)} or {(N,)}, got {Theta0.shape}")
+    M_obs, V = _check_constraint(system, constraint, n_rows=n_steps + 1)
+    constrained = M_obs is not None
+    C = system.n_forces if constrained else 0
+    Mdt = system.mass_matrix() / dt
+    if constrained:
+        Cth = np.kron(M_obs, system.E1[None, :])
+        Jl = system.lam_jacobian()
+
+    times = t0 + dt * np.arange(n_steps + 1)
+    Th = np.zeros((n_steps + 1, N, P))
+    Th[0] = Theta0
+    lam = np.zeros((n_steps + 1, C))
+    dTh = np.zeros((n_steps + 1, n, system.n_eps)) if sensitivities else None
+    dlam = np.zeros((n_steps + 1, C, system.n_eps)) if sensitivities and constrained else None
+    nits = np.zeros(n_steps, dtype=int)
+
+    for s in range(n_steps):
+        t1 = times[s + 1]
+        prev = Th[s].ravel()
+
+        if constrained:
+            v1 = V[s + 1]
+
+            def fun(z, prev=prev, t1=t1, v1=v1):
+                T1, l1 = z[:n].reshape(N, P), z[n:]
+                r1 = Mdt @ (z[:n] - prev) + system.residual(T1, eps, l1, t1).ravel()
+                J = np.block(
+                    [[Mdt + system.jacobian(T1, eps, t1), Jl], [Cth, np.zeros((C, C))]]
+                )
+                return np.concatenate([r1, Cth @ z[:n] - v1]), J
+
+            z0 = np.concatenate([prev, lam[s]])
+        else:
+
+            def fun(z, prev=prev, t1=t1):
+                T1 = z.reshape(N, P)
+                r1 = Mdt @ (z - prev) + system.residual(T1, eps, None, t1).ravel()
+                return r1, Mdt + system.jacobian(T1, eps, t1)
+
+            z0 = prev
+        z, lu, info = newton(fun, z0, tol, maxiter)
+        nits[s] = info.nit
+        if not info.success:
+            msg = (
+                f"{system.name}: Newton failed at step {s + 1} (t={t1:.6g}) with "
+                f"||R||={info.residual_norm:.3e}: {info.message}"
+            )
+            if strict:
+                raise ConvergenceError(msg)
+            k = s + 1
+            return Trajectory(
+                times[:k],
+                Th[:k],
+                lam[:k],
+                None if dTh is None else dTh[:k].reshape(k, N, P, -1),
+                None if dlam is None else dlam[:k],
+                False,
+                msg,
+                s + 1,
+                nits[: s + 1],
+            )
+        Th[s + 1] = z[:n].reshape(N, P)
+        if constrained:
+            lam[s + 1] = z[n:]
+        if sensitivities:
+            T1 = Th[s + 1]
+            rhs = Mdt @ dTh[s] - system.eps_jacobian(T1, eps, t1)
+            if constrained:
+                rhs = np.vstack([rhs, np.zeros((C, system.n_eps))])
+            S = sla.lu_solve(lu, rhs, check_finite=False)
+            dTh[s + 1] = S[:n]
+            if constrained:
+                dlam[s + 1] = S[n:]
+
+    return Trajectory(
+        times,
+        Th,
+        lam,
+        None if dTh is None else dTh.reshape(n_steps + 1, N, P, system.n_eps),
+        dlam,
+        True,
+        "converged at every step",
+        None,
+        nits,
+    )
