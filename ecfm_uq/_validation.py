@@ -15,7 +15,9 @@ def as_finite_array(name, value, *, ndim=None, shape=None, dtype=float):
     try:
         arr = np.asarray(value, dtype=dtype)
     except (TypeError, ValueError) as e:
-        raise TypeError(f"`{name}` must be array-like of numbers, got {type(value).__name__}") from e
+        raise TypeError(
+            f"`{name}` must be array-like of numbers, got {type(value).__name__}"
+        ) from e
     if ndim is not None and arr.ndim != ndim:
         raise ValueError(f"`{name}` must be {ndim}-D, got shape {arr.shape}")
     if shape is not None:

@@ -93,6 +93,8 @@ def fit_steady(
     method : str
         A gradient-based ``scipy.optimize.minimize`` method (BFGS, L-BFGS-B, ...).
     gtol : float
+        Gradient tolerance, relative: the optimizer sees the objective divided by its
+        value at ``eps0`` (so the tolerance does not depend on the data's units).
     maxiter : int
     bounds : sequence of (lo, hi), optional
         For bounded methods; keeps trial parameters physical (e.g. a positive length).
@@ -122,17 +124,21 @@ def fit_steady(
         except ConvergenceError as e:
             failures.append(str(e))
             return np.inf, np.zeros_like(eps)
-        return z, g
+        return z / scale, g / scale
 
     def callback(xk, *args):
         hist_eps.append(np.array(xk))
-        hist_loss.append(fun(xk)[0])
+        hist_loss.append(fun(xk)[0] * scale)
 
+    z0 = objective(system, M_obs, v, eps0, **solve_kw)[0]
+    scale = z0 if z0 > 0 else 1.0
     callback(eps0)
     opts = {"maxiter": maxiter}
     if method.upper() in {"BFGS", "CG", "L-BFGS-B", "TNC"}:
         opts["gtol"] = gtol
-    res = sopt.minimize(fun, eps0, jac=True, method=method, bounds=bounds, options=opts, callback=callback)
+    res = sopt.minimize(
+        fun, eps0, jac=True, method=method, bounds=bounds, options=opts, callback=callback
+    )
     z, _, sol = objective(system, M_obs, v, res.x, **solve_kw)
     msg = str(res.message)
     if failures:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import as_finite_array, check_int, check_positive
+from .._validation import as_finite_array, check_positive
 from .basis import SinusoidBasis, TensorBasis2D
 from .quadrature import composite_gauss, default_points
 

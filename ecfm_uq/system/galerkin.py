@@ -49,7 +49,9 @@ class GalerkinSystem:
             raise ValueError("`terms` must contain at least one term")
         for term in self.terms:
             if not isinstance(term, LinearTerm | QuadraticTerm | LoadTerm):
-                raise TypeError(f"unsupported term {term!r}; use LinearTerm, QuadraticTerm, LoadTerm")
+                raise TypeError(
+                    f"unsupported term {term!r}; use LinearTerm, QuadraticTerm, LoadTerm"
+                )
         self.n_eps = check_int("n_eps", n_eps, minimum=0)
         self.basis = basis
         if basis is None:

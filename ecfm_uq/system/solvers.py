@@ -19,6 +19,7 @@ sensitivity right-hand sides.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -39,7 +40,9 @@ class NewtonInfo:
 
 
 def _factor(J):
-    lu = sla.lu_factor(J, check_finite=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", sla.LinAlgWarning)
+        lu = sla.lu_factor(J, check_finite=False)
     # lu_factor only warns on exact singularity; detect it ourselves
     d = np.abs(np.diag(lu[0]))
     if d.min() <= 1e-14 * max(d.max(), 1e-300):
@@ -347,9 +350,7 @@ def march(
             def fun(z, prev=prev, t1=t1, v1=v1):
                 T1, l1 = z[:n].reshape(N, P), z[n:]
                 r1 = Mdt @ (z[:n] - prev) + system.residual(T1, eps, l1, t1).ravel()
-                J = np.block(
-                    [[Mdt + system.jacobian(T1, eps, t1), Jl], [Cth, np.zeros((C, C))]]
-                )
+                J = np.block([[Mdt + system.jacobian(T1, eps, t1), Jl], [Cth, np.zeros((C, C))]])
                 return np.concatenate([r1, Cth @ z[:n] - v1]), J
 
             z0 = np.concatenate([prev, lam[s]])

@@ -111,7 +111,9 @@ class LinearTerm:
         if self.G is None:
             self.G = E2
         if self.G.shape != E2.shape:
-            raise ValueError(f"term {self.name!r}: `G` has shape {self.G.shape}, expected {E2.shape}")
+            raise ValueError(
+                f"term {self.name!r}: `G` has shape {self.G.shape}, expected {E2.shape}"
+            )
 
     def apply(self, Theta, eps, t=None):
         return self.coef.value(eps) * (self.K @ Theta @ self.G)
