@@ -118,7 +118,14 @@ def main(argv=None):
             mod = load_study(args.study)
             settings = mod.settings_from_args(args)
             run_study(args.study, settings, args.out, progress)
-    except (ValueError, TypeError, ConvergenceError, SingularSystemError, OSError) as e:
+    except (
+        ValueError,
+        TypeError,
+        ConvergenceError,
+        SingularSystemError,
+        OSError,
+        RuntimeError,
+    ) as e:
         msg = str(e).splitlines()[0] if str(e) else type(e).__name__
         print(f"ecfm-uq: error: {msg}", file=sys.stderr)
         return EXIT_FAILED

@@ -1,0 +1,89 @@
+"""``ecfm-uq reproduce all``: run every study and write ``summary.md``.
+
+Each study runs with its default (paper) settings in its own folder; a failing study
+does not stop the others, but makes the command fail with a one-line reason after the
+summary (which records the failure) has been written.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from .studies._common import write_atomic
+
+
+def _default_settings(name, out, seed):
+    from .cli import build_parser
+
+    argv = ["reproduce", name, "--out", str(out), "--quiet"]
+    if seed is not None:
+        argv += ["--seed", str(seed)]
+    args = build_parser().parse_args(argv)
+    from .cli import load_study
+
+    return load_study(name).settings_from_args(args)
+
+
+def _fmt_holds(h):
+    return {True: "yes", False: "**no**", None: "n/a"}[h]
+
+
+def render_summary(entries):
+    """Markdown for a list of ``(name, rows, figures, error, seconds)`` entries."""
+    lines = [
+        "# ecfm_uq: paper vs measured",
+        "",
+        "Every study run with the paper's settings (see each `result.json` for the exact",
+        "settings). *holds* says whether the paper's claim is reproduced.",
+        "",
+    ]
+    for name, rows, figures, error, seconds in entries:
+        lines += [f"## {name}", ""]
+        if error is not None:
+            lines += [f"**FAILED**: {error}", ""]
+            continue
+        lines += [f"Result: [`{name}/result.json`]({name}/result.json), {seconds:.1f} s.", ""]
+        lines += ["| quantity | paper | ours | holds |", "|---|---|---|---|"]
+        for r in rows:
+            lines.append(
+                f"| {r['quantity']} | {r['paper']} | {r['ours']} | {_fmt_holds(r['holds'])} |"
+            )
+        if figures:
+            lines += ["", "Figures: " + ", ".join(f"[{f.name}]({name}/{f.name})" for f in figures)]
+        lines.append("")
+    return "\n".join(lines) + "\n"
+
+
+def reproduce_all(out, progress, seed=None, names=None):
+    """Run every available study into ``out/<study>`` and write ``out/summary.md``.
+
+    Raises
+    ------
+    RuntimeError
+        After writing the summary, if any study failed (the message names them).
+    """
+    from .cli import available_studies, load_study, run_study
+
+    out = Path(out)
+    names = available_studies() if names is None else list(names)
+    entries, failed = [], []
+    with progress.bar(len(names), "studies") as bar:
+        for name in names:
+            progress.log(f"running {name} ...")
+            t0 = time.perf_counter()
+            try:
+                settings = _default_settings(name, out, seed)
+                result = run_study(name, settings, out, progress)
+                rows = load_study(name).summary_rows(result)
+                figures = sorted((out / name).glob("*.png"))
+                entries.append((name, rows, figures, None, time.perf_counter() - t0))
+            except Exception as e:  # noqa: BLE001 - recorded, then re-raised as one failure
+                msg = f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"
+                entries.append((name, [], [], msg, time.perf_counter() - t0))
+                failed.append(f"{name} ({msg})")
+            bar.update()
+    write_atomic(out / "summary.md", render_summary(entries))
+    if failed:
+        raise RuntimeError("studies failed: " + "; ".join(failed))
+    return entries

@@ -1,0 +1,83 @@
+"""The ecfm-uq command's plumbing: help, one-line errors, atomic output, summary."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from ecfm_uq.cli import build_parser, main
+from ecfm_uq.studies._common import to_jsonable, write_json
+from ecfm_uq.summary import render_summary
+
+
+def run_cli(*argv):
+    return subprocess.run(
+        [sys.executable, "-m", "ecfm_uq.cli", *argv], capture_output=True, text=True, timeout=300
+    )
+
+
+def test_help_lists_the_reproduce_command():
+    r = run_cli("--help")
+    assert r.returncode == 0
+    assert "reproduce" in r.stdout
+
+
+def test_unknown_study_is_one_line_and_nonzero():
+    r = run_cli("reproduce", "nosuchstudy", "--out", "x")
+    assert r.returncode != 0
+    assert "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert "nosuchstudy" in r.stderr
+
+
+def test_unknown_option_is_rejected(tmp_path):
+    parser = build_parser()
+    study = parser._subparsers._group_actions[0].choices["reproduce"]
+    names = list(study._subparsers._group_actions[0].choices)
+    r = run_cli("reproduce", names[0], "--out", str(tmp_path), "--no-such-option", "1")
+    assert r.returncode != 0 and "Traceback" not in r.stderr
+    assert "--no-such-option" in r.stderr
+
+
+def test_out_that_is_a_file_fails_cleanly(tmp_path, capsys):
+    f = tmp_path / "file"
+    f.write_text("x")
+    code = main(["reproduce", "all", "--out", str(f / "sub"), "--quiet"])
+    assert code != 0
+    err = capsys.readouterr().err
+    assert err.startswith("ecfm-uq: error: --out") and len(err.strip().splitlines()) == 1
+
+
+def test_json_refuses_non_finite_and_writes_atomically(tmp_path):
+    path = tmp_path / "r.json"
+    write_json(path, {"a": {"b": np.float64(1.5)}, "c": np.arange(3), "d": np.bool_(True)})
+    assert json.loads(path.read_text()) == {"a": {"b": 1.5}, "c": [0, 1, 2], "d": True}
+    with pytest.raises(ValueError, match="non-finite"):
+        write_json(path, {"a": float("nan")})
+    # the earlier file is untouched and no temporary file is left behind
+    assert json.loads(path.read_text())["a"] == {"b": 1.5}
+    assert [p.name for p in tmp_path.iterdir()] == ["r.json"]
+    with pytest.raises(ValueError):
+        to_jsonable([np.inf])
+
+
+def test_summary_lists_paper_and_measured_values(tmp_path):
+    fig = tmp_path / "f.png"
+    fig.write_bytes(b"")
+    md = render_summary(
+        [
+            (
+                "burgers",
+                [{"quantity": "eps1", "paper": "1.750", "ours": "1.750", "holds": True}],
+                [fig],
+                None,
+                1.0,
+            ),
+            ("kpp", [], [], "ValueError: boom", 0.1),
+        ]
+    )
+    assert "| eps1 | 1.750 | 1.750 | yes |" in md
+    assert "[f.png](burgers/f.png)" in md
+    assert "**FAILED**: ValueError: boom" in md
