@@ -585,8 +585,11 @@ class BeamModel:
         """Mean and variance of :math:`O\\,\\Theta\\,\\Psi` for an observation matrix ``Obs``."""
         Theta = self._check_Theta(Theta)
         V = Obs @ Theta
-        mu = V @ self.system.E1
-        var = np.einsum("ik,kq,iq->i", V, self.system.E2, V) - mu**2
+        E1, E2 = self.system.E1, self.system.E2
+        mu = V @ E1
+        # Eq. stats, with mu^2 = V_k V_q E[Psi_k] E[Psi_q] moved inside the sum: the same
+        # value without the cancellation of E[v^2] - mu^2 when mu^2 >> var
+        var = np.einsum("ik,kq,iq->i", V, E2 - np.outer(E1, E1), V)
         return mu, np.maximum(var, 0.0)
 
     def sample_data(self, eps=1.0, n_replicates=25, rng=None):

@@ -1,0 +1,316 @@
+"""Monte Carlo and quadrature over deterministic solves, to verify the stochastic Galerkin
+PCE (paper Section 3.3, Eqs. pce and stats; SPEC "Monte Carlo vs PCE verification").
+
+The PCE gives the mean and variance of a model output in closed form (Eq. stats). Here
+the same statistics are estimated non-intrusively from deterministic solves
+:math:`y(\\omega)` at germ samples:
+
+* :func:`monte_carlo` evaluates a picklable ``fn(omega)`` on caller-drawn samples through an
+  executor (a local process pool by default; any object with ``map`` works, including a
+  ``dask.distributed.Client``), so the numbers do not depend on where they ran;
+* :func:`mc_moments` gives :math:`\\bar y`, :math:`s^2` and their standard errors
+  :math:`s/\\sqrt n` and :math:`\\sqrt{(m_4 - \\tfrac{n-3}{n-1}s^4)/n}`;
+* :func:`quadrature_moments` and :func:`pseudospectral_projection` are the
+  high-accuracy Gauss-Legendre references (and the non-intrusive collocation PCE);
+* :func:`batch_errors` and :func:`loglog_slope` measure the :math:`n^{-1/2}` decay of
+  Monte Carlo errors.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import numbers
+import pickle
+from concurrent.futures import ProcessPoolExecutor
+from typing import NamedTuple
+
+import numpy as np
+
+from ._validation import as_finite_array, check_int
+
+__all__ = [
+    "Moments",
+    "batch_errors",
+    "draw_germ",
+    "loglog_slope",
+    "mc_moments",
+    "monte_carlo",
+    "pseudospectral_projection",
+    "quadrature_moments",
+    "relative_error",
+]
+
+
+class Moments(NamedTuple):
+    """Sample statistics of Monte Carlo outputs (each of the output's shape)."""
+
+    mean: np.ndarray
+    var: np.ndarray
+    se_mean: np.ndarray
+    se_var: np.ndarray
+
+
+def draw_germ(n, seed=None, dim=1):
+    """``n`` draws of the germ :math:`\\omega \\sim U(0,1)^{dim}` from a seeded generator.
+
+    Parameters
+    ----------
+    n : int
+    seed : None, int or numpy.random.Generator
+    dim : int
+
+    Returns
+    -------
+    (n,) ndarray for ``dim == 1``, else (n, dim)
+    """
+    n = check_int("n", n, minimum=1)
+    dim = check_int("dim", dim, minimum=1)
+    gen = np.random.default_rng(seed)
+    return gen.random(n) if dim == 1 else gen.random((n, dim))
+
+
+def _evaluate_chunk(fn, chunk):
+    """Evaluate ``fn`` on every sample of ``chunk``; module-level so it pickles."""
+    return np.stack([np.asarray(fn(s), dtype=float) for s in chunk])
+
+
+def _is_future(obj):
+    return hasattr(obj, "result") and callable(obj.result) and not isinstance(obj, np.ndarray)
+
+
+def monte_carlo(fn, samples, executor=None, *, workers=2, chunksize=None, callback=None):
+    """Evaluate ``fn`` at each sample, in parallel, and stack the outputs.
+
+    Parameters
+    ----------
+    fn : callable
+        ``fn(sample) -> array_like`` of a fixed shape. For a process pool it must be
+        picklable: a module-level function or a ``functools.partial`` of one (e.g.
+        :meth:`ecfm_uq.problems.beam.BeamModel.response_function`).
+    samples : (n, ...) array_like
+        Germ samples, drawn by the caller from a seeded generator (:func:`draw_germ`) so
+        the result does not depend on the executor.
+    executor : object with ``map``, optional
+        ``None``: a local ``concurrent.futures.ProcessPoolExecutor(max_workers=workers)``
+        (run in-process when ``workers == 1``), created and shut down here. Otherwise any
+        executor whose ``map(f, chunks)`` returns results or futures, e.g. a
+        ``ThreadPoolExecutor`` or a ``dask.distributed.Client`` (whose futures are
+        gathered with ``client.gather``).
+    workers : int
+        Worker count for the default pool and for the default chunk size.
+    chunksize : int, optional
+        Samples per task (default ``ceil(n / (4 workers))``).
+    callback : callable, optional
+        Called with the number of samples in each finished chunk (e.g. a progress bar's
+        ``update``).
+
+    Returns
+    -------
+    (n, ...) ndarray
+        Outputs in the order of ``samples``.
+
+    Raises
+    ------
+    TypeError
+        ``fn`` not callable or not picklable for a process pool; ``executor`` without ``map``.
+    ValueError
+        Empty or non-finite samples, outputs of different shapes, or a non-finite output
+        (the message gives the first offending sample).
+    """
+    if not callable(fn):
+        raise TypeError(f"`fn` must be callable fn(sample), got {type(fn).__name__}")
+    samples = as_finite_array("samples", samples)
+    if samples.ndim == 0 or samples.shape[0] == 0:
+        raise ValueError("`samples` must be a non-empty array of shape (n, ...)")
+    workers = check_int("workers", workers, minimum=1)
+    n = samples.shape[0]
+    if chunksize is None:
+        chunksize = max(1, math.ceil(n / (4 * workers)))
+    chunksize = check_int("chunksize", chunksize, minimum=1)
+    if executor is not None and not callable(getattr(executor, "map", None)):
+        raise TypeError(
+            "`executor` must have a map(f, iterable) method (concurrent.futures executor or "
+            f"dask.distributed.Client), got {type(executor).__name__}"
+        )
+    chunks = [samples[i : i + chunksize] for i in range(0, n, chunksize)]
+    task = functools.partial(_evaluate_chunk, fn)
+
+    own_pool = executor is None and workers > 1
+    if own_pool:
+        try:
+            pickle.dumps(fn)
+        except Exception as e:
+            raise TypeError(
+                "`fn` must be picklable to run in worker processes: use a module-level "
+                "function or functools.partial of one (not a lambda or closure), or pass "
+                "workers=1"
+            ) from e
+        executor = ProcessPoolExecutor(max_workers=workers)
+    try:
+        if executor is None:
+            results = map(task, chunks)
+        elif callable(getattr(executor, "gather", None)):
+            results = executor.gather(executor.map(task, chunks))
+        else:
+            results = executor.map(task, chunks)
+        parts = []
+        for r in results:
+            r = r.result() if _is_future(r) else r
+            parts.append(r)
+            if callback is not None:
+                callback(len(r))
+    finally:
+        if own_pool:
+            executor.shutdown(wait=True, cancel_futures=True)
+    try:
+        out = np.concatenate(parts, axis=0)
+    except ValueError as e:
+        raise ValueError(f"`fn` returned outputs of different shapes: {e}") from e
+    bad = ~np.isfinite(out.reshape(n, -1)).all(axis=1)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(
+            f"`fn` returned NaN or inf for sample {i} ({samples[i]!r}); "
+            "check the model at that germ value"
+        )
+    return out
+
+
+def mc_moments(outputs):
+    """Sample mean and variance with their standard errors.
+
+    Parameters
+    ----------
+    outputs : (n, ...) array_like
+        ``n >= 2`` finite samples.
+
+    Returns
+    -------
+    Moments
+        ``mean``, ``var`` (unbiased, ddof = 1), ``se_mean`` :math:`= s/\\sqrt n` and
+        ``se_var`` :math:`= \\sqrt{(m_4 - \\frac{n-3}{n-1}s^4)/n}` (the standard error of
+        :math:`s^2`, with :math:`m_4` the sample fourth central moment).
+    """
+    y = as_finite_array("outputs", outputs)
+    if y.ndim == 0 or y.shape[0] < 2:
+        raise ValueError("`outputs` must hold at least 2 samples along axis 0")
+    n = y.shape[0]
+    mean = y.mean(axis=0)
+    d = y - mean
+    var = (d**2).sum(axis=0) / (n - 1)
+    m4 = (d**4).mean(axis=0)
+    se_var = np.sqrt(np.maximum(m4 - (n - 3) / (n - 1) * var**2, 0.0) / n)
+    return Moments(mean, var, np.sqrt(var / n), se_var)
+
+
+def quadrature_moments(fn, n_points):
+    """Mean and variance of ``fn(omega)``, :math:`\\omega \\sim U(0,1)`, by Gauss-Legendre.
+
+    Converges exponentially for outputs analytic in :math:`\\omega` (the beam below
+    buckling), so it is the high-accuracy reference for both PCE and Monte Carlo.
+
+    Parameters
+    ----------
+    fn : callable
+        ``fn(omega) -> (m,)``.
+    n_points : int
+
+    Returns
+    -------
+    mean, var : (m,) ndarray
+    """
+    from .chaos import gauss_legendre
+
+    nodes, w = gauss_legendre(check_int("n_points", n_points, minimum=1))
+    y = np.stack([np.asarray(fn(x), dtype=float) for x in nodes])
+    mean = w @ y
+    return mean, w @ (y - mean) ** 2
+
+
+def pseudospectral_projection(fn, chaos, n_points=None):
+    """Non-intrusive PCE coefficients by Gauss-Legendre projection (collocation).
+
+    .. math:: \\Theta_{ik} = \\sum_q w_q\\, y_i(\\omega_q)\\, \\Psi_k(\\omega_q)
+
+    With ``n_points = order + 1`` this is interpolation at the Gauss nodes, which for an
+    operator affine in a single germ equals the stochastic Galerkin solution of Eq. pce.
+
+    Parameters
+    ----------
+    fn : callable
+        ``fn(omega) -> (m,)`` deterministic solve.
+    chaos : ChaosBasis
+        One-dimensional basis.
+    n_points : int, optional
+        Gauss nodes (default ``chaos.order + 1``).
+
+    Returns
+    -------
+    (m, P) ndarray
+    """
+    from .chaos import ChaosBasis, gauss_legendre
+
+    if not isinstance(chaos, ChaosBasis) or chaos.dim != 1:
+        raise TypeError("`chaos` must be a one-dimensional ChaosBasis")
+    n_points = chaos.order + 1 if n_points is None else n_points
+    nodes, w = gauss_legendre(check_int("n_points", n_points, minimum=1))
+    y = np.stack([np.asarray(fn(x), dtype=float) for x in nodes])
+    Psi = chaos.evaluate(nodes)
+    return (y * w[:, None]).T @ Psi / np.asarray(chaos.norms2)[None, :]
+
+
+def relative_error(estimate, reference):
+    """:math:`\\max_i |e_i - r_i| / \\max_i |r_i|` (the reference's scale, never 0/0)."""
+    e = as_finite_array("estimate", estimate)
+    r = as_finite_array("reference", reference)
+    if e.shape != r.shape:
+        raise ValueError(f"`estimate` {e.shape} and `reference` {r.shape} must have equal shapes")
+    scale = np.abs(r).max()
+    if scale == 0:
+        raise ValueError("`reference` is identically zero; a relative error is undefined")
+    return float(np.abs(e - r).max() / scale)
+
+
+def batch_errors(outputs, ref_mean, ref_var, sizes):
+    """Monte Carlo error of mean and variance against sample size, from one ensemble.
+
+    For each size ``n`` the first ``B n`` outputs are split into ``B = len // n``
+    disjoint batches; the error of a batch is :func:`relative_error` of its mean (and
+    variance) against the reference, and the root mean square over batches is returned.
+
+    Parameters
+    ----------
+    outputs : (n_total, m) array_like
+    ref_mean, ref_var : (m,) array_like
+    sizes : sequence of int
+        Batch sizes, each in ``[2, n_total]``.
+
+    Returns
+    -------
+    err_mean, err_var, n_batches : (len(sizes),) ndarray
+    """
+    y = as_finite_array("outputs", outputs, ndim=2)
+    ref_mean = as_finite_array("ref_mean", ref_mean, shape=(y.shape[1],))
+    ref_var = as_finite_array("ref_var", ref_var, shape=(y.shape[1],))
+    em, ev, nb = [], [], []
+    for n in sizes:
+        if isinstance(n, bool) or not isinstance(n, numbers.Integral) or not 2 <= n <= y.shape[0]:
+            raise ValueError(f"`sizes` must be integers in [2, {y.shape[0]}], got {n!r}")
+        B = y.shape[0] // n
+        batches = y[: B * n].reshape(B, n, -1)
+        mu = batches.mean(axis=1)
+        var = batches.var(axis=1, ddof=1)
+        em.append(np.sqrt(np.mean([relative_error(m, ref_mean) ** 2 for m in mu])))
+        ev.append(np.sqrt(np.mean([relative_error(v, ref_var) ** 2 for v in var])))
+        nb.append(B)
+    return np.array(em), np.array(ev), np.array(nb)
+
+
+def loglog_slope(x, y):
+    """Least-squares slope of ``log y`` against ``log x`` (e.g. -1/2 for Monte Carlo)."""
+    x = as_finite_array("x", x, ndim=1)
+    y = as_finite_array("y", y, shape=(x.size,))
+    if x.size < 2 or np.any(x <= 0) or np.any(y <= 0):
+        raise ValueError("`x` and `y` must hold at least 2 positive values")
+    return float(np.polyfit(np.log(x), np.log(y), 1)[0])
