@@ -1,0 +1,264 @@
+"""Standard and ECFM inverse problems for time-dependent systems (paper Section 3.1).
+
+For any :class:`~ecfm_uq.system.GalerkinSystem` with a mass matrix, marched by
+backward Euler (Eq. backward_euler) over :math:`\\mathcal P` steps of size
+:math:`\\Delta t`, with data :math:`v_i` measured at every step:
+
+* standard (Eq. inv_obj), the state a function of :math:`\\epsilon`:
+
+  .. math::
+
+      z^{INV}(\\epsilon) = \\frac{\\Delta t}{2}\\sum_{i=1}^{\\mathcal P}
+          \\|\\mathcal M\\theta_i - v_i\\|^2,\\qquad
+      \\nabla z^{INV} = \\Delta t\\sum_{i=1}^{\\mathcal P}(\\mathcal M\\theta_i - v_i)\\cdot
+          \\mathcal M\\frac{\\partial\\theta_i}{\\partial\\epsilon}
+
+  (Eq. grad), with :math:`\\partial\\theta_i/\\partial\\epsilon` from the discrete
+  sensitivity equations (Eq. discrete_sens);
+* ECFM (Eq. ecfm_obj), the state and the constraint forces functions of :math:`\\epsilon`
+  through the augmented Newton system of every step (Eq. ecfm_solve):
+
+  .. math::
+
+      z^{ECFM}(\\epsilon) = \\frac{\\Delta t}{2}\\sum_{i=1}^{\\mathcal P}\\|\\lambda_i\\|^2,
+      \\qquad
+      \\nabla z^{ECFM} = \\Delta t\\sum_{i=1}^{\\mathcal P}\\lambda_i\\cdot
+          \\frac{\\partial\\lambda_i}{\\partial\\epsilon}
+
+  (Eq. ecfm_grad), with :math:`\\partial\\lambda_i/\\partial\\epsilon` from the augmented
+  sensitivity system (Eq. discrete_sens_ecfm).
+
+The sensitivities are integrated by :func:`ecfm_uq.system.march` with the factorized
+step Jacobian, so a gradient costs little more than a forward solve. For a stochastic
+system (``P > 1``) :math:`\\theta_i` is read as the mean :math:`\\Theta_i\\mathbb E[\\Psi]`,
+which is also what the ECFM data constraint acts on.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._validation import as_finite_array, check_choice, check_int, check_positive
+from ..errors import ConvergenceError
+from ..system import march
+from .optimizers import adam
+
+FORMULATIONS = ("standard", "ecfm")
+
+
+class DynamicInverseProblem:
+    """A time-dependent model, its initial state, time grid and sensor data.
+
+    Parameters
+    ----------
+    system : GalerkinSystem
+        With a mass matrix ``M``; with constraint forces ``Gamma`` ``(N, C)`` for the ECFM
+        formulation.
+    Theta0 : (N,) or (N, P) array_like
+        Initial state, independent of :math:`\\epsilon`.
+    dt : float
+        Time step :math:`\\Delta t`.
+    n_steps : int
+        Number of steps :math:`\\mathcal P`.
+    M_obs : (C, N) array_like
+        Measurement operator :math:`\\mathcal M`.
+    V : (n_steps + 1, C) array_like
+        Data; row ``i`` is :math:`v_i` at time ``t0 + i * dt`` (row 0, the initial time,
+        is not used by either objective).
+    t0 : float
+        Initial time.
+    tol : float
+        Newton tolerance per step on :math:`\\|R\\|_2`.
+    maxiter : int
+        Newton iterations per step.
+
+    Raises
+    ------
+    ValueError
+        On misshaped or non-finite data, a system without mass matrix, or a
+        non-positive ``dt``/``tol``.
+    """
+
+    def __init__(self, system, Theta0, dt, n_steps, M_obs, V, *, t0=0.0, tol=1e-10, maxiter=30):
+        if getattr(system, "M", None) is None:
+            raise ValueError("`system` needs a mass matrix M for time stepping (build it with M=)")
+        self.system = system
+        self.dt = check_positive("dt", dt)
+        self.n_steps = check_int("n_steps", n_steps, minimum=1)
+        self.t0 = float(as_finite_array("t0", t0, ndim=0))
+        self.tol = check_positive("tol", tol)
+        self.maxiter = check_int("maxiter", maxiter, minimum=1)
+        N, P = system.shape
+        Theta0 = as_finite_array("Theta0", Theta0)
+        if Theta0.shape == (N,):
+            Theta0 = np.outer(Theta0, np.eye(P)[0])
+        if Theta0.shape != (N, P):
+            raise ValueError(f"`Theta0` must have shape {(N,)} or {(N, P)}, got {Theta0.shape}")
+        self.Theta0 = Theta0
+        self.M_obs = as_finite_array("M_obs", M_obs, ndim=2)
+        if self.M_obs.shape[1] != N:
+            raise ValueError(f"`M_obs` must have N = {N} columns, got shape {self.M_obs.shape}")
+        C = self.M_obs.shape[0]
+        self.V = as_finite_array("V", V, shape=(self.n_steps + 1, C))
+
+    @property
+    def n_sensors(self):
+        """Number of sensors C."""
+        return self.M_obs.shape[0]
+
+    # -- forward solves --------------------------------------------------------------------
+    def solve(self, eps, formulation="standard", sensitivities=False):
+        """March the model at ``eps``; ``"ecfm"`` adds the data constraint at every step.
+
+        Returns
+        -------
+        Trajectory
+
+        Raises
+        ------
+        ConvergenceError
+            If Newton fails at some step; the message names the step, its time and the
+            residual norm.
+        """
+        formulation = check_choice("formulation", formulation, FORMULATIONS)
+        constraint = None
+        if formulation == "ecfm":
+            if self.system.n_forces != self.n_sensors:
+                raise ValueError(
+                    f"the ECFM formulation needs one constraint force per sensor: the system "
+                    f"has {self.system.n_forces} (Gamma), the data {self.n_sensors} sensors"
+                )
+            constraint = (self.M_obs, self.V)
+        eps = self.system.check_eps(eps)
+        try:
+            return march(
+                self.system,
+                eps,
+                self.Theta0,
+                self.dt,
+                self.n_steps,
+                t0=self.t0,
+                constraint=constraint,
+                sensitivities=sensitivities,
+                tol=self.tol,
+                maxiter=self.maxiter,
+                strict=True,
+            )
+        except ConvergenceError as e:
+            raise ConvergenceError(
+                f"{formulation} forward solve at eps={np.array2string(eps)} failed: {e}"
+            ) from e
+
+    def predictions(self, trajectory):
+        """Sensor readings of the mean state, :math:`\\mathcal M\\,\\Theta_i\\mathbb E[\\Psi]`.
+
+        Returns
+        -------
+        (n_times, C) ndarray
+        """
+        return trajectory.Theta @ self.system.E1 @ self.M_obs.T
+
+    # -- objectives ------------------------------------------------------------------------
+    def standard_objective(self, eps, gradient=True):
+        """:math:`z^{INV}` (Eq. inv_obj) and its gradient (Eqs. grad, discrete_sens).
+
+        Parameters
+        ----------
+        eps : (n_eps,) array_like
+        gradient : bool
+            Integrate the sensitivities and return the gradient (else ``None``).
+
+        Returns
+        -------
+        z : float
+        grad : (n_eps,) ndarray or None
+        trajectory : Trajectory
+        """
+        traj = self.solve(eps, "standard", sensitivities=gradient)
+        e = self.predictions(traj)[1:] - self.V[1:]  # (P, C), i = 1..P
+        z = 0.5 * self.dt * float(np.sum(e * e))
+        if not gradient:
+            return z, None, traj
+        dmean = np.einsum("tikm,k->tim", traj.dTheta[1:], self.system.E1)  # (P, N, n_eps)
+        de = np.einsum("cj,tjm->tcm", self.M_obs, dmean)  # (P, C, n_eps)
+        return z, self.dt * np.einsum("tc,tcm->m", e, de), traj
+
+    def ecfm_objective(self, eps, gradient=True):
+        """:math:`z^{ECFM}` (Eq. ecfm_obj) and its gradient (Eqs. ecfm_grad,
+        discrete_sens_ecfm).
+
+        Returns
+        -------
+        z : float
+        grad : (n_eps,) ndarray or None
+        trajectory : Trajectory
+            ``trajectory.lam`` ``(n_steps + 1, C)`` are the constraint forces.
+        """
+        traj = self.solve(eps, "ecfm", sensitivities=gradient)
+        lam = traj.lam[1:]
+        z = 0.5 * self.dt * float(np.sum(lam * lam))
+        if not gradient:
+            return z, None, traj
+        return z, self.dt * np.einsum("tc,tcm->m", lam, traj.dlam[1:]), traj
+
+    def objective(self, formulation):
+        """The callable ``eps -> (z, grad)`` of one formulation (for optimizers)."""
+        formulation = check_choice("formulation", formulation, FORMULATIONS)
+        method = self.standard_objective if formulation == "standard" else self.ecfm_objective
+
+        def fun_and_grad(eps):
+            z, g, _ = method(eps, gradient=True)
+            return z, g
+
+        return fun_and_grad
+
+    def loss(self, eps, formulation):
+        """Objective value only (one forward solve, no sensitivities)."""
+        formulation = check_choice("formulation", formulation, FORMULATIONS)
+        method = self.standard_objective if formulation == "standard" else self.ecfm_objective
+        return method(eps, gradient=False)[0]
+
+    # -- optimization ----------------------------------------------------------------------
+    def fit(
+        self,
+        eps0,
+        formulation="ecfm",
+        *,
+        lr=1e-2,
+        epochs=250,
+        betas=(0.9, 0.999),
+        eps_hat=1e-8,
+        callback=None,
+    ):
+        """Minimize one objective with Adam (the paper's optimizer for Section 3.1).
+
+        Parameters
+        ----------
+        eps0 : (n_eps,) array_like
+            Start.
+        formulation : {"standard", "ecfm"}
+        lr, epochs, betas, eps_hat, callback
+            See :func:`ecfm_uq.inverse.optimizers.adam`.
+
+        Returns
+        -------
+        InverseResult
+            ``success=False`` with the failing step and residual in ``message`` if a
+            forward solve failed on the way; ``extra`` adds the final trajectory's
+            ``lam`` ``(n_steps + 1, C)`` for ECFM.
+        """
+        formulation = check_choice("formulation", formulation, FORMULATIONS)
+        eps0 = self.system.check_eps(eps0)
+        res = adam(
+            self.objective(formulation),
+            eps0,
+            lr=lr,
+            epochs=epochs,
+            betas=betas,
+            eps_hat=eps_hat,
+            method=formulation,
+            callback=callback,
+        )
+        if formulation == "ecfm":
+            res.extra["lam"] = self.solve(res.eps, "ecfm").lam
+        return res
