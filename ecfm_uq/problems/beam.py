@@ -250,6 +250,18 @@ def _calibrate(target, n_basis, H0):
     return float(brentq(lambda d: ops.buckling_load(1.0, d) - target, 0.0, hi, xtol=1e-14))
 
 
+@functools.lru_cache(maxsize=32)
+def _constraint_forces(n_basis, sensors, shape, width):
+    """Gamma (N, C), cached: its composite quadrature dominates building a model."""
+    basis = BeamBasis(n_basis)
+    if shape == "hat":
+        Gamma = hat_forces(basis, np.array(sensors), width)
+    else:
+        Gamma = gaussian_forces(basis, np.array(sensors), 0.5 / width**2)
+    Gamma.setflags(write=False)
+    return Gamma
+
+
 def deterministic_response(omega, A0, A1, F, Obs):
     """Observed deterministic solution :math:`O\\,(A_0 + \\omega A_1)^{-1} F` at one germ value.
 
@@ -340,10 +352,9 @@ class BeamModel:
             )
         self.force_shape = check_choice("force_shape", force_shape, FORCE_SHAPES)
         self.force_width = check_positive("force_width", force_width)
-        if self.force_shape == "hat":
-            self.Gamma = hat_forces(self.basis, self.sensors, self.force_width)
-        else:
-            self.Gamma = gaussian_forces(self.basis, self.sensors, 0.5 / self.force_width**2)
+        self.Gamma = _constraint_forces(
+            self.N, tuple(self.sensors.tolist()), self.force_shape, self.force_width
+        )
         # E[omega Psi_k Psi_l]: exact with the default Gauss rule (degree 2 order + 1)
         self.G_omega = weighted_gram(self.chaos, lambda w: w)
         self.system = GalerkinSystem(
