@@ -93,7 +93,7 @@ def settings_from_args(args):
     s = dict(DEFAULTS)
     s["seed"] = DEFAULTS["seed"] if args.seed is None else int(args.seed)
     checks = [
-        ("samples", "--samples", 100),
+        ("samples", "--samples", 200),
         ("order", "--order", 0),
         ("max_order", "--max-order", 0),
         ("workers", "--workers", 1),
@@ -115,7 +115,7 @@ def settings_from_args(args):
 
 def _sizes(n_total):
     """Batch sizes from 10 to n_total / 10 (at least 10 disjoint batches each)."""
-    hi = max(n_total // 10, 10)
+    hi = max(n_total // 10, 20)
     return sorted({int(round(v)) for v in np.geomspace(10, hi, 9)})
 
 
