@@ -1,0 +1,427 @@
+"""All-at-once constrained inverse problems for steady models with noisy data
+(paper Section 3.2, Eqs. kpp_inv and ecfm_noise).
+
+Both problems are nonlinear programs in the stacked variables, solved with
+``scipy.optimize.minimize(method="SLSQP")`` and analytic first derivatives of the
+objective and of every constraint (no sensitivity solves: the variables are
+independent, as the paper remarks after Eq. ecfm_noise):
+
+* standard, Eq. (kpp_inv), variables :math:`z = (\\theta, \\epsilon)`:
+
+  .. math::
+
+      \\min \\tfrac12\\|\\mathcal M\\theta - v\\|^2 \\quad\\text{s.t.}\\quad
+      R(\\theta;\\epsilon) = 0;
+
+* noise-aware ECFM, Eq. (ecfm_noise), variables :math:`z = (\\theta, \\epsilon, \\lambda)`:
+
+  .. math::
+
+      \\min \\tfrac12\\|\\lambda\\|^2 \\quad\\text{s.t.}\\quad
+      \\tilde R(\\lambda, \\theta;\\epsilon) = R(\\theta;\\epsilon) - \\Gamma\\lambda = 0,\\quad
+      \\ell_1 \\le \\bar e \\le \\ell_2,\\quad p_1 \\le s^2_e \\le p_2,
+
+  with :math:`e = \\mathcal M\\theta - v`, :math:`\\bar e` its sample mean, :math:`s^2_e`
+  its sample variance and the bounds of :func:`ecfm_uq.inverse.noise.noise_bounds`.
+
+Derivatives: :math:`\\partial R/\\partial(\\theta, \\epsilon, \\lambda) =
+[J_\\theta, J_\\epsilon, -\\Gamma]` from the system, :math:`\\nabla_\\theta\\bar e =
+\\mathcal M^T\\mathbf 1/C`, :math:`\\nabla_\\theta s^2_e = 2\\mathcal M^T(e - \\bar e)/(C-1)`.
+The four inequalities are divided by their natural scales (:math:`\\sigma/\\sqrt C` for the
+mean, :math:`\\sigma^2` for the variance); positive scaling leaves the feasible set
+unchanged and keeps SLSQP's feasibility tolerance meaningful.
+
+Any steady deterministic :class:`~ecfm_uq.system.GalerkinSystem` (``P = 1``) works; the
+ECFM problem needs its ``Gamma``.
+"""
+
+from __future__ import annotations
+
+import numbers
+import time
+
+import numpy as np
+import scipy.optimize as sopt
+
+from .._validation import as_finite_array, check_int, check_positive
+from ..system import solve_steady
+from .noise import noise_bounds, sample_moments
+from .result import InverseResult
+
+_GRADIENTS = ("analytic", "fd")
+
+
+class ConstrainedInverse:
+    """The nonlinear program of Eq. (kpp_inv) or Eq. (ecfm_noise) in stacked variables.
+
+    Parameters
+    ----------
+    system : GalerkinSystem
+        Steady, deterministic (``P = 1``); with ``Gamma`` for ``formulation="noisy-ecfm"``.
+    M_obs : (C, N) array_like
+        Measurement operator.
+    v : (C,) array_like
+        Data.
+    formulation : {"standard", "noisy-ecfm"}
+    sigma : float, optional
+        Noise standard deviation (required for ``"noisy-ecfm"``).
+    alpha : float
+        Significance level of the moment bounds.
+
+    Notes
+    -----
+    The stacked vector is ``z = [theta (N), eps (n_eps), lam (C)]`` (no ``lam`` for the
+    standard problem). Every method takes ``z`` and returns plain arrays.
+    """
+
+    def __init__(self, system, M_obs, v, formulation="standard", sigma=None, alpha=0.05):
+        if formulation not in ("standard", "noisy-ecfm"):
+            raise ValueError(
+                f"unknown `formulation` {formulation!r}; choose 'standard' or 'noisy-ecfm'"
+            )
+        if getattr(system, "P", None) != 1:
+            raise ValueError(
+                "`system` must be a deterministic GalerkinSystem (P = 1); the moment "
+                "constraints act on one measured state"
+            )
+        self.system = system
+        self.formulation = formulation
+        self.M_obs = as_finite_array("M_obs", M_obs, ndim=2)
+        if self.M_obs.shape[1] != system.N:
+            raise ValueError(
+                f"`M_obs` must have {system.N} columns (N), got shape {self.M_obs.shape}"
+            )
+        self.C = self.M_obs.shape[0]
+        self.v = as_finite_array("v", v, shape=(self.C,))
+        self.N = system.N
+        self.n_eps = system.n_eps
+        if formulation == "noisy-ecfm":
+            if system.Gamma is None:
+                raise ValueError("formulation='noisy-ecfm' needs a system with `Gamma`")
+            if system.n_forces != self.C:
+                raise ValueError(
+                    f"`Gamma` has {system.n_forces} columns but there are {self.C} "
+                    "measurements; use one constraint force per sensor"
+                )
+            if sigma is None:
+                raise ValueError("formulation='noisy-ecfm' needs the noise level `sigma`")
+            self.bounds = noise_bounds(sigma, self.C, alpha)
+            self.n_lam = self.C
+            self._Jlam = system.lam_jacobian()
+            self._mean_scale = self.bounds["sigma"] / np.sqrt(self.C)
+            self._var_scale = self.bounds["sigma"] ** 2
+        else:
+            self.bounds = None
+            self.n_lam = 0
+        self.size = self.N + self.n_eps + self.n_lam
+        self._mean_row = self.M_obs.sum(axis=0) / self.C
+
+    # -- variables ---------------------------------------------------------------------
+    def split(self, z):
+        """``(theta (N,), eps (n_eps,), lam (n_lam,))`` views of ``z``."""
+        z = np.asarray(z, dtype=float)
+        if z.shape != (self.size,):
+            raise ValueError(f"`z` must have shape ({self.size},), got {z.shape}")
+        N, m = self.N, self.n_eps
+        return z[:N], z[N : N + m], z[N + m :]
+
+    def stack(self, theta, eps, lam=None):
+        """Stack ``theta``, ``eps`` (and ``lam``) into ``z``."""
+        parts = [np.ravel(theta), np.ravel(eps)]
+        if self.n_lam:
+            parts.append(np.zeros(self.n_lam) if lam is None else np.ravel(lam))
+        z = np.concatenate(parts).astype(float)
+        if z.shape != (self.size,):
+            raise ValueError(f"stacked variables have {z.size} entries, expected {self.size}")
+        return z
+
+    def discrepancy(self, z):
+        """:math:`e = \\mathcal M\\theta - v`, shape (C,)."""
+        theta, _, _ = self.split(z)
+        return self.M_obs @ theta - self.v
+
+    # -- objective ---------------------------------------------------------------------
+    def objective(self, z):
+        """:math:`\\tfrac12\\|e\\|^2` (standard) or :math:`\\tfrac12\\|\\lambda\\|^2` (ECFM)."""
+        if self.n_lam:
+            lam = self.split(z)[2]
+            return 0.5 * float(lam @ lam)
+        e = self.discrepancy(z)
+        return 0.5 * float(e @ e)
+
+    def objective_grad(self, z):
+        """Gradient of :meth:`objective`, shape (size,)."""
+        g = np.zeros(self.size)
+        if self.n_lam:
+            g[self.N + self.n_eps :] = self.split(z)[2]
+        else:
+            g[: self.N] = self.M_obs.T @ self.discrepancy(z)
+        return g
+
+    # -- equality: the discretized model -----------------------------------------------
+    def equality(self, z):
+        """:math:`R(\\theta;\\epsilon) - \\Gamma\\lambda`, shape (N,)."""
+        theta, eps, lam = self.split(z)
+        Th = theta[:, None]
+        return self.system.residual(Th, eps, lam if self.n_lam else None).ravel()
+
+    def equality_jac(self, z):
+        """:math:`[\\partial R/\\partial\\theta, \\partial R/\\partial\\epsilon, -\\Gamma]`,
+        shape (N, size)."""
+        theta, eps, _ = self.split(z)
+        Th = theta[:, None]
+        blocks = [self.system.jacobian(Th, eps), self.system.eps_jacobian(Th, eps)]
+        if self.n_lam:
+            blocks.append(self._Jlam)
+        return np.hstack(blocks)
+
+    # -- inequalities: moments of the discrepancy (ECFM only) --------------------------
+    def moments(self, z):
+        """Sample mean and variance of the discrepancy at ``z``."""
+        return sample_moments(self.discrepancy(z))
+
+    def inequality(self, z):
+        """Scaled :math:`[\\bar e - \\ell_1, \\ell_2 - \\bar e, s^2 - p_1, p_2 - s^2] \\ge 0`.
+
+        The mean rows are divided by :math:`\\sigma/\\sqrt C`, the variance rows by
+        :math:`\\sigma^2`. Shape (4,) (empty for the standard problem).
+        """
+        if not self.n_lam:
+            return np.zeros(0)
+        b = self.bounds
+        mean, var = self.moments(z)
+        sm, sv = self._mean_scale, self._var_scale
+        return np.array(
+            [
+                (mean - b["l1"]) / sm,
+                (b["l2"] - mean) / sm,
+                (var - b["p1"]) / sv,
+                (b["p2"] - var) / sv,
+            ]
+        )
+
+    def inequality_jac(self, z):
+        """Jacobian of :meth:`inequality`, shape (4, size)."""
+        if not self.n_lam:
+            return np.zeros((0, self.size))
+        e = self.discrepancy(z)
+        dmean = self._mean_row
+        dvar = 2.0 * self.M_obs.T @ (e - e.mean()) / (self.C - 1)
+        J = np.zeros((4, self.size))
+        sm, sv = self._mean_scale, self._var_scale
+        J[0, : self.N] = dmean / sm
+        J[1, : self.N] = -dmean / sm
+        J[2, : self.N] = dvar / sv
+        J[3, : self.N] = -dvar / sv
+        return J
+
+    def scipy_constraints(self, gradients="analytic"):
+        """Constraint dicts for ``scipy.optimize.minimize(method="SLSQP")``.
+
+        ``gradients="fd"`` omits every ``jac`` so SLSQP differences them itself.
+        """
+        analytic = gradients == "analytic"
+        cons = [{"type": "eq", "fun": self.equality}]
+        if analytic:
+            cons[0]["jac"] = self.equality_jac
+        if self.n_lam:
+            cons.append({"type": "ineq", "fun": self.inequality})
+            if analytic:
+                cons[1]["jac"] = self.inequality_jac
+        return cons
+
+
+def _start(problem, eps0, theta0, lam0, solve_options):
+    """Starting point: eps0 (default 0), theta0 = Newton solution at (eps0, lam0)."""
+    sysm = problem.system
+    eps0 = np.zeros(sysm.n_eps) if eps0 is None else sysm.check_eps(eps0)
+    lam0 = (
+        np.zeros(problem.n_lam)
+        if lam0 is None
+        else as_finite_array("lam0", lam0, shape=(problem.n_lam,))
+    )
+    note = "given theta0"
+    if theta0 is None:
+        sol = solve_steady(sysm, eps0, lam0 if problem.n_lam else None, **dict(solve_options or {}))
+        if sol.success:
+            theta0, note = sol.Theta[:, 0], f"theta0 = Newton solution at eps0 ({sol.nit} it.)"
+        else:
+            theta0, note = np.zeros(sysm.N), f"theta0 = 0 (Newton at eps0 failed: {sol.message})"
+    else:
+        theta0 = as_finite_array("theta0", theta0, shape=(sysm.N,))
+    return problem.stack(theta0, eps0, lam0), note
+
+
+def _check_options(gradients, maxiter, ftol):
+    if gradients not in _GRADIENTS:
+        raise ValueError(f"unknown `gradients` {gradients!r}; choose 'analytic' or 'fd'")
+    maxiter = check_int("maxiter", maxiter, minimum=1)
+    ftol = check_positive("ftol", ftol)
+    return maxiter, ftol
+
+
+def _solve(problem, z0, note, gradients, maxiter, ftol, method_name):
+    hist_eps, hist_loss = [], []
+
+    def callback(xk, *args):
+        hist_eps.append(problem.split(xk)[1].copy())
+        hist_loss.append(problem.objective(xk))
+
+    callback(z0)
+    jac = problem.objective_grad if gradients == "analytic" else None
+    t0 = time.perf_counter()
+    res = sopt.minimize(
+        problem.objective,
+        z0,
+        jac=jac,
+        method="SLSQP",
+        constraints=problem.scipy_constraints(gradients),
+        options={"maxiter": maxiter, "ftol": ftol},
+        callback=callback,
+    )
+    wall = time.perf_counter() - t0
+    z = np.asarray(res.x, dtype=float)
+    theta, eps, lam = problem.split(z)
+    e = problem.discrepancy(z)
+    mean, var = sample_moments(e) if e.size >= 2 else (float(e.mean()), 0.0)
+    extra = {
+        "theta": theta.copy(),
+        "lam": lam.copy(),
+        "discrepancy": e,
+        "mean_discrepancy": mean,
+        "var_discrepancy": var,
+        "residual_norm": float(np.linalg.norm(problem.equality(z))),
+        "inequality": problem.inequality(z),
+        "bounds": problem.bounds,
+        "nfev": int(res.nfev),
+        "njev": int(getattr(res, "njev", 0) or 0),
+        "status": int(res.status),
+        "start": note,
+        "gradients": gradients,
+        "wall_time_s": wall,
+        "n_variables": problem.size,
+    }
+    finite = np.all(np.isfinite(z))
+    success = bool(res.success) and bool(finite)
+    msg = f"SLSQP: {res.message}"
+    if not finite:
+        msg += " (non-finite iterate)"
+    return InverseResult(
+        eps=eps.copy(),
+        loss=float(res.fun) if np.isfinite(res.fun) else float("inf"),
+        success=success,
+        message=msg,
+        nit=int(res.nit),
+        method=method_name,
+        eps_history=np.array(hist_eps),
+        loss_history=np.array(hist_loss),
+        extra=extra,
+    )
+
+
+def fit_standard_slsqp(
+    system,
+    M_obs,
+    v,
+    eps0=None,
+    theta0=None,
+    *,
+    gradients="analytic",
+    maxiter=500,
+    ftol=1e-12,
+    solve_options=None,
+):
+    """Standard inverse problem, Eq. (kpp_inv), all at once with SLSQP.
+
+    .. math::
+
+        \\min_{\\theta, \\epsilon} \\tfrac12\\|\\mathcal M\\theta - v\\|^2
+        \\quad\\text{s.t.}\\quad R(\\theta;\\epsilon) = 0
+
+    Parameters
+    ----------
+    system : GalerkinSystem
+        Steady, deterministic (P = 1).
+    M_obs : (C, N) array_like
+    v : (C,) array_like
+    eps0 : (n_eps,) array_like, optional
+        Starting parameters (default 0).
+    theta0 : (N,) array_like, optional
+        Starting state (default: Newton solution of :math:`R(\\theta;\\epsilon_0) = 0`).
+    gradients : {"analytic", "fd"}
+        ``"fd"`` lets SLSQP difference objective and constraints (benchmarks only).
+    maxiter : int
+        SLSQP iterations.
+    ftol : float
+        SLSQP's precision goal on the objective (also its feasibility tolerance).
+    solve_options : dict, optional
+        Passed to :func:`~ecfm_uq.system.solve_steady` for the starting state.
+
+    Returns
+    -------
+    InverseResult
+        ``method="standard-slsqp"``; ``success``, ``message``, ``nit`` are SLSQP's.
+        ``extra``: ``theta``, ``discrepancy``, ``mean_discrepancy``, ``var_discrepancy``,
+        ``residual_norm`` (:math:`\\|R\\|_2` at the end), ``nfev``, ``njev``, ``start``.
+    """
+    maxiter, ftol = _check_options(gradients, maxiter, ftol)
+    problem = ConstrainedInverse(system, M_obs, v, "standard")
+    z0, note = _start(problem, eps0, theta0, None, solve_options)
+    return _solve(problem, z0, note, gradients, maxiter, ftol, "standard-slsqp")
+
+
+def fit_noisy_ecfm(
+    system,
+    M_obs,
+    v,
+    sigma,
+    alpha=0.05,
+    eps0=None,
+    theta0=None,
+    lam0=None,
+    *,
+    gradients="analytic",
+    maxiter=500,
+    ftol=1e-12,
+    solve_options=None,
+):
+    """Noise-aware ECFM, Eq. (ecfm_noise), all at once with SLSQP.
+
+    .. math::
+
+        \\min_{\\theta, \\epsilon, \\lambda} \\tfrac12\\|\\lambda\\|^2 \\quad\\text{s.t.}\\quad
+        R(\\theta;\\epsilon) - \\Gamma\\lambda = 0,\\ \\ell_1 \\le \\bar e \\le \\ell_2,\\
+        p_1 \\le s^2_e \\le p_2
+
+    Parameters
+    ----------
+    system : GalerkinSystem
+        Steady, deterministic, with ``Gamma`` of shape (N, C).
+    M_obs : (C, N) array_like
+    v : (C,) array_like
+    sigma : float
+        Known noise standard deviation.
+    alpha : float
+        Significance level of the bounds (0.05: 95 % intervals).
+    eps0, theta0, lam0 : array_like, optional
+        Start (defaults: :math:`\\epsilon_0 = 0`, :math:`\\lambda_0 = 0`, :math:`\\theta_0`
+        the Newton solution at :math:`(\\epsilon_0, \\lambda_0)`).
+    gradients, maxiter, ftol, solve_options
+        As in :func:`fit_standard_slsqp`.
+
+    Returns
+    -------
+    InverseResult
+        ``method="noisy-ecfm"``; ``extra`` as in :func:`fit_standard_slsqp` plus ``lam``
+        (C,), ``inequality`` (the four scaled constraint values, >= 0 when feasible) and
+        ``bounds``.
+    """
+    maxiter, ftol = _check_options(gradients, maxiter, ftol)
+    if isinstance(sigma, bool) or not isinstance(sigma, numbers.Real):
+        raise TypeError(f"`sigma` must be a positive real number, got {sigma!r}")
+    problem = ConstrainedInverse(system, M_obs, v, "noisy-ecfm", sigma=sigma, alpha=alpha)
+    z0, note = _start(problem, eps0, theta0, lam0, solve_options)
+    return _solve(problem, z0, note, gradients, maxiter, ftol, "noisy-ecfm")
+
+
+__all__ = ["ConstrainedInverse", "fit_noisy_ecfm", "fit_standard_slsqp"]
