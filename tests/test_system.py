@@ -297,3 +297,59 @@ def test_bad_input_names_the_argument():
         LinearTerm(K, coef="x")
     with pytest.raises(ValueError, match="N"):
         GalerkinSystem([LinearTerm(K), LinearTerm(np.eye(3))], 0)
+
+
+def _linear_stochastic(order, second_germ_power=1):
+    basis = ChaosBasis(order)
+    G1 = weighted_gram(basis, lambda w: w**second_germ_power)
+    terms = [
+        LinearTerm(K, Coefficient.power10(0, sign=1.0)),
+        LinearTerm(M, coef=Coefficient.parameter(1), G=G1),
+        LoadTerm.constant(F1),
+    ]
+    return GalerkinSystem(terms, 2, basis=basis, Gamma=GAMMA)
+
+
+def test_affine_germ_system_decouples_and_matches_the_dense_block_solve():
+    system = _linear_stochastic(5)
+    assert system.decoupling() is not None
+    lam = np.array([0.1, -0.2, 0.3])
+    fast = solve_steady(system, EPS, lam)
+    dense = solve_steady(system, EPS, lam, structure="dense")
+    assert fast.success and "decoupled" in fast.message
+    np.testing.assert_allclose(fast.Theta, dense.Theta, atol=1e-12 * np.abs(dense.Theta).max())
+    for a, b in zip(fast.eps_sensitivity()[0:1], dense.eps_sensitivity()[0:1], strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-11 * np.abs(b).max())
+    np.testing.assert_allclose(
+        fast.lam_sensitivity(), dense.lam_sensitivity(), atol=1e-11, rtol=1e-10
+    )
+
+
+def test_decoupled_solve_is_gauss_collocation():
+    # Galerkin of order p with an affine germ == collocation at the p + 1 Gauss nodes
+    from ecfm_uq.chaos import gauss_legendre
+
+    order = 4
+    system = _linear_stochastic(order)
+    sol = solve_steady(system, EPS)
+    nodes, weights = gauss_legendre(order + 1)
+    th = np.array([np.linalg.solve(10 ** EPS[0] * K + EPS[1] * w * M, F1) for w in nodes])
+    Psi = system.basis.evaluate(nodes)
+    np.testing.assert_allclose(sol.Theta, (th.T * weights) @ Psi, atol=1e-12)
+
+
+def test_non_commuting_couplings_fall_back_to_dense():
+    # E[w Psi Psi] and E[w^2 Psi Psi] commute only up to truncation; w^2 and the Jacobi
+    # matrix of w do not share eigenvectors in a truncated basis
+    basis = ChaosBasis(3)
+    terms = [
+        LinearTerm(K, G=weighted_gram(basis, lambda w: 1 + w)),
+        LinearTerm(M, G=weighted_gram(basis, lambda w: w**3)),
+        LoadTerm.constant(F1),
+    ]
+    system = GalerkinSystem(terms, 0, basis=basis)
+    assert system.decoupling() is None
+    sol = solve_steady(system, [])
+    assert sol.success and "decoupled" not in sol.message
+    with pytest.raises(ValueError, match="structure"):
+        solve_steady(system, [], structure="fast")

@@ -150,6 +150,45 @@ class GalerkinSystem:
             raise ValueError(f"system {self.name!r} has no mass matrix; pass M= for time stepping")
         return np.kron(self.M, self.E2.T)
 
+    # -- structure ---------------------------------------------------------------------
+    def decoupling(self):
+        """Common eigenbasis of the stochastic couplings, if the system allows one.
+
+        For a linear system whose couplings :math:`G_q = \\mathbb E[g_q\\Psi\\Psi^T]` are
+        simultaneously diagonalizable, :math:`G_q = Q D_q Q^T` (e.g. every operator
+        affine in one germ: :math:`\\mathbb E[\\omega\\Psi\\Psi^T]` is the Jacobi matrix,
+        whose eigenvectors are the Gauss nodes), the block system splits into ``P``
+        independent ``N x N`` systems :math:`(\\sum_q c_q d_{qp} K_q)\\hat\\theta_p = \\hat b_p`
+        with :math:`\\Theta = \\hat\\Theta Q^T`.
+
+        Returns
+        -------
+        (Q (P, P), D (n_linear, P)) or None
+            ``None`` for nonlinear systems, ``P = 1``, or couplings without a common
+            eigenbasis (the dense block solve is used then).
+        """
+        if not hasattr(self, "_decoupling"):
+            self._decoupling = self._find_decoupling()
+        return self._decoupling
+
+    def _find_decoupling(self):
+        if self.P == 1 or any(isinstance(t, QuadraticTerm) for t in self.terms):
+            return None
+        Gs = [t.G for t in self.terms if isinstance(t, LinearTerm)]
+        # a generic combination has simple eigenvalues whenever a common eigenbasis exists
+        combo = sum(
+            (1.0 + 0.618034 * q) * G / max(np.abs(G).max(), 1e-300) for q, G in enumerate(Gs)
+        )
+        _, Q = np.linalg.eigh(0.5 * (combo + combo.T))
+        D = []
+        for G in Gs:
+            H = Q.T @ G @ Q
+            d = np.diag(H).copy()
+            if np.abs(H - np.diag(d)).max() > 1e-11 * max(np.abs(G).max(), 1e-300):
+                return None
+            D.append(d)
+        return Q, np.array(D)
+
     # -- statistics --------------------------------------------------------------------
     def mean(self, Theta):
         """:math:`\\mathbb E[\\theta] = \\Theta\\,\\mathbb E[\\Psi]`, shape (N,)."""

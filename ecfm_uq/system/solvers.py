@@ -50,11 +50,65 @@ def _factor(J):
     return lu
 
 
+class _DenseFactor:
+    """LU factors of a dense Jacobian."""
+
+    def __init__(self, lu):
+        self.lu = lu
+
+    def solve(self, rhs):
+        return sla.lu_solve(self.lu, rhs, check_finite=False)
+
+
+class _BlockFactor:
+    """Factors of a decoupled stochastic Galerkin system (see GalerkinSystem.decoupling).
+
+    Solves :math:`\\sum_q c_q K_q X G_q = B` for ``X`` as ``P`` independent ``N x N``
+    solves in the common eigenbasis ``Q`` of the couplings.
+    """
+
+    def __init__(self, Ks, coefs, Q, D):
+        self.Q = Q
+        self.N = Ks[0].shape[0]
+        self.P = Q.shape[0]
+        self.factors = []
+        for p in range(self.P):
+            Ap = sum(c * d * K for c, d, K in zip(coefs, D[:, p], Ks, strict=True))
+            lu = _factor(Ap)
+            if lu is None:
+                raise np.linalg.LinAlgError(f"decoupled block {p} is singular")
+            self.factors.append(lu)
+
+    def solve(self, rhs):
+        rhs = np.asarray(rhs, dtype=float)
+        m = rhs.shape[1] if rhs.ndim == 2 else None
+        B = rhs.reshape(self.N, self.P, -1)
+        Bh = np.einsum("ikm,kp->ipm", B, self.Q)
+        Xh = np.empty_like(Bh)
+        for p, lu in enumerate(self.factors):
+            Xh[:, p, :] = sla.lu_solve(lu, Bh[:, p, :], check_finite=False)
+        X = np.einsum("ipm,kp->ikm", Xh, self.Q)
+        return X.reshape(self.N * self.P, m) if m is not None else X.reshape(-1)
+
+
+def _solve_decoupled(system, eps, lam):
+    """Direct solve of a linear, decoupled system; returns (Theta, factor, residual norm)."""
+    from .terms import LinearTerm
+
+    Q, D = system.decoupling()
+    lin = [t for t in system.terms if isinstance(t, LinearTerm)]
+    factor = _BlockFactor([t.K for t in lin], [t.coef.value(eps) for t in lin], Q, D)
+    rhs = -system.residual(system.zeros(), eps, lam)  # loads and forces only
+    Theta = factor.solve(rhs.ravel()).reshape(system.shape)
+    rnorm = float(np.linalg.norm(system.residual(Theta, eps, lam)))
+    return Theta, factor, rnorm
+
+
 def newton(fun, z0, tol=1e-10, maxiter=50):
     """Newton's method on ``fun(z) -> (r, J)``.
 
-    Returns ``(z, lu, info)`` where ``lu`` factorizes the Jacobian at the returned
-    ``z`` (``None`` when the iteration failed).
+    Returns ``(z, factor, info)`` where ``factor.solve(rhs)`` solves with the Jacobian
+    at the returned ``z`` (``None`` when the iteration failed).
 
     Convergence is declared when :math:`\\|r\\|_2 < \\mathrm{tol}`; the Jacobian is then
     evaluated at the converged point, factorized, and used for one final correction
@@ -73,7 +127,7 @@ def newton(fun, z0, tol=1e-10, maxiter=50):
         dz = sla.lu_solve(lu, r, check_finite=False)
         z = z - dz
         if rnorm < tol:
-            return z, lu, NewtonInfo(True, k, rnorm, "converged")
+            return z, _DenseFactor(lu), NewtonInfo(True, k, rnorm, "converged")
     return z, None, NewtonInfo(False, maxiter, rnorm, f"no convergence in {maxiter} iterations")
 
 
@@ -127,7 +181,7 @@ class SteadySolution:
             raise ConvergenceError(f"sensitivities of a failed solve: {self.message}")
 
     def _solve(self, rhs):
-        return sla.lu_solve(self._lu, rhs, check_finite=False)
+        return self._lu.solve(rhs)
 
     def eps_sensitivity(self):
         """:math:`\\partial\\Theta/\\partial\\epsilon` (N, P, n_eps) and, under a data
@@ -162,6 +216,7 @@ def solve_steady(
     tol=1e-10,
     maxiter=50,
     strict=False,
+    structure="auto",
 ):
     """Solve the steady system :math:`R(\\Theta; \\epsilon, \\lambda) = 0` by Newton's method.
 
@@ -181,6 +236,11 @@ def solve_steady(
     maxiter : int
     strict : bool
         Raise :class:`ConvergenceError` instead of returning ``success=False``.
+    structure : {"auto", "dense"}
+        ``"auto"`` solves a linear system whose stochastic couplings share an eigenbasis
+        as ``P`` decoupled ``N x N`` systems (no dense ``(NP)^2`` matrix; see
+        :meth:`GalerkinSystem.decoupling`); ``"dense"`` always uses the dense Newton
+        block solve.
 
     Returns
     -------
@@ -193,6 +253,33 @@ def solve_steady(
     N, P = system.shape
     n = N * P
     Theta0 = system.zeros() if Theta0 is None else as_finite_array("Theta0", Theta0, shape=(N, P))
+    if structure not in ("auto", "dense"):
+        raise ValueError(f"unknown `structure` {structure!r}; choose 'auto' or 'dense'")
+    if M_obs is None and structure == "auto" and system.decoupling() is not None:
+        lam = system.check_lam(lam)
+        try:
+            Theta, factor, rnorm = _solve_decoupled(system, eps, lam)
+            info = NewtonInfo(rnorm < tol, 1, rnorm, "converged (decoupled direct solve)")
+            if not info.success:
+                info.message = f"decoupled direct solve left ||R||={rnorm:.3e} >= tol"
+        except np.linalg.LinAlgError as e:
+            Theta, factor, info = system.zeros(), None, NewtonInfo(False, 1, np.inf, str(e))
+        sol = SteadySolution(
+            system,
+            eps,
+            Theta,
+            lam,
+            info.success,
+            info.nit,
+            info.residual_norm,
+            info.message,
+            _lu=factor if info.success else None,
+        )
+        if strict and not sol.success:
+            raise ConvergenceError(
+                f"{system.name}: steady solve failed at eps={eps}: {info.message}"
+            )
+        return sol
     if M_obs is None:
         lam = system.check_lam(lam)
 
@@ -391,7 +478,7 @@ def march(
             rhs = Mdt @ dTh[s] - system.eps_jacobian(T1, eps, t1)
             if constrained:
                 rhs = np.vstack([rhs, np.zeros((C, system.n_eps))])
-            S = sla.lu_solve(lu, rhs, check_finite=False)
+            S = lu.solve(rhs)
             dTh[s + 1] = S[:n]
             if constrained:
                 dlam[s + 1] = S[n:]
