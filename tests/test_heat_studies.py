@@ -67,7 +67,7 @@ def test_geometry_study_recovers_sizes_and_flags_misspecification(tmp_path):
     assert res["ecfm"]["eps"] is res["cases"]["rectangle"]["ecfm"]["eps"]
     write_json(tmp_path / "result.json", res)
     rows = geometry.summary_rows(res)
-    assert len(rows) == 10 and all(r["holds"] for r in rows)
+    assert len(rows) == 11 and all(r["holds"] for r in rows)
     for fig in ("fields_rectangle.png", "forces_rectangle.png", "forces_interval.png"):
         assert (tmp_path / fig).stat().st_size > 0
 

@@ -270,9 +270,21 @@ def _interval_figures(model, truth_miss, data, fits, true_eps, sink, grid, dens,
         (axes[1], "misspecified", truth_miss, "misspecified data (unmodelled sink)"),
     ):
         ax.plot(L * grid, truth.field(truth.solve(true_eps), grid), "k-", lw=2, label="truth")
-        for meth, style, label in (("inv", "C0--", "standard fit"), ("ecfm", "C1:", "ECFM fit")):
+        for meth, style, label in (
+            ("inv", "C0--", "standard fit"),
+            ("ecfm", "C1:", "ECFM fit (lam = 0)"),
+        ):
             e = fits[key][meth].eps
             ax.plot(e[0] * grid, model.field(model.solve(e), grid), style, lw=2, label=label)
+        r_ec = fits[key]["ecfm"]
+        ax.plot(
+            r_ec.eps[0] * grid,
+            model.field(r_ec.extra["Theta"][:, 0], grid),
+            "C3-",
+            lw=1,
+            alpha=0.7,
+            label="ECFM with forces",
+        )
         ax.plot(L * model.sensors, data[key], "ko", mfc="none", label="data")
         ax.set_title(title)
         ax.set_xlabel("x (each curve on its own estimated [0, L])")
