@@ -170,7 +170,7 @@ class HeatProblem:
         return self.system.jacobian(zero, eps), -self.system.residual(zero, eps)[:, 0]
 
     # -- fields on points --------------------------------------------------------------
-    def field(self, theta, points, eps=None):
+    def field(self, theta, points):
         """Temperature :math:`\\hat w` at reference points.
 
         Parameters
@@ -180,8 +180,6 @@ class HeatProblem:
         points : (m,) or (m, 2) array_like
             Reference coordinates in the unit interval or square; physical coordinates
             are :math:`x = \\epsilon\\xi` in the geometry cases.
-        eps : ignored
-            Kept for a uniform signature.
 
         Returns
         -------
