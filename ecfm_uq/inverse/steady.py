@@ -78,6 +78,7 @@ def fit_steady(
     maxiter=500,
     bounds=None,
     solve_options=None,
+    options=None,
 ):
     """Fit :math:`\\epsilon` of a steady system to data by the standard or ECFM formulation.
 
@@ -100,6 +101,8 @@ def fit_steady(
         For bounded methods; keeps trial parameters physical (e.g. a positive length).
     solve_options : dict, optional
         Passed to :func:`solve_steady` (``tol``, ``maxiter``).
+    options : dict, optional
+        Extra ``scipy.optimize.minimize`` options (override the defaults above).
 
     Returns
     -------
@@ -118,24 +121,38 @@ def fit_steady(
     hist_eps, hist_loss = [], []
     failures = []
 
+    last = {}
+
     def fun(eps):
         try:
             z, g, _ = objective(system, M_obs, v, eps, **solve_kw)
         except ConvergenceError as e:
             failures.append(str(e))
-            return np.inf, np.zeros_like(eps)
+            z, g = np.inf, np.zeros_like(eps)
+        last["eps"], last["z"] = np.array(eps), z
         return z / scale, g / scale
 
     def callback(xk, *args):
+        # the optimizer evaluated fun at xk last (no second solve); fall back otherwise
+        z = last["z"] if "eps" in last and np.array_equal(last["eps"], xk) else fun(xk)[0] * scale
         hist_eps.append(np.array(xk))
-        hist_loss.append(fun(xk)[0] * scale)
+        hist_loss.append(z)
 
-    z0 = objective(system, M_obs, v, eps0, **solve_kw)[0]
+    scale = 1.0
+    z0 = fun(eps0)[0]
+    if not np.isfinite(z0):
+        raise ConvergenceError(
+            f"fit_steady: the model cannot be solved at eps0={eps0}: {failures[0]}"
+        )
     scale = z0 if z0 > 0 else 1.0
+    last["z"] = z0  # z0 was computed with scale 1
     callback(eps0)
     opts = {"maxiter": maxiter}
     if method.upper() in {"BFGS", "CG", "L-BFGS-B", "TNC"}:
         opts["gtol"] = gtol
+    if method.upper() == "L-BFGS-B":
+        opts["ftol"] = 1e-15  # stop on the (relative) gradient, not on a stalled decrease
+    opts.update(options or {})
     res = sopt.minimize(
         fun, eps0, jac=True, method=method, bounds=bounds, options=opts, callback=callback
     )

@@ -220,6 +220,8 @@ class LoadTerm:
         ``dF(eps, t)`` returning ``(N, n_eps)`` or ``(N, P, n_eps)``; ``None`` means the
         load does not depend on :math:`\\epsilon`.
 
+    Notes
+    -----
     Use the constructors :meth:`constant`, :meth:`scaled` and :meth:`linear` for the
     common cases.
     """
