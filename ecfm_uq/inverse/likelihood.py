@@ -72,6 +72,7 @@ __all__ = [
     "ForceSolution",
     "LikelihoodPoint",
     "PseudoLikelihood",
+    "eps_curvature",
     "expected_relative_error",
     "fit_pseudo_likelihood",
     "negative_log_pseudo_likelihood",
@@ -612,6 +613,48 @@ def optimal_forces(like, eps, lam0=None, *, tol=1e-15, maxiter=100):
     return ForceSolution(eps, point.lam, point, dlam, min_eig, cond, ok, msg, nit)
 
 
+def eps_curvature(like, eps, *, profile=False, step=1e-4):
+    """Curvature of :math:`\\Lambda` in :math:`\\epsilon` (the observed pseudo-information).
+
+    ``profile=False``: :math:`\\partial^2\\Lambda(\\epsilon, 0)/\\partial\\epsilon^2`, the
+    curvature the standard estimate sees. ``profile=True``: the curvature of the profile
+    :math:`\\Lambda^*(\\epsilon) = \\min_\\lambda\\Lambda(\\epsilon, \\lambda)`, whose gradient
+    is :math:`\\partial_\\epsilon\\Lambda(\\epsilon, \\lambda^*(\\epsilon))` (envelope theorem):
+    how much information on :math:`\\epsilon` is left once the forces are free. Both by
+    central differences of the analytic gradient (error O(step^2)).
+
+    Parameters
+    ----------
+    like : PseudoLikelihood
+    eps : (n_eps,) array_like
+    profile : bool
+    step : float
+        Absolute step in :math:`\\epsilon`.
+
+    Returns
+    -------
+    (n_eps, n_eps) ndarray
+    """
+    eps = like.system.check_eps(eps)
+    step = check_positive("step", step)
+
+    def grad(e):
+        if not profile:
+            return like.evaluate(e, None, order=1).grad_eps
+        fs = optimal_forces(like, e)
+        if not fs.success:
+            raise ConvergenceError(f"inner solve at eps={e}: {fs.message}")
+        return fs.point.grad_eps
+
+    m = eps.size
+    H = np.zeros((m, m))
+    for r in range(m):
+        e = np.zeros(m)
+        e[r] = step
+        H[:, r] = (grad(eps + e) - grad(eps - e)) / (2 * step)
+    return 0.5 * (H + H.T)
+
+
 # --------------------------------------------------------------------------------------
 # the three estimators
 # --------------------------------------------------------------------------------------
@@ -902,10 +945,14 @@ def fit_pseudo_likelihood(
     -----
     The penalty objective is unbounded below: as :math:`\\lambda\\to 0` the term
     :math:`\\log(\\tfrac12\\|\\lambda\\|^2)\\to-\\infty` while :math:`\\alpha\\Lambda` stays
-    finite, so it has no minimizer. What an optimizer returns is where it stopped on the
-    way down; the forces shrink toward zero and :math:`\\epsilon` drifts toward the
-    standard estimate :math:`\\arg\\min_\\epsilon\\Lambda(\\epsilon, 0)`. Its ``success``
-    flag is SLSQP's and does not certify a minimum.
+    finite, so it has no minimizer. It can have local minima near the joint maximizer of
+    the pseudo-likelihood over :math:`(\\epsilon, \\lambda)`, where the log term's pull
+    toward zero forces balances :math:`\\alpha\\,\\partial\\Lambda/\\partial\\lambda`. What
+    SLSQP returns depends on the start: either such a local minimum (for the beam, close
+    to the inner-outer estimate) or a point on the way down the valley
+    :math:`\\lambda\\to 0`, where the :math:`\\epsilon`-part reduces to the standard
+    estimate :math:`\\arg\\min_\\epsilon\\Lambda(\\epsilon, 0)`. Its ``success`` flag is
+    SLSQP's and certifies neither.
     """
     if formulation not in _FITTERS:
         raise ValueError(
