@@ -494,9 +494,9 @@ def _figures(r, model, v, Theta_true, thetas, x, w_pce, u_ref, out_dir):
         fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.2))
         data = [ss[k]["eps"] for k in fits_keys()]
         a.boxplot(data, showmeans=True)
-        for j, d in enumerate(data):
+        for j, (d, col) in enumerate(zip(data, ("C0", "C1", "C3"), strict=True)):
             jit = np.random.default_rng(j).uniform(-0.12, 0.12, len(d))
-            a.plot(np.full(len(d), j + 1) + jit, d, ".", color=f"C{j}", alpha=0.6)
+            a.plot(np.full(len(d), j + 1) + jit, d, ".", color=col, alpha=0.6)
         a.set_xticks([1, 2, 3], [_LABELS[k] for k in fits_keys()])
         a.axhline(s["true_eps"], color="k", lw=1, label=f"true β = {s['true_eps']:g}")
         a.axhline(PAPER["eps"], color="C3", ls="--", lw=1, label=f"paper ε = {PAPER['eps']}")
