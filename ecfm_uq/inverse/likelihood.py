@@ -505,7 +505,7 @@ class ForceSolution:
     hess_cond : float
         Its condition number (large means weakly identified forces).
     success : bool
-        Converged (gradient norm below ``gtol``) to a strict local minimum.
+        Converged (Newton decrement below ``tol``) to a strict local minimum.
     message : str
     nit : int
     """
