@@ -220,7 +220,7 @@ class BurgersModel:
             raise ValueError("`sensors` must be distinct positions")
         if hat_half_width is None:
             pts = np.sort(np.concatenate([[0.0, 1.0], self.sensors]))
-            hat_half_width = float(np.min(np.diff(pts)))
+            hat_half_width = float(np.round(np.min(np.diff(pts)), 12))
         self.hat_half_width = check_positive("hat_half_width", hat_half_width)
         self.newton_tol = check_positive("newton_tol", newton_tol)
         self.newton_maxiter = check_int("newton_maxiter", newton_maxiter, minimum=1)
