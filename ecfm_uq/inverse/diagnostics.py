@@ -172,7 +172,8 @@ def loss_surface(fun, grid1, grid2, *, callback=None):
     -------
     Z : (n1, n2) numpy.ma.MaskedArray
         ``Z[a, b] = fun((grid1[a], grid2[b]))``; points where ``fun`` raised
-        :class:`ConvergenceError` (a failed forward solve) are masked, never NaN.
+        :class:`ConvergenceError` (a failed forward solve) or returned a non-finite value
+        are masked (``numpy.ma.getmaskarray(Z)``), never left as NaN.
     """
     g1 = as_finite_array("grid1", grid1, ndim=1)
     g2 = as_finite_array("grid2", grid2, ndim=1)
