@@ -13,6 +13,8 @@ import sys
 import time
 from pathlib import Path
 
+from threadpoolctl import threadpool_limits
+
 from .errors import ConvergenceError, SingularSystemError
 from .studies import STUDY_NAMES
 from .studies._common import Progress, write_json
@@ -108,6 +110,8 @@ def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
     progress = Progress(quiet=args.quiet)
+    # the studies' dense solves are small: threaded BLAS only oversubscribes the cores
+    blas = threadpool_limits(limits=1, user_api="blas")
     try:
         _check_out(args.out)
         if args.study == "all":
@@ -132,6 +136,8 @@ def main(argv=None):
     except KeyboardInterrupt:
         print("ecfm-uq: interrupted", file=sys.stderr)
         return 130
+    finally:
+        blas.restore_original_limits()
     return 0
 
 

@@ -110,6 +110,7 @@ class LinearTerm:
         """Fill the default stochastic coupling from the system's Gram matrix."""
         if self.G is None:
             self.G = E2
+        self._KG = None
         if self.G.shape != E2.shape:
             raise ValueError(
                 f"term {self.name!r}: `G` has shape {self.G.shape}, expected {E2.shape}"
@@ -119,7 +120,9 @@ class LinearTerm:
         return self.coef.value(eps) * (self.K @ Theta @ self.G)
 
     def jacobian(self, Theta, eps, t=None):
-        return self.coef.value(eps) * np.kron(self.K, self.G.T)
+        if getattr(self, "_KG", None) is None:
+            self._KG = np.kron(self.K, self.G.T)  # fixed: only the coefficient varies
+        return self.coef.value(eps) * self._KG
 
     def eps_jacobian(self, Theta, eps, t=None):
         base = (self.K @ Theta @ self.G).ravel()
