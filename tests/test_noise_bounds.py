@@ -124,3 +124,17 @@ def test_wrong_types():
         noise_bounds(0.05, 225, alpha="0.05")
     with pytest.raises(TypeError, match="n_sensors"):
         noise_bounds(0.05, 225.0)
+
+
+def test_sample_variance_has_no_cancellation_for_an_offset_discrepancy():
+    # a biased model's discrepancy: large mean, small spread. The one-pass formula
+    # (sum e^2 - (sum e)^2 / C) / (C - 1) loses every digit here (and can go negative)
+    rng = np.random.default_rng(3)
+    spread = 1e-3 * rng.standard_normal(225)
+    e = 1e4 + spread
+    two_pass = np.sum((e - e.mean()) ** 2) / 224  # exact up to round-off of the mean
+    assert sample_moments(e)[1] == pytest.approx(two_pass, rel=1e-8)
+    # a constant discrepancy has sample variance 0 up to the round-off of its mean
+    # squared (~1e-34 here), not the one-pass formula's residue of ~1e-18
+    assert 0.0 <= sample_moments(np.full(10, 0.1))[1] < 1e-30
+    assert consistency_test(np.full(10, 0.1), 0.05).var_rejects

@@ -106,13 +106,23 @@ def sample_moments(e):
     -------
     mean, var : float
         :math:`\\bar e` and :math:`s^2` as in Eq. (ecfm_noise).
+
+    Notes
+    -----
+    The variance is evaluated on the centred values :math:`d = e - \\bar e` as
+    :math:`(\\sum d_i^2 - (\\sum d_i)^2/C)/(C-1)` (the paper's formula applied to
+    :math:`d`, equal in exact arithmetic). The formula applied to :math:`e` itself
+    cancels catastrophically when :math:`|\\bar e|` is large against the spread (a biased
+    discrepancy) and can even turn negative.
     """
     e = as_finite_array("e", e, ndim=1)
     C = e.size
     if C < 2:
         raise ValueError(f"`e` must have at least 2 entries for a sample variance, got {C}")
-    s = float(e.sum())
-    return s / C, (float(e @ e) - s * s / C) / (C - 1)
+    mean = float(np.mean(e))
+    d = e - mean
+    sd = float(d.sum())
+    return mean, max(float(d @ d) - sd * sd / C, 0.0) / (C - 1)
 
 
 @dataclass(frozen=True)
