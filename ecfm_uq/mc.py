@@ -204,6 +204,19 @@ def mc_moments(outputs):
     return Moments(mean, var, np.sqrt(var / n), se_var)
 
 
+def _node_outputs(fn, nodes):
+    """``fn`` at each Gauss node, stacked; a non-finite output raises (never a NaN moment)."""
+    y = np.stack([np.asarray(fn(x), dtype=float) for x in nodes])
+    bad = ~np.isfinite(y.reshape(len(nodes), -1)).all(axis=1)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(
+            f"`fn` returned NaN or inf at Gauss node {i} (omega={float(nodes[i]):.6g}); "
+            "check the model at that germ value"
+        )
+    return y
+
+
 def quadrature_moments(fn, n_points):
     """Mean and variance of ``fn(omega)``, :math:`\\omega \\sim U(0,1)`, by Gauss-Legendre.
 
@@ -219,11 +232,16 @@ def quadrature_moments(fn, n_points):
     Returns
     -------
     mean, var : (m,) ndarray
+
+    Raises
+    ------
+    ValueError
+        If ``fn`` returns NaN or inf at a node (the message names the node).
     """
     from .chaos import gauss_legendre
 
     nodes, w = gauss_legendre(check_int("n_points", n_points, minimum=1))
-    y = np.stack([np.asarray(fn(x), dtype=float) for x in nodes])
+    y = _node_outputs(fn, nodes)
     mean = w @ y
     return mean, w @ (y - mean) ** 2
 
@@ -248,6 +266,11 @@ def pseudospectral_projection(fn, chaos, n_points=None):
     Returns
     -------
     (m, P) ndarray
+
+    Raises
+    ------
+    ValueError
+        If ``fn`` returns NaN or inf at a node (the message names the node).
     """
     from .chaos import ChaosBasis, gauss_legendre
 
@@ -255,7 +278,7 @@ def pseudospectral_projection(fn, chaos, n_points=None):
         raise TypeError("`chaos` must be a one-dimensional ChaosBasis")
     n_points = chaos.order + 1 if n_points is None else n_points
     nodes, w = gauss_legendre(check_int("n_points", n_points, minimum=1))
-    y = np.stack([np.asarray(fn(x), dtype=float) for x in nodes])
+    y = _node_outputs(fn, nodes)
     Psi = chaos.evaluate(nodes)
     return (y * w[:, None]).T @ Psi / np.asarray(chaos.norms2)[None, :]
 

@@ -195,3 +195,11 @@ def test_sampler_refuses_buckling(beam):
     # a load above buckling is refused when the sampler is built, not inside the workers
     with pytest.raises(SingularSystemError):
         beam.response_function(3.0)
+
+
+def test_quadrature_references_refuse_non_finite_outputs():
+    # a model that returns NaN at a Gauss node must not give a NaN mean or PCE silently
+    with pytest.raises(ValueError, match="NaN or inf"):
+        quadrature_moments(nan_at_half, 4)
+    with pytest.raises(ValueError, match="NaN or inf"):
+        pseudospectral_projection(nan_at_half, ChaosBasis(3))
