@@ -81,3 +81,15 @@ def test_bad_input():
     plain = GalerkinSystem([LinearTerm(K), LoadTerm.linear(F)], 2)
     with pytest.raises(ValueError, match="Gamma"):
         fit_steady(plain, M_OBS, v, [1.0, 1.0], "ecfm")
+
+
+@pytest.mark.parametrize("objective", [standard_objective, ecfm_objective])
+def test_public_objectives_reject_bad_data_instead_of_returning_nan(objective):
+    system = heat()
+    eps = [1.0, 1.0]
+    with pytest.raises(ValueError, match="`v`"):
+        objective(system, M_OBS, np.full(4, np.nan), eps)
+    with pytest.raises(ValueError, match="`v`"):
+        objective(system, M_OBS, 0.5, eps)  # a scalar must not broadcast over sensors
+    with pytest.raises(ValueError, match="M_obs"):
+        objective(system, M_OBS[:, :3], np.zeros(4), eps)

@@ -40,7 +40,13 @@ def standard_objective(system, M_obs, v, eps, **solve_kw):
     z : float
     grad : (n_eps,) ndarray
     sol : SteadySolution
+
+    Raises
+    ------
+    ValueError
+        If ``M_obs`` is not (C, N) or ``v`` not (C,), or either is not finite.
     """
+    M_obs, v = _data(system, M_obs, v)
     sol = solve_steady(system, eps, strict=True, **solve_kw)
     e = M_obs @ system.mean(sol.Theta) - v
     dTheta, _ = sol.eps_sensitivity()
