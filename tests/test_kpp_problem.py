@@ -194,3 +194,17 @@ def test_bad_input():
         KroneckerTripleForm(np.ones((2, 2, 3)), np.ones((2, 2, 2)))
     with pytest.raises(TypeError, match="TensorBasis2D"):
         KroneckerTripleForm.from_basis(SineBasis(3))
+
+
+def test_relative_error_refuses_non_finite_or_misshaped_coefficients():
+    # a failed fit handing over NaN coefficients must not produce a NaN error silently
+    p = build_kpp(n_state=4, n_source=2, sensors=sensor_grid(3))
+    good = np.ones(p.basis.size)
+    bad = good.copy()
+    bad[3] = np.nan
+    with pytest.raises(ValueError, match="theta"):
+        relative_l1_error(p, good, bad)
+    with pytest.raises(ValueError, match="theta_ref"):
+        relative_l1_error(p, bad, good)
+    with pytest.raises(ValueError, match="theta"):
+        relative_l1_error(p, good, np.ones(p.basis.size + 1))

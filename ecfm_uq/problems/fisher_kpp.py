@@ -512,6 +512,8 @@ def relative_l1_error(problem, theta_ref, theta, grid=None):
     -------
     float
     """
+    theta_ref = as_finite_array("theta_ref", theta_ref, shape=(problem.basis.size,))
+    theta = as_finite_array("theta", theta, shape=(problem.basis.size,))
     x, w = fine_grid() if grid is None else grid
     W = np.outer(w, w)
     u = problem.basis.evaluate_grid(theta_ref, x, x)
