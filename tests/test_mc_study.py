@@ -103,3 +103,12 @@ def test_cli_reports_buckling(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "beta_crit" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "mc" / "result.json").exists()
+
+
+def test_summary_rows_with_only_order_zero(result):
+    # --max-order 0 is a valid setting: the spectral-decay row must say "not measured"
+    # (holds None) rather than crash on the missing order-1 error
+    pc = result["pce"]["convergence"]
+    short = {**result, "pce": {**result["pce"], "convergence": {k: v[:1] for k, v in pc.items()}}}
+    rows = study.summary_rows(short)
+    assert rows[-1]["holds"] is None
