@@ -262,6 +262,27 @@ def test_nonlinear_system_uses_finite_difference_hessian(nonlinear):
     assert abs(res.eps[0] - TRUE_EPS) < 0.1
 
 
+@pytest.mark.parametrize("formulation", ["standard", "inner-outer"])
+def test_stall_at_the_edge_of_solvable_models_is_not_success(linear, formulation):
+    """The forward solve fails for eps > 0.7 while the estimate (~0.97) lies beyond: the
+    trust region shrinks onto eps = 0.7 and stops on its step length with a large
+    gradient. That is not a converged estimate and must not be reported as one."""
+    system, v = linear
+    cut = Coefficient(lambda e: -float(e[0]) if e[0] <= 0.7 else np.nan, lambda e: np.array([-1.0]))
+    basis = system.basis
+    terms = [
+        LinearTerm(K0),
+        LinearTerm(-K1, G=weighted_gram(basis, lambda w: w)),
+        LinearTerm(KG, coef=cut),  # as make_system, but no model beyond eps = 0.7
+        LoadTerm.constant(F),
+    ]
+    edged = GalerkinSystem(terms, 1, basis=basis, Gamma=GAMMA)
+    res = fit_pseudo_likelihood(edged, M_OBS, v, [0.5], formulation)
+    assert res.eps[0] == pytest.approx(0.7, abs=1e-3)  # where it got stuck
+    assert not res.success, res.message
+    assert "evaluations failed" in res.message
+
+
 # --------------------------------------------------------------------------------------
 # expected relative error (Section 3.3)
 # --------------------------------------------------------------------------------------

@@ -713,8 +713,23 @@ def _trust_region(fun, eps0, bounds, gtol, maxiter, trust_radius):
     the gradient, which can jump over the physically relevant minimum (for the beam
     from eps0 = 0.5 straight to the upper bound). ``gtol`` is relative to the gradient
     at the start.
+
+    trust-constr also stops, with ``success=True``, when the trust radius falls below
+    ``xtol``. That is what happens when trial points keep failing (``fun`` returns
+    ``inf`` where the forward or inner solve fails): the radius shrinks onto the edge
+    of the solvable region while the gradient there is large. A step-length stop whose
+    last trial failed and whose optimality misses ``gtol`` is reported as
+    ``success=False`` (a step-length stop amid finite values is round-off in the
+    objective near its minimum and stays a success).
     """
-    z0, g0 = fun(np.array(eps0, dtype=float))
+    finite = []
+
+    def tracked(x):
+        z, g = fun(x)
+        finite.append(bool(np.isfinite(z)))
+        return z, g
+
+    z0, g0 = tracked(np.array(eps0, dtype=float))
     if not np.isfinite(z0):
         raise ConvergenceError(
             f"the objective cannot be evaluated at the start eps0={eps0} (the forward or "
@@ -729,8 +744,8 @@ def _trust_region(fun, eps0, bounds, gtol, maxiter, trust_radius):
     with warnings.catch_warnings():
         # trust-constr warns when it swaps its bound-handling method; not a failure
         warnings.simplefilter("ignore", UserWarning)
-        return sopt.minimize(
-            fun,
+        res = sopt.minimize(
+            tracked,
             eps0,
             jac=True,
             hess=sopt.BFGS(),
@@ -746,6 +761,14 @@ def _trust_region(fun, eps0, bounds, gtol, maxiter, trust_radius):
                 "initial_barrier_tolerance": 1e-8,
             },
         )
+    if res.status == 2 and not finite[-1] and not res.optimality <= gtol * scale:
+        res.success = False
+        res.message = (
+            f"{res.message} but the optimality {res.optimality:.3e} > gtol "
+            f"{gtol * scale:.3e}: the trust region collapsed onto the edge of the region "
+            "where the model can be solved (the last trial step failed)"
+        )
+    return res
 
 
 def _fit_standard(like, eps0, bounds, gtol, maxiter, trust_radius=0.1, **_):
