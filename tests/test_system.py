@@ -353,3 +353,26 @@ def test_non_commuting_couplings_fall_back_to_dense():
     assert sol.success and "decoupled" not in sol.message
     with pytest.raises(ValueError, match="structure"):
         solve_steady(system, [], structure="fast")
+
+
+def test_non_finite_jacobian_is_a_failure_not_a_nan_state():
+    class BrokenForm:
+        size = 2
+
+        def apply(self, X, Y):
+            return np.zeros_like(X)
+
+        def matrix(self, x):
+            return np.full((2, 2), np.nan)
+
+    bad = GalerkinSystem(
+        [LinearTerm(np.eye(2)), QuadraticTerm(BrokenForm()), LoadTerm.constant([1.0, 0.0])], 0
+    )
+    sol = solve_steady(bad, [])
+    assert not sol.success and "not finite" in sol.message
+
+
+def test_forces_on_a_system_without_gamma_are_rejected_in_the_residual():
+    no_gamma = GalerkinSystem([LinearTerm(K), LoadTerm.constant(F1)], 0)
+    with pytest.raises(ValueError, match="Gamma"):
+        no_gamma.residual(no_gamma.zeros(), [], lam=np.ones(2))

@@ -117,8 +117,12 @@ class GalerkinSystem:
         R = np.zeros(self.shape)
         for term in self.terms:
             R += term.apply(Theta, eps, t)
-        if lam is not None and self.Gamma is not None:
-            R -= np.outer(self.Gamma @ lam, self.E1)
+        if lam is not None:
+            if self.Gamma is None:
+                if np.any(np.asarray(lam) != 0):
+                    raise ValueError("`lam` given but the system has no constraint forces (Gamma)")
+            else:
+                R -= np.outer(self.Gamma @ lam, self.E1)
         return R
 
     def jacobian(self, Theta, eps, t=None):

@@ -45,7 +45,7 @@ def _factor(J):
         lu = sla.lu_factor(J, check_finite=False)
     # lu_factor only warns on exact singularity; detect it ourselves
     d = np.abs(np.diag(lu[0]))
-    if d.min() <= 1e-14 * max(d.max(), 1e-300):
+    if not np.all(np.isfinite(d)) or d.min() <= 1e-14 * max(d.max(), 1e-300):
         return None
     return lu
 
@@ -136,7 +136,7 @@ def newton(fun, z0, tol=1e-10, maxiter=50):
             return z, None, NewtonInfo(False, k, rnorm, "residual became non-finite")
         lu = _factor(J)
         if lu is None:
-            return z, None, NewtonInfo(False, k, rnorm, "Jacobian is singular")
+            return z, None, NewtonInfo(False, k, rnorm, "Jacobian is singular or not finite")
         dz = sla.lu_solve(lu, r, check_finite=False)
         z = z - dz
         if rnorm < tol:

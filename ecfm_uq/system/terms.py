@@ -176,19 +176,20 @@ class QuadraticTerm:
         idx = np.argwhere(E3 != 0.0)
         self._nz = [(int(a), int(b), int(c), float(E3[a, b, c])) for a, b, c in idx]
         self._P = E3.shape[0]
+        # group by (b, c): q(Theta_b, Theta_c) is evaluated once per pair
+        pairs = {}
+        for a, b, c, v in self._nz:
+            pairs.setdefault((b, c), []).append((a, v))
+        self._pairs = list(pairs.items())
+        self._bs = [bc[0] for bc, _ in self._pairs]
+        self._cs = [bc[1] for bc, _ in self._pairs]
 
     def _raw(self, Theta):
         out = np.zeros_like(Theta)
         if self._P == 1:
             return self.form.apply(Theta, Theta)
-        # group by (b, c) pairs: q(Theta_b, Theta_c) once per pair
-        pairs = {}
-        for a, b, c, v in self._nz:
-            pairs.setdefault((b, c), []).append((a, v))
-        bs = [bc[0] for bc in pairs]
-        cs = [bc[1] for bc in pairs]
-        Q = self.form.apply(Theta[:, bs], Theta[:, cs])
-        for col, (_bc, targets) in enumerate(pairs.items()):
+        Q = self.form.apply(Theta[:, self._bs], Theta[:, self._cs])
+        for col, (_bc, targets) in enumerate(self._pairs):
             for a, v in targets:
                 out[:, a] += v * Q[:, col]
         return out
