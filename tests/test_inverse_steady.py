@@ -93,3 +93,11 @@ def test_public_objectives_reject_bad_data_instead_of_returning_nan(objective):
         objective(system, M_OBS, 0.5, eps)  # a scalar must not broadcast over sensors
     with pytest.raises(ValueError, match="M_obs"):
         objective(system, M_OBS[:, :3], np.zeros(4), eps)
+
+
+def test_an_optimizer_stopped_early_is_not_success():
+    system = heat()
+    v = M_OBS @ solve_steady(system, [3.0, -2.0]).Theta[:, 0]
+    res = fit_steady(system, M_OBS, v, [1.0, 1.0], "standard", maxiter=1)
+    assert not res.success
+    assert "round-off" not in res.message

@@ -406,7 +406,11 @@ def summary_rows(result):
         {
             "quantity": "ECFM better conditioned than standard",
             "paper": f"{PAPER['ecfm_hessian_cond']:.2f} < {PAPER['inv_hessian_cond']:.2f}",
-            "ours": f"{result['ecfm']['hessian_cond']:.2f} < {result['inv']['hessian_cond']:.2f}",
+            "ours": "{:.2f} {} {:.2f}".format(
+                result["ecfm"]["hessian_cond"],
+                "<" if result["ecfm"]["hessian_cond"] < result["inv"]["hessian_cond"] else ">=",
+                result["inv"]["hessian_cond"],
+            ),
             "holds": bool(result["ecfm"]["hessian_cond"] < result["inv"]["hessian_cond"]),
         }
     )

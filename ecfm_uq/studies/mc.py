@@ -315,7 +315,12 @@ def summary_rows(result):
             "holds": abs(result["beta_crit"] - 2.24) < 5e-3,
         },
         {
-            "quantity": "PCE (N = M = 6) vs 15-mode solves at omega = 0, 1/2, 1 (max rel. error)",
+            "quantity": "PCE (N = {n}, M = {m}) vs {r}-mode solves at omega = 0, 1/2, 1 "
+            "(max rel. error)".format(
+                n=result["settings"]["n_basis"],
+                m=result["settings"]["order"] + 1,
+                r=result["settings"]["reference_basis"],
+            ),
             "paper": "agrees satisfactorily",
             "ours": f"{result['pce_vs_reference_max_rel_error']:.1e}",
             "holds": result["pce_vs_reference_max_rel_error"] < 1e-2,
