@@ -319,7 +319,7 @@ def _figures(model, truth, V, fits, surfaces, true_eps, out_dir):
 
     # true field and measured time series (paper Figure `sol`)
     U = model.field(truth.Theta, x)
-    fig, ax = plt.subplots(1, 2, figsize=(12, 4))
+    fig, ax = plt.subplots(1, 2, figsize=(12, 4), layout="constrained")
     im = ax[0].pcolormesh(x, t, U, shading="auto", cmap="RdBu_r")
     fig.colorbar(im, ax=ax[0], label="u")
     for xc in model.sensors:
