@@ -173,6 +173,7 @@ class QuadraticTerm:
 
     def bind(self, E3):
         """Store the nonzero triple products (a, b, c, value) of the chaos basis."""
+        self._E3 = np.asarray(E3, dtype=float)
         idx = np.argwhere(E3 != 0.0)
         self._nz = [(int(a), int(b), int(c), float(E3[a, b, c])) for a, b, c in idx]
         self._P = E3.shape[0]
@@ -202,11 +203,10 @@ class QuadraticTerm:
         c = self.coef.value(eps)
         if P == 1:
             return c * self.form.matrix(Theta[:, 0])
-        S = [self.form.matrix(Theta[:, k]) for k in range(P)]
-        J = np.zeros((N, P, N, P))
-        for a, b, k, v in self._nz:
-            J[:, a, :, b] += v * S[k]
-        return c * J.reshape(N * P, N * P)
+        S = np.stack([self.form.matrix(Theta[:, k]) for k in range(P)])  # (P, N, N)
+        # J[i, a, j, b] = sum_k E3[a, b, k] S_k[i, j], as one matrix product
+        T = (self._E3.reshape(P * P, P) @ S.reshape(P, N * N)).reshape(P, P, N, N)
+        return c * T.transpose(2, 0, 3, 1).reshape(N * P, N * P)
 
     def eps_jacobian(self, Theta, eps, t=None):
         return np.outer(self._raw(Theta).ravel(), self.coef.grad(eps))
