@@ -376,3 +376,18 @@ def test_forces_on_a_system_without_gamma_are_rejected_in_the_residual():
     no_gamma = GalerkinSystem([LinearTerm(K), LoadTerm.constant(F1)], 0)
     with pytest.raises(ValueError, match="Gamma"):
         no_gamma.residual(no_gamma.zeros(), [], lam=np.ones(2))
+
+
+@pytest.mark.parametrize("structure", ["auto", "dense"])
+def test_jacobian_solve_reuses_the_factors_and_equals_a_fresh_dense_solve(structure):
+    system = _linear_stochastic(3)
+    sol = solve_steady(system, EPS, structure=structure)
+    rng = np.random.default_rng(3)
+    B = rng.normal(size=(system.N * system.P, 2))
+    X = sol.jacobian_solve(B)
+    np.testing.assert_allclose(X, np.linalg.solve(system.jacobian(sol.Theta, EPS), B), rtol=1e-10)
+    with pytest.raises(ValueError, match="rhs"):
+        sol.jacobian_solve(np.ones(3))
+    constrained = solve_steady(burgers_like(), EPS, constraint=(M_OBS, np.zeros(3)))
+    with pytest.raises(ValueError, match="constrained"):
+        constrained.jacobian_solve(np.ones(N))

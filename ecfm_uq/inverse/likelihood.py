@@ -59,7 +59,6 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg as sla
 import scipy.optimize as sopt
 
 from .._validation import as_finite_array, check_int, check_positive
@@ -135,15 +134,22 @@ def sensor_moments(system, M_obs, Theta, dTheta=None):
     Theta = as_finite_array("Theta", Theta, shape=system.shape)
     Cpsi = _centered_gram(system.E1, system.E2)
     A = M_obs @ Theta
-    mu = A @ system.E1
-    var = np.einsum("ik,kq,iq->i", A, Cpsi, A)
+    mu, var = _stats(A, system.E1, Cpsi)
     if dTheta is None:
         return mu, var
     dTheta = as_finite_array("dTheta", dTheta, shape=(system.N, system.P, None))
     dA = np.einsum("ij,jkm->ikm", M_obs, dTheta)
-    dmu = np.einsum("ikm,k->im", dA, system.E1)
-    dvar = 2.0 * np.einsum("ik,kq,iqm->im", A, Cpsi, dA)
-    return mu, var, dmu, dvar
+    return (mu, var, *_stats_derivative(A, dA, system.E1, Cpsi))
+
+
+def _stats(A, E1, Cpsi):
+    """Sensor mean and variance from the observed coefficients ``A = M_obs Theta`` (C, P)."""
+    return A @ E1, np.einsum("ik,kq,iq->i", A, Cpsi, A)
+
+
+def _stats_derivative(A, dA, E1, Cpsi):
+    """Derivatives (C, m) of the sensor mean and variance for ``dA = M_obs dTheta`` (C, P, m)."""
+    return np.einsum("ikm,k->im", dA, E1), 2.0 * np.einsum("ik,kq,iqm->im", A, Cpsi, dA)
 
 
 def _check_data(v, C):
@@ -394,8 +400,7 @@ class PseudoLikelihood:
         sol = self.solve(eps, lam)
         Theta = sol.Theta
         A = self.M_obs @ Theta
-        mu = A @ sysm.E1
-        var = np.einsum("ik,kq,iq->i", A, self.Cpsi, A)
+        mu, var = _stats(A, sysm.E1, self.Cpsi)
         _check_variance(var, mu, self.var_rtol)
         f, f_mu, f_s, f_mumu, f_mus, f_ss = _nll_terms(mu, var, self.vbar, self.ss, self.D)
         point = LikelihoodPoint(eps, lam, float(f.sum()), mu, var, Theta)
@@ -404,14 +409,12 @@ class PseudoLikelihood:
 
         dTh_e, _ = sol.eps_sensitivity()
         A_e = np.einsum("ij,jkm->ikm", self.M_obs, dTh_e)
-        mu_e = np.einsum("ikm,k->im", A_e, sysm.E1)
-        s_e = 2.0 * np.einsum("ik,kq,iqm->im", A, self.Cpsi, A_e)
+        mu_e, s_e = _stats_derivative(A, A_e, sysm.E1, self.Cpsi)
         point.grad_eps = f_mu @ mu_e + f_s @ s_e
         if sysm.Gamma is not None:
             dTh_l = sol.lam_sensitivity()
             A_l = np.einsum("ij,jkm->ikm", self.M_obs, dTh_l)
-            mu_l = np.einsum("ikm,k->im", A_l, sysm.E1)
-            s_l = 2.0 * np.einsum("ik,kq,iqm->im", A, self.Cpsi, A_l)
+            mu_l, s_l = _stats_derivative(A, A_l, sysm.E1, self.Cpsi)
             point.grad_lam = f_mu @ mu_l + f_s @ s_l
         if order == 1:
             return point
@@ -429,8 +432,8 @@ class PseudoLikelihood:
             for term in sysm.terms:
                 if isinstance(term, LinearTerm):
                     rhs[:, q * m : (q + 1) * m] += term.eps_jacobian(X, eps)
-        lu = sla.lu_factor(sysm.jacobian(Theta, eps), check_finite=False)
-        dTh_le = -sla.lu_solve(lu, rhs, check_finite=False).reshape(sysm.N, sysm.P, C, m)
+        # the converged solve's factors (dense or decoupled) serve the mixed derivative too
+        dTh_le = -sol.jacobian_solve(rhs).reshape(sysm.N, sysm.P, C, m)
         A_le = np.einsum("ij,jkqm->ikqm", self.M_obs, dTh_le)
         mu_le = np.einsum("ikqm,k->iqm", A_le, sysm.E1)
         s_ll = 2.0 * np.einsum("ikq,kl,ilr->iqr", A_l, self.Cpsi, A_l)

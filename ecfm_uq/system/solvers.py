@@ -196,6 +196,30 @@ class SteadySolution:
     def _solve(self, rhs):
         return self._lu.solve(rhs)
 
+    def jacobian_solve(self, rhs):
+        """Solve :math:`(\\partial R/\\partial\\Theta)\\,X = B` with the stored factors.
+
+        The factors (dense LU, or the decoupled blocks) of the converged solve are reused,
+        so further sensitivity systems (e.g. second derivatives) cost one back-substitution.
+
+        Parameters
+        ----------
+        rhs : (N * P,) or (N * P, m) array_like
+            Right-hand side(s), flattened row-major like ``Theta``.
+
+        Returns
+        -------
+        ndarray of the shape of ``rhs``
+        """
+        self._require()
+        if self.constrained:
+            raise ValueError("a constrained solve stores the augmented (Theta, lam) factors")
+        n = self.system.N * self.system.P
+        rhs = as_finite_array("rhs", rhs)
+        if rhs.shape[0] != n or rhs.ndim > 2:
+            raise ValueError(f"`rhs` must have shape ({n},) or ({n}, m), got {rhs.shape}")
+        return self._solve(rhs)
+
     def eps_sensitivity(self):
         """:math:`\\partial\\Theta/\\partial\\epsilon` (N, P, n_eps) and, under a data
         constraint, :math:`\\partial\\lambda/\\partial\\epsilon` (C, n_eps) (else ``None``)."""
