@@ -62,7 +62,7 @@ DEFAULTS = {
     "eps_lower_bound": 0.0,
     "eps_upper_bound_fraction": 0.99,
     "trust_radius": 0.1,
-    "solve_tol": 1e-8,
+    "solve_tol": 1e-10,  # the library default; the decoupled solve refines to it
     "reference_basis": 15,
     "error_quadrature_points": 400,
     "seed_study_quadrature_points": 128,
