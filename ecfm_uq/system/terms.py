@@ -169,31 +169,19 @@ class QuadraticTerm:
         self.form = form if hasattr(form, "matrix") else DenseQuadraticForm(form)
         self.coef = as_coefficient(coef)
         self.name = name
-        self._nz = None
 
     def bind(self, E3):
-        """Store the nonzero triple products (a, b, c, value) of the chaos basis."""
+        """Store :math:`\\mathbb E[\\Psi_a\\Psi_b\\Psi_c]` and the (b, c) pairs it couples."""
         self._E3 = np.asarray(E3, dtype=float)
-        idx = np.argwhere(E3 != 0.0)
-        self._nz = [(int(a), int(b), int(c), float(E3[a, b, c])) for a, b, c in idx]
         self._P = E3.shape[0]
-        # group by (b, c): q(Theta_b, Theta_c) is evaluated once per pair
-        pairs = {}
-        for a, b, c, v in self._nz:
-            pairs.setdefault((b, c), []).append((a, v))
-        self._pairs = list(pairs.items())
-        self._bs = [bc[0] for bc, _ in self._pairs]
-        self._cs = [bc[1] for bc, _ in self._pairs]
+        # q(Theta_b, Theta_c) is evaluated once per structurally nonzero pair (b, c)
+        self._bs, self._cs = np.nonzero(np.any(self._E3 != 0.0, axis=0))
+        self._W = self._E3[:, self._bs, self._cs].T  # (n_pairs, P)
 
     def _raw(self, Theta):
-        out = np.zeros_like(Theta)
         if self._P == 1:
             return self.form.apply(Theta, Theta)
-        Q = self.form.apply(Theta[:, self._bs], Theta[:, self._cs])
-        for col, (_bc, targets) in enumerate(self._pairs):
-            for a, v in targets:
-                out[:, a] += v * Q[:, col]
-        return out
+        return self.form.apply(Theta[:, self._bs], Theta[:, self._cs]) @ self._W
 
     def apply(self, Theta, eps, t=None):
         return self.coef.value(eps) * self._raw(Theta)
