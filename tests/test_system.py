@@ -14,6 +14,7 @@ from ecfm_uq.system import (
     LoadTerm,
     QuadraticTerm,
     march,
+    solve_continuation,
     solve_steady,
 )
 
@@ -391,3 +392,18 @@ def test_jacobian_solve_reuses_the_factors_and_equals_a_fresh_dense_solve(struct
     constrained = solve_steady(burgers_like(), EPS, constraint=(M_OBS, np.zeros(3)))
     with pytest.raises(ValueError, match="constrained"):
         constrained.jacobian_solve(np.ones(N))
+
+
+def test_continuation_reaches_a_solution_plain_newton_misses():
+    # R = theta + theta^2 - s: at s = 400 Newton from zero needs 10 iterations
+    system = GalerkinSystem(
+        [LinearTerm(np.eye(1)), QuadraticTerm(np.ones((1, 1, 1))), LoadTerm.linear([[1.0]])], 1
+    )
+    assert not solve_steady(system, [400.0], maxiter=7).success
+    sol, steps = solve_continuation(system, [0.0], [400.0], maxiter=7)
+    assert sol.success and steps > 1
+    np.testing.assert_allclose(sol.Theta[0, 0], (-1 + np.sqrt(1 + 1600)) / 2, rtol=1e-12)
+    failed, _ = solve_continuation(system, [0.0], [400.0], maxiter=1, max_halvings=1)
+    assert not failed.success and "continuation step" in failed.message
+    with pytest.raises(ConvergenceError, match="continuation"):
+        solve_continuation(system, [0.0], [400.0], maxiter=1, max_halvings=1, strict=True)

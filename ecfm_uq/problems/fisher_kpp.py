@@ -33,7 +33,7 @@ which we use (:math:`\\mu = 1/2`). The cubic tensor :math:`A` is never formed: t
 few tens of MB (the dense tensor would need 33 GB).
 
 This module only builds systems and data from the paper's equations (the data generator
-uses Newton with load continuation, not an optimizer) and evaluates fields and errors
+uses the engine's Newton continuation, not an optimizer) and evaluates fields and errors
 on fine quadrature grids; the inverse solvers live in :mod:`ecfm_uq.inverse.noisy`.
 """
 
@@ -56,7 +56,14 @@ from ..spectral import (
     stiffness,
     triple,
 )
-from ..system import Coefficient, GalerkinSystem, LinearTerm, LoadTerm, QuadraticTerm, solve_steady
+from ..system import (
+    Coefficient,
+    GalerkinSystem,
+    LinearTerm,
+    LoadTerm,
+    QuadraticTerm,
+    solve_continuation,
+)
 
 #: Paper settings of Section 3.2.
 MU = 0.5
@@ -415,8 +422,8 @@ def solve_true_state(
 ):
     """Solve the true problem by Newton, with load continuation if needed.
 
-    Newton starts from zero at the full load; if it fails the load is reached in
-    ``2, 4, 8, ...`` equal steps, each started from the previous solution.
+    Delegates to :func:`ecfm_uq.system.solve_continuation` along the load scale 0 -> 1:
+    Newton from zero at the full load first, then ``2, 4, 8, ...`` load steps.
 
     Returns
     -------
@@ -431,24 +438,12 @@ def solve_true_state(
     ConvergenceError
         If even ``2**max_halvings`` load steps fail.
     """
-    from ..errors import ConvergenceError
-
     sysm = true_system(problem, amplitude, box)
-    last = ""
-    for h in range(max_halvings + 1):
-        steps = 2**h
-        Theta = sysm.zeros()
-        nit = 0
-        for t in np.arange(1, steps + 1) / steps:
-            sol = solve_steady(sysm, [t], Theta0=Theta, tol=tol)
-            nit += sol.nit
-            if not sol.success:
-                last = f"load step t={t:.4g} of {steps}: {sol.message}"
-                break
-            Theta = sol.Theta
-        else:
-            return Theta[:, 0], steps, nit
-    raise ConvergenceError(f"true Fisher-KPP state: Newton failed with continuation ({last})")
+    # the true system's one parameter scales the load; zero load has the zero solution
+    sol, steps = solve_continuation(
+        sysm, [0.0], [1.0], max_halvings=max_halvings, tol=tol, strict=True
+    )
+    return sol.Theta[:, 0], steps, sol.nit
 
 
 def make_data(problem, sigma=0.05, seed=0, amplitude=SOURCE_AMPLITUDE, box=SOURCE_BOX):

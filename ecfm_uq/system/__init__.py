@@ -2,7 +2,15 @@
 backward_euler, ecfm_solve, discrete_sens, discrete_sens_ecfm, pce, stochastic_sens)."""
 
 from .galerkin import GalerkinSystem
-from .solvers import NewtonInfo, SteadySolution, Trajectory, march, newton, solve_steady
+from .solvers import (
+    NewtonInfo,
+    SteadySolution,
+    Trajectory,
+    march,
+    newton,
+    solve_continuation,
+    solve_steady,
+)
 from .terms import Coefficient, DenseQuadraticForm, LinearTerm, LoadTerm, QuadraticTerm
 
 __all__ = [
@@ -17,5 +25,6 @@ __all__ = [
     "Trajectory",
     "march",
     "newton",
+    "solve_continuation",
     "solve_steady",
 ]

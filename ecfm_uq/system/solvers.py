@@ -355,6 +355,58 @@ def solve_steady(
     return sol
 
 
+def solve_continuation(
+    system, eps_start, eps_end, *, Theta0=None, max_halvings=6, tol=1e-10, maxiter=50, strict=False
+):
+    """Solve at ``eps_end`` by Newton continuation along the straight path from ``eps_start``.
+
+    Newton first goes straight to ``eps_end``; if that fails, the path is taken in
+    ``2, 4, 8, ...`` equal steps, each Newton solve started from the previous solution
+    (``Theta0`` for the first), until one pass succeeds.
+
+    Parameters
+    ----------
+    system : GalerkinSystem
+    eps_start, eps_end : (n_eps,) array_like
+        Path ends; ``Theta0`` should solve (or nearly solve) the system at ``eps_start``.
+    Theta0 : (N, P) array_like, optional
+        Start state (zero by default).
+    max_halvings : int
+        At most ``2**max_halvings`` steps.
+    tol, maxiter : Newton settings per step.
+    strict : bool
+        Raise :class:`ConvergenceError` instead of returning ``success=False``.
+
+    Returns
+    -------
+    sol : SteadySolution
+        At ``eps_end``; ``nit`` counts the Newton iterations of the successful pass.
+    steps : int
+        Number of continuation steps used.
+    """
+    e0, e1 = system.check_eps(eps_start), system.check_eps(eps_end)
+    max_halvings = check_int("max_halvings", max_halvings, minimum=0)
+    Theta0 = (
+        system.zeros() if Theta0 is None else as_finite_array("Theta0", Theta0, shape=system.shape)
+    )
+    for h in range(max_halvings + 1):
+        steps = 2**h
+        Theta, nit = Theta0, 0
+        for t in np.arange(1, steps + 1) / steps:
+            sol = solve_steady(system, e0 + t * (e1 - e0), Theta0=Theta, tol=tol, maxiter=maxiter)
+            nit += sol.nit
+            if not sol.success:
+                sol.message = f"continuation step t={t:.4g} of {steps}: {sol.message}"
+                break
+            Theta = sol.Theta
+        else:
+            sol.nit = nit
+            return sol, steps
+    if strict:
+        raise ConvergenceError(f"{system.name}: continuation failed ({sol.message})")
+    return sol, steps
+
+
 # --------------------------------------------------------------------------------------
 # backward Euler
 # --------------------------------------------------------------------------------------
