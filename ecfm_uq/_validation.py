@@ -5,6 +5,7 @@ from __future__ import annotations
 import numbers
 
 import numpy as np
+import scipy.sparse as sp
 
 
 def as_finite_array(name, value, *, ndim=None, shape=None, dtype=float):
@@ -56,3 +57,46 @@ def check_choice(name, value, choices):
     if value not in choices:
         raise ValueError(f"unknown `{name}` {value!r}; choose one of {sorted(choices)}")
     return value
+
+
+def is_sparse(value):
+    """True for a ``scipy.sparse`` matrix or array."""
+    return sp.issparse(value)
+
+
+def as_operator(name, value, *, shape=None, square=False):
+    """Return ``value`` as a finite dense ``ndarray`` or a CSR ``scipy.sparse`` matrix.
+
+    Dense input goes through :func:`as_finite_array` unchanged (2-D); sparse input is kept
+    sparse (converted to CSR, ``float``) with its stored values checked for NaN/inf, so
+    nothing of size ``N^2`` is formed for a sparse operator.
+
+    Parameters
+    ----------
+    name : str
+        Argument name used in error messages.
+    value : array_like or scipy.sparse matrix
+    shape : tuple, optional
+        Required shape; ``None`` entries are free.
+    square : bool
+        Require a square matrix.
+    """
+    if sp.issparse(value):
+        if value.ndim != 2:
+            raise ValueError(f"`{name}` must be 2-D, got shape {value.shape}")
+        try:
+            out = sp.csr_matrix(value, dtype=float)
+        except (TypeError, ValueError) as e:
+            raise TypeError(f"`{name}` must hold real numbers, got dtype {value.dtype}") from e
+        if not np.all(np.isfinite(out.data)):
+            raise ValueError(f"`{name}` contains NaN or inf; pass finite values only")
+    else:
+        out = as_finite_array(name, value, ndim=2)
+    if square and out.shape[0] != out.shape[1]:
+        raise ValueError(f"`{name}` must be square, got shape {out.shape}")
+    if shape is not None and any(
+        s is not None and s != a for s, a in zip(shape, out.shape, strict=True)
+    ):
+        want = tuple("any" if s is None else s for s in shape)
+        raise ValueError(f"`{name}` must have shape {want}, got {out.shape}")
+    return out

@@ -5,5 +5,17 @@ class ConvergenceError(RuntimeError):
     """An iterative solver did not converge and the caller asked for strictness."""
 
 
+class KrylovError(ConvergenceError):
+    """A Krylov solve did not reach its tolerance (the message gives iterations and residual)."""
+
+
 class SingularSystemError(ValueError):
     """A system matrix is singular or indefinite where it must not be (e.g. buckling)."""
+
+
+class MemoryBudgetError(MemoryError):
+    """A requested allocation exceeds the memory budget (see :mod:`ecfm_uq.memory`).
+
+    Raised *before* allocating; the message gives the size needed, the budget and the
+    options that avoid the allocation.
+    """

@@ -15,9 +15,12 @@ polynomial nonlinearities and loads (see :mod:`.terms`), plus constraint forces
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
-from .._validation import as_finite_array, check_int
-from .terms import LinearTerm, LoadTerm, QuadraticTerm
+from .._validation import as_finite_array, as_operator, check_int
+from ..memory import check_allocation
+from .operator import GalerkinOperator, _LinearPart, _QuadraticLinearization
+from .terms import LinearTerm, LoadTerm, QuadraticTerm, _symmetric
 
 
 class GalerkinSystem:
@@ -31,9 +34,9 @@ class GalerkinSystem:
         Number of model parameters :math:`\\epsilon`.
     basis : ChaosBasis, optional
         Stochastic basis; ``None`` for a deterministic system (``P = 1``).
-    Gamma : (N, C) array_like, optional
+    Gamma : (N, C) array_like or scipy.sparse matrix, optional
         Constraint-force vectors :math:`\\Gamma_{ij} = \\int f_i\\Gamma(x - x_j)`.
-    M : (N, N) array_like, optional
+    M : (N, N) array_like or scipy.sparse matrix, optional
         Mass matrix for time-dependent systems :math:`M\\dot\\theta + R = 0`.
     name : str
 
@@ -78,10 +81,11 @@ class GalerkinSystem:
                 term.bind(self.E3)
             else:
                 term.bind(self.E1)
-        self.Gamma = None if Gamma is None else as_finite_array("Gamma", Gamma, ndim=2)
+        self.Gamma = None if Gamma is None else as_operator("Gamma", Gamma)
         if self.Gamma is not None and self.Gamma.shape[0] != self.N:
             raise ValueError(f"`Gamma` must have {self.N} rows (N), got {self.Gamma.shape}")
-        self.M = None if M is None else as_finite_array("M", M, shape=(self.N, self.N))
+        self.M = None if M is None else as_operator("M", M, shape=(self.N, self.N))
+        self._operator_cache = None
         self.name = name
 
     # -- sizes -------------------------------------------------------------------------
@@ -122,18 +126,54 @@ class GalerkinSystem:
                 if np.any(np.asarray(lam) != 0):
                     raise ValueError("`lam` given but the system has no constraint forces (Gamma)")
             else:
-                R -= np.outer(self.Gamma @ lam, self.E1)
+                R -= np.outer(self.Gamma @ np.asarray(lam, dtype=float), self.E1)
         return R
 
-    def jacobian(self, Theta, eps, t=None):
-        """:math:`\\partial\\,\\mathrm{vec}R / \\partial\\,\\mathrm{vec}\\Theta`, shape (NP, NP)."""
-        n = self.N * self.P
-        J = np.zeros((n, n))
+    def jacobian_operator(self, Theta, eps, t=None, dt=None):
+        """The Jacobian at ``Theta`` as a structured :class:`~.operator.GalerkinOperator`.
+
+        Nothing is assembled: the operator applies itself matrix-free and assembles dense,
+        sparse or its mean block on request (the solver layer decides which). ``dt`` adds
+        the backward-Euler mass term :math:`M\\otimes\\mathbb E[\\Psi\\Psi^T]/\\Delta t`. For
+        a linear system the same object is returned for the same ``(eps, dt)``, so a
+        solver can reuse its factorization.
+        """
+        if self.is_linear:
+            key = (np.asarray(eps, dtype=float).tobytes(), dt)
+            if self._operator_cache is not None and self._operator_cache[0] == key:
+                return self._operator_cache[1]
+        parts = []
         for term in self.terms:
-            Jt = term.jacobian(Theta, eps, t)
-            if Jt is not None:
-                J += Jt
-        return J
+            if isinstance(term, LinearTerm):
+                parts.append(_LinearPart(term, term.coef.value(eps)))
+            elif isinstance(term, QuadraticTerm):
+                parts.append(_QuadraticLinearization(term, Theta, term.coef.value(eps)))
+        op = GalerkinOperator(self, parts, dt=dt)
+        if self.is_linear:
+            self._operator_cache = (key, op)
+        return op
+
+    def jacobian(self, Theta, eps, t=None):
+        """:math:`\\partial\\,\\mathrm{vec}R / \\partial\\,\\mathrm{vec}\\Theta`, dense (NP, NP).
+
+        Refused (:class:`~ecfm_uq.errors.MemoryBudgetError`) when it would not fit the
+        memory budget; use :meth:`jacobian_operator` for large systems.
+        """
+        return self.jacobian_operator(Theta, eps, t).to_dense()
+
+    @property
+    def is_linear(self):
+        """True when no term is quadratic in the state."""
+        return not any(isinstance(t, QuadraticTerm) for t in self.terms)
+
+    @property
+    def sparse_input(self):
+        """True when any spatial operator, ``M`` or ``Gamma`` is ``scipy.sparse``."""
+        return (
+            any(isinstance(t, LinearTerm) and t.sparse for t in self.terms)
+            or sp.issparse(self.M)
+            or sp.issparse(self.Gamma)
+        )
 
     def eps_jacobian(self, Theta, eps, t=None):
         """:math:`\\partial\\,\\mathrm{vec}R / \\partial\\epsilon`, shape (NP, n_eps)."""
@@ -146,13 +186,42 @@ class GalerkinSystem:
         """:math:`\\partial\\,\\mathrm{vec}R / \\partial\\lambda = -\\Gamma\\otimes\\mathbb E[\\Psi]`, (NP, C)."""
         if self.Gamma is None:
             return np.zeros((self.N * self.P, 0))
-        return -(self.Gamma[:, None, :] * self.E1[None, :, None]).reshape(self.N * self.P, -1)
+        Gamma = self.Gamma.toarray() if sp.issparse(self.Gamma) else self.Gamma
+        return -(Gamma[:, None, :] * self.E1[None, :, None]).reshape(self.N * self.P, -1)
 
-    def mass_matrix(self):
-        """:math:`M \\otimes \\mathbb E[\\Psi_k\\Psi_\\ell]`, shape (NP, NP)."""
+    def constraint_jacobian(self, M_obs):
+        """:math:`\\mathcal M \\otimes \\mathbb E[\\Psi]^T`, (C, NP): the data constraint's Jacobian.
+
+        Sparse when ``M_obs`` is sparse.
+        """
+        if sp.issparse(M_obs):
+            return sp.kron(M_obs, sp.csr_matrix(self.E1[None, :]), format="csr")
+        return np.kron(M_obs, self.E1[None, :])
+
+    def mass_matrix(self, sparse=False):
+        """:math:`M \\otimes \\mathbb E[\\Psi_k\\Psi_\\ell]`, shape (NP, NP) (CSR if ``sparse``)."""
         if self.M is None:
             raise ValueError(f"system {self.name!r} has no mass matrix; pass M= for time stepping")
-        return np.kron(self.M, self.E2.T)
+        if sparse:
+            return sp.kron(self.M, sp.csr_matrix(self.E2.T), format="csr")
+        n = self.N * self.P
+        check_allocation(
+            8.0 * n * n,
+            f"the dense mass matrix of {self.name!r} (NP = {n})",
+            "pass a sparse M and solver='cg' or 'gmres'",
+        )
+        M = self.M.toarray() if sp.issparse(self.M) else self.M
+        return np.kron(M, self.E2.T)
+
+    def apply_mass(self, X):
+        """:math:`M X \\mathbb E[\\Psi\\Psi^T]` for ``X`` of shape (N, P), matrix-free."""
+        if self.M is None:
+            raise ValueError(f"system {self.name!r} has no mass matrix; pass M= for time stepping")
+        return np.asarray(self.M @ X) @ self.E2
+
+    def mass_is_symmetric(self):
+        """Whether ``M`` is symmetric."""
+        return self.M is not None and _symmetric(self.M)
 
     # -- structure ---------------------------------------------------------------------
     def decoupling(self):
@@ -176,7 +245,7 @@ class GalerkinSystem:
         return self._decoupling
 
     def _find_decoupling(self):
-        if self.P == 1 or any(isinstance(t, QuadraticTerm) for t in self.terms):
+        if self.P == 1 or not self.is_linear:
             return None
         Gs = [t.G for t in self.terms if isinstance(t, LinearTerm)]
         # a generic combination has simple eigenvalues whenever a common eigenbasis exists
@@ -202,6 +271,11 @@ class GalerkinSystem:
         """:math:`\\mathrm{Cov}[\\theta] = \\Theta\\,\\mathbb E[\\Psi\\Psi^T]\\,\\Theta^T - \\mu\\mu^T`, (N, N)."""
         mu = self.mean(Theta)
         return Theta @ self.E2 @ Theta.T - np.outer(mu, mu)
+
+    def variance(self, Theta):
+        """Pointwise :math:`\\mathrm{Var}[\\theta_i]`, shape (N,), without the (N, N) covariance."""
+        mu = self.mean(Theta)
+        return np.einsum("ik,kl,il->i", Theta, self.E2, Theta) - mu**2
 
     def __repr__(self):
         return f"GalerkinSystem({self.name!r}, N={self.N}, P={self.P}, n_eps={self.n_eps}, C={self.n_forces})"

@@ -21,8 +21,9 @@ from __future__ import annotations
 import numbers
 
 import numpy as np
+import scipy.sparse as sp
 
-from .._validation import as_finite_array, check_int
+from .._validation import as_finite_array, as_operator, check_int, is_sparse
 
 
 class Coefficient:
@@ -83,50 +84,106 @@ def as_coefficient(c):
     raise TypeError(f"`coef` must be a number or a Coefficient, got {type(c).__name__}")
 
 
+def right_multiply(X, G, G_sparse=None):
+    """:math:`X G` for ``X`` of shape (N, P), with the sparse copy of ``G`` when given.
+
+    The stochastic couplings of affine random inputs have a few nonzeros a row, so for
+    large ``P`` the product costs ``O(N nnz(G))`` instead of ``O(N P^2)``.
+    """
+    if G_sparse is None:
+        return X @ G
+    return np.asarray(G_sparse.T @ X.T).T
+
+
+def _sparse_coupling(G):
+    """CSR copy of a coupling worth multiplying sparsely, else ``None``."""
+    P = G.shape[0]
+    if P < 10 or np.count_nonzero(G) > 0.25 * P * P:
+        return None
+    return sp.csr_matrix(G)
+
+
 class LinearTerm:
     """:math:`c(\\epsilon)\\,K\\,\\Theta\\,G` with a stochastic coupling :math:`G`.
 
     Parameters
     ----------
-    K : (N, N) array_like
-        Spatial operator.
+    K : (N, N) ndarray or scipy.sparse matrix
+        Spatial operator. A sparse ``K`` (e.g. from scikit-fem) is kept sparse: the
+        residual, the Jacobian action and the solvers never form an ``N x N`` dense array.
     coef : float or Coefficient
         :math:`c(\\epsilon)`.
     G : (P, P) array_like, optional
         :math:`G_{k\\ell} = \\mathbb E[g(\\omega)\\Psi_k\\Psi_\\ell]` (symmetric). ``None``
         means :math:`g = 1`, i.e. :math:`G = \\mathbb E[\\Psi_k\\Psi_\\ell]`, supplied by the
         system.
+
+    Notes
+    -----
+    The term only describes itself (``coef``, ``K``, ``G``); whether its Jacobian
+    :math:`c\\,K \\otimes G^T` is assembled dense, assembled sparse or applied matrix-free
+    is decided by the solver layer (:mod:`.operator`, :mod:`.linear`).
     """
 
     def __init__(self, K, coef=1.0, G=None, name="linear"):
-        self.K = as_finite_array("K", K, ndim=2)
-        if self.K.shape[0] != self.K.shape[1]:
-            raise ValueError(f"`K` must be square, got {self.K.shape}")
+        self.K = as_operator("K", K, square=True)
         self.coef = as_coefficient(coef)
         self.G = None if G is None else as_finite_array("G", G, ndim=2)
         self.name = name
+
+    @property
+    def sparse(self):
+        """True when ``K`` is a ``scipy.sparse`` matrix."""
+        return is_sparse(self.K)
 
     def bind(self, E2):
         """Fill the default stochastic coupling from the system's Gram matrix."""
         if self.G is None:
             self.G = E2
-        self._KG = None
         if self.G.shape != E2.shape:
             raise ValueError(
                 f"term {self.name!r}: `G` has shape {self.G.shape}, expected {E2.shape}"
             )
+        self._G_sparse = _sparse_coupling(self.G)
+        self._kron = {}
+
+    def action(self, X):
+        """:math:`K X G` (without the coefficient) for ``X`` of shape (N, P)."""
+        return right_multiply(np.asarray(self.K @ X), self.G, self._G_sparse)
+
+    def kron(self, kind):
+        """:math:`K \\otimes G^T` as a dense (``kind="dense"``) or CSR (``"sparse"``) matrix.
+
+        Cached: the operator is fixed, only the coefficient varies with :math:`\\epsilon`.
+        """
+        if kind not in self._kron:
+            if kind == "dense":
+                K = self.K.toarray() if self.sparse else self.K
+                self._kron[kind] = np.kron(K, self.G.T)
+            else:
+                self._kron[kind] = sp.kron(self.K, sp.csr_matrix(self.G.T), format="csr")
+        return self._kron[kind]
+
+    def is_symmetric(self):
+        """Whether :math:`K` and :math:`G` are symmetric (to 1e-12 of their scale)."""
+        if not hasattr(self, "_symmetric"):
+            self._symmetric = _symmetric(self.K) and _symmetric(self.G)
+        return self._symmetric
 
     def apply(self, Theta, eps, t=None):
-        return self.coef.value(eps) * (self.K @ Theta @ self.G)
-
-    def jacobian(self, Theta, eps, t=None):
-        if getattr(self, "_KG", None) is None:
-            self._KG = np.kron(self.K, self.G.T)  # fixed: only the coefficient varies
-        return self.coef.value(eps) * self._KG
+        return self.coef.value(eps) * self.action(Theta)
 
     def eps_jacobian(self, Theta, eps, t=None):
-        base = (self.K @ Theta @ self.G).ravel()
-        return np.outer(base, self.coef.grad(eps))
+        return np.outer(self.action(Theta).ravel(), self.coef.grad(eps))
+
+
+def _symmetric(A):
+    if is_sparse(A):
+        D = (A - A.T).tocsr()
+        err = abs(D).max() if D.nnz else 0.0
+    else:
+        err = np.abs(A - A.T).max()
+    return bool(err <= 1e-12 * max(abs(A).max(), 1e-300))
 
 
 class DenseQuadraticForm:
@@ -186,15 +243,22 @@ class QuadraticTerm:
     def apply(self, Theta, eps, t=None):
         return self.coef.value(eps) * self._raw(Theta)
 
-    def jacobian(self, Theta, eps, t=None):
-        N, P = Theta.shape
-        c = self.coef.value(eps)
-        if P == 1:
-            return c * self.form.matrix(Theta[:, 0])
-        S = np.stack([self.form.matrix(Theta[:, k]) for k in range(P)])  # (P, N, N)
-        # J[i, a, j, b] = sum_k E3[a, b, k] S_k[i, j], as one matrix product
-        T = (self._E3.reshape(P * P, P) @ S.reshape(P, N * N)).reshape(P, P, N, N)
-        return c * T.transpose(2, 0, 3, 1).reshape(N * P, N * P)
+    def linear_action(self, Theta, X):
+        """Directional derivative of the projected form at ``Theta`` along ``X`` (no coefficient).
+
+        The Jacobian action :math:`q(X_b, \\Theta_c) + q(\\Theta_b, X_c)` projected with
+        :math:`\\mathbb E[\\Psi_b\\Psi_c\\Psi_\\ell]`, without forming the Jacobian.
+        """
+        if self._P == 1:
+            return self.form.apply(X, Theta) + self.form.apply(Theta, X)
+        bs, cs = self._bs, self._cs
+        return (
+            self.form.apply(X[:, bs], Theta[:, cs]) + self.form.apply(Theta[:, bs], X[:, cs])
+        ) @ self._W
+
+    def matrices(self, Theta):
+        """:math:`S_k = S(\\Theta_{:,k})`, the form's linearization per chaos column, (P, N, N)."""
+        return [self.form.matrix(Theta[:, k]) for k in range(Theta.shape[1])]
 
     def eps_jacobian(self, Theta, eps, t=None):
         return np.outer(self._raw(Theta).ravel(), self.coef.grad(eps))
@@ -249,8 +313,9 @@ class LoadTerm:
     @classmethod
     def linear(cls, B, name="load"):
         """Load linear in the parameters, :math:`F = B\\,\\epsilon` (Fisher-KPP source)."""
-        B = as_finite_array("B", B, ndim=2)
-        return cls(lambda eps, t: B @ np.asarray(eps, dtype=float), lambda eps, t: B, name=name)
+        B = as_operator("B", B)
+        dB = B.toarray() if is_sparse(B) else B  # (N, n_eps): small
+        return cls(lambda eps, t: B @ np.asarray(eps, dtype=float), lambda eps, t: dB, name=name)
 
     def bind(self, E1):
         self._E1 = E1
@@ -261,9 +326,6 @@ class LoadTerm:
 
     def apply(self, Theta, eps, t=None):
         return -self._chaos(self.F(eps, t))
-
-    def jacobian(self, Theta, eps, t=None):
-        return None  # no dependence on Theta
 
     def eps_jacobian(self, Theta, eps, t=None):
         N, P = Theta.shape
