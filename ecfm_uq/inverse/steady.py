@@ -18,14 +18,14 @@ from __future__ import annotations
 import numpy as np
 import scipy.optimize as sopt
 
-from .._validation import as_finite_array
+from .._validation import as_finite_array, as_operator
 from ..errors import ConvergenceError
 from ..system import solve_steady
 from .result import InverseResult
 
 
 def _data(system, M_obs, v):
-    M_obs = as_finite_array("M_obs", M_obs, ndim=2)
+    M_obs = as_operator("M_obs", M_obs)
     if M_obs.shape[1] != system.N:
         raise ValueError(f"`M_obs` must have {system.N} columns (N), got {M_obs.shape}")
     v = as_finite_array("v", v, shape=(M_obs.shape[0],))
@@ -92,7 +92,7 @@ def fit_steady(
     ----------
     system : GalerkinSystem
         With ``Gamma`` for ``formulation="ecfm"``.
-    M_obs : (C, N) array_like
+    M_obs : (C, N) array_like or scipy.sparse matrix
     v : (C,) array_like
     eps0 : (n_eps,) array_like
         Starting point.
@@ -106,7 +106,7 @@ def fit_steady(
     bounds : sequence of (lo, hi), optional
         For bounded methods; keeps trial parameters physical (e.g. a positive length).
     solve_options : dict, optional
-        Passed to :func:`solve_steady` (``tol``, ``maxiter``).
+        Passed to :func:`solve_steady` (``tol``, ``maxiter``, ``solver``).
     options : dict, optional
         Extra ``scipy.optimize.minimize`` options (override the defaults above).
 
