@@ -14,6 +14,7 @@ quadrature (:mod:`.quadrature`), matching the paper's definitions:
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from .._validation import as_finite_array, check_positive
 from .basis import SinusoidBasis, TensorBasis2D
@@ -210,7 +211,13 @@ def rbf_forces(basis, centers, omega):
 
 
 def kron2(ax, ay):
-    """Dense Kronecker product of 1-D factors (row-major tensor ordering)."""
+    """Kronecker product of 1-D factors (row-major tensor ordering).
+
+    Dense for dense factors; CSR when either factor is ``scipy.sparse`` (no dense
+    ``N x N`` array is formed then).
+    """
+    if sp.issparse(ax) or sp.issparse(ay):
+        return sp.kron(ax, ay, format="csr")
     return np.kron(ax, ay)
 
 
