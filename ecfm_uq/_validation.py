@@ -100,3 +100,14 @@ def as_operator(name, value, *, shape=None, square=False):
         want = tuple("any" if s is None else s for s in shape)
         raise ValueError(f"`{name}` must have shape {want}, got {out.shape}")
     return out
+
+
+def as_dense_rows(name, value, *, n_cols=None):
+    """A (C, N) matrix with few rows (sensors) as a dense array, from dense or sparse input.
+
+    For formulations whose algebra is dense in the sensors: a ``(C, N)`` array is small
+    even when ``N`` is large, so densifying a sparse sensor matrix forms nothing of size
+    ``N^2``.
+    """
+    out = as_operator(name, value, shape=None if n_cols is None else (None, n_cols))
+    return out.toarray() if sp.issparse(out) else out

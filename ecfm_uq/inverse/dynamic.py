@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import as_finite_array, check_choice, check_int, check_positive
+from .._validation import as_dense_rows, as_finite_array, check_choice, check_int, check_positive
 from ..errors import ConvergenceError
 from ..system import march
 from .optimizers import adam
@@ -95,7 +95,7 @@ class DynamicInverseProblem:
         if Theta0.shape != (N, P):
             raise ValueError(f"`Theta0` must have shape {(N,)} or {(N, P)}, got {Theta0.shape}")
         self.Theta0 = Theta0
-        self.M_obs = as_finite_array("M_obs", M_obs, ndim=2)
+        self.M_obs = as_dense_rows("M_obs", M_obs)
         if self.M_obs.shape[1] != N:
             raise ValueError(f"`M_obs` must have N = {N} columns, got shape {self.M_obs.shape}")
         C = self.M_obs.shape[0]
