@@ -21,6 +21,7 @@ import scipy.optimize as sopt
 from .._validation import as_finite_array, as_operator
 from ..errors import ConvergenceError
 from ..system import solve_steady
+from .gradients import choose_gradient
 from .result import InverseResult
 
 
@@ -32,8 +33,11 @@ def _data(system, M_obs, v):
     return M_obs, v
 
 
-def standard_objective(system, M_obs, v, eps, **solve_kw):
+def standard_objective(system, M_obs, v, eps, gradient="auto", **solve_kw):
     """:math:`z^{INV}` and its gradient at ``eps``.
+
+    ``gradient`` chooses forward sensitivities or one adjoint solve
+    (:func:`~ecfm_uq.inverse.gradients.choose_gradient`); both give the same gradient.
 
     Returns
     -------
@@ -49,12 +53,15 @@ def standard_objective(system, M_obs, v, eps, **solve_kw):
     M_obs, v = _data(system, M_obs, v)
     sol = solve_steady(system, eps, strict=True, **solve_kw)
     e = M_obs @ system.mean(sol.Theta) - v
+    if choose_gradient(gradient, system.n_eps) == "adjoint":
+        g_theta = np.outer(M_obs.T @ e, system.E1)  # dz/dTheta
+        return 0.5 * float(e @ e), sol.adjoint_gradient(g_theta), sol
     dTheta, _ = sol.eps_sensitivity()
     dmean = np.einsum("ikm,k->im", dTheta, system.E1)
     return 0.5 * float(e @ e), (M_obs @ dmean).T @ e, sol
 
 
-def ecfm_objective(system, M_obs, v, eps, **solve_kw):
+def ecfm_objective(system, M_obs, v, eps, gradient="auto", **solve_kw):
     """:math:`z^{ECFM}` and its gradient at ``eps`` (equality-constrained forces).
 
     Returns
@@ -65,8 +72,11 @@ def ecfm_objective(system, M_obs, v, eps, **solve_kw):
         With ``sol.lam`` the constraint forces :math:`\\lambda(\\epsilon)`.
     """
     sol = solve_steady(system, eps, constraint=(M_obs, v), strict=True, **solve_kw)
+    z = 0.5 * float(sol.lam @ sol.lam)
+    if choose_gradient(gradient, system.n_eps) == "adjoint":
+        return z, sol.adjoint_gradient(system.zeros(), sol.lam), sol
     _, dlam = sol.eps_sensitivity()
-    return 0.5 * float(sol.lam @ sol.lam), dlam.T @ sol.lam, sol
+    return z, dlam.T @ sol.lam, sol
 
 
 _OBJECTIVES = {"standard": standard_objective, "ecfm": ecfm_objective}
@@ -85,6 +95,7 @@ def fit_steady(
     bounds=None,
     solve_options=None,
     options=None,
+    gradient="auto",
 ):
     """Fit :math:`\\epsilon` of a steady system to data by the standard or ECFM formulation.
 
@@ -109,6 +120,9 @@ def fit_steady(
         Passed to :func:`solve_steady` (``tol``, ``maxiter``, ``solver``).
     options : dict, optional
         Extra ``scipy.optimize.minimize`` options (override the defaults above).
+    gradient : {"auto", "forward", "adjoint"}
+        Forward sensitivities or one adjoint solve per evaluation
+        (:func:`~ecfm_uq.inverse.gradients.choose_gradient`).
 
     Returns
     -------
@@ -124,6 +138,7 @@ def fit_steady(
     eps0 = system.check_eps(eps0)
     objective = _OBJECTIVES[formulation]
     solve_kw = dict(solve_options or {})
+    solve_kw["gradient"] = choose_gradient(gradient, system.n_eps)
     hist_eps, hist_loss = [], []
     failures = []
 

@@ -213,11 +213,12 @@ class GalerkinSystem:
         M = self.M.toarray() if sp.issparse(self.M) else self.M
         return np.kron(M, self.E2.T)
 
-    def apply_mass(self, X):
-        """:math:`M X \\mathbb E[\\Psi\\Psi^T]` for ``X`` of shape (N, P), matrix-free."""
+    def apply_mass(self, X, transpose=False):
+        """:math:`M X \\mathbb E[\\Psi\\Psi^T]` (or :math:`M^T X \\ldots`) for ``X`` (N, P), matrix-free."""
         if self.M is None:
             raise ValueError(f"system {self.name!r} has no mass matrix; pass M= for time stepping")
-        return np.asarray(self.M @ X) @ self.E2
+        M = self.M.T if transpose else self.M
+        return np.asarray(M @ X) @ (self.E2.T if transpose else self.E2)
 
     def mass_is_symmetric(self):
         """Whether ``M`` is symmetric."""

@@ -147,6 +147,10 @@ class DenseFactor:
     def solve(self, rhs, rtol=None):
         return sla.lu_solve(self.lu, rhs, check_finite=False)
 
+    def solve_transpose(self, rhs, rtol=None):
+        """Solve with the transposed matrix (adjoint equations)."""
+        return sla.lu_solve(self.lu, rhs, trans=1, check_finite=False)
+
 
 class SparseFactor:
     """``splu`` factors of an assembled sparse matrix."""
@@ -157,47 +161,58 @@ class SparseFactor:
     def solve(self, rhs, rtol=None):
         return self.lu.solve(np.asarray(rhs, dtype=float))
 
+    def solve_transpose(self, rhs, rtol=None):
+        return self.lu.solve(np.asarray(rhs, dtype=float), trans="T")
+
 
 def _lu_any(A):
-    """Factor a dense or sparse square matrix; returns ``solve(B)`` or ``None``."""
+    """Factor a dense or sparse square matrix: a DenseFactor/SparseFactor, or ``None``."""
     if sp.issparse(A):
         lu = sparse_lu(A)
-        return None if lu is None else lu.solve
+        return None if lu is None else SparseFactor(lu)
     lu = dense_lu(A)
-    return None if lu is None else (lambda B, lu=lu: sla.lu_solve(lu, B, check_finite=False))
+    return None if lu is None else DenseFactor(lu)
 
 
 class BlockFactor:
     """Factors of a decoupled linear Galerkin system (see GalerkinSystem.decoupling).
 
     Solves :math:`\\sum_q c_q K_q X G_q = B` for ``X`` as ``P`` independent ``N x N``
-    solves in the common eigenbasis ``Q`` of the couplings.
+    solves in the common eigenbasis ``Q`` of the couplings (and the transposed system,
+    :math:`\\sum_q c_q K_q^T X G_q = B`, with the same factors).
     """
 
     def __init__(self, op, Q, D):
         self.Q = Q
         self.N, self.P = op.N, op.P
-        self.solvers = []
+        self.factors = []
         for p in range(self.P):
             Ap = None
             for part, d in zip(op.parts, D[:, p], strict=True):
                 block = (part.coef * d) * part.term.K
                 Ap = block if Ap is None else Ap + block
-            solve = _lu_any(Ap)
-            if solve is None:
+            factor = _lu_any(Ap)
+            if factor is None:
                 raise np.linalg.LinAlgError(f"decoupled block {p} is singular")
-            self.solvers.append(solve)
+            self.factors.append(factor)
 
-    def solve(self, rhs, rtol=None):
+    def _solve(self, rhs, transpose):
         rhs = np.asarray(rhs, dtype=float)
         m = rhs.shape[1] if rhs.ndim == 2 else None
         B = rhs.reshape(self.N, self.P, -1)
         Bh = np.einsum("ikm,kp->ipm", B, self.Q)
         Xh = np.empty_like(Bh)
-        for p, solve in enumerate(self.solvers):
+        for p, factor in enumerate(self.factors):
+            solve = factor.solve_transpose if transpose else factor.solve
             Xh[:, p, :] = solve(Bh[:, p, :])
         X = np.einsum("ipm,kp->ikm", Xh, self.Q)
         return X.reshape(self.N * self.P, m) if m is not None else X.reshape(-1)
+
+    def solve(self, rhs, rtol=None):
+        return self._solve(rhs, False)
+
+    def solve_transpose(self, rhs, rtol=None):
+        return self._solve(rhs, True)
 
 
 class MeanPreconditioner:
@@ -237,20 +252,25 @@ class MeanPreconditioner:
                 ) from e
             M = ml.aspreconditioner(cycle="V")
             self._solve = lambda B: np.column_stack([M @ B[:, j] for j in range(B.shape[1])])
+            self._solve_t = self._solve  # a symmetric V-cycle: its own transpose for SPD K
         else:
-            solve = _lu_any(K)
-            if solve is None:
+            factor = _lu_any(K)
+            if factor is None:
                 raise SingularSystemError(
                     "`preconditioner`='mean': the mean block of the Jacobian "
                     "(sum_q E[g_q] c_q K_q, the mean problem's matrix) is singular or not "
                     "finite and cannot be factorized; check that the mean coefficients make "
                     "the problem well posed, or pass preconditioner='none'"
                 )
-            self._solve = solve
+            self._solve, self._solve_t = factor.solve, factor.solve_transpose
 
     def apply(self, R):
         """Apply to ``R`` of shape (N, P)."""
         return self._solve(R) / self.d[None, :]
+
+    def apply_transpose(self, R):
+        """The transposed preconditioner (for adjoint solves)."""
+        return self._solve_t(R) / self.d[None, :]
 
 
 def _pcg(op, b, precond, rtol, maxiter):
@@ -307,13 +327,25 @@ class KrylovFactor:
     never sees an unconverged answer.
     """
 
-    def __init__(self, op, method, precond, options, record):
+    def __init__(self, op, method, precond, options, record, transposed=False):
         self.op, self.method, self.precond = op, method, precond
         self.options, self.record = options, record
         self.N, self.P = op.N, op.P
+        self.transposed = transposed
+        self._T = None
 
     def _apply_precond(self, R):
-        return R if self.precond is None else self.precond.apply(R)
+        if self.precond is None:
+            return R
+        return self.precond.apply_transpose(R) if self.transposed else self.precond.apply(R)
+
+    def solve_transpose(self, rhs, rtol=None):
+        """Solve with :math:`J^T` (adjoint equations), same preconditioner transposed."""
+        if self._T is None:
+            self._T = KrylovFactor(
+                self.op.transpose(), self.method, self.precond, self.options, self.record, True
+            )
+        return self._T.solve(rhs, rtol)
 
     def _solve_one(self, b, rtol):
         N, P = self.N, self.P
@@ -366,17 +398,21 @@ class KrylovFactor:
 class SchurFactor:
     """Bordered ECFM system solved through the Schur complement on the forces.
 
-    For :math:`\\begin{bmatrix}J & J_\\lambda\\\\ C & 0\\end{bmatrix}
+    For :math:`\\begin{bmatrix}J & B\\\\ C & 0\\end{bmatrix}
     \\begin{bmatrix}x\\\\ y\\end{bmatrix} = \\begin{bmatrix}a\\\\ b\\end{bmatrix}`:
-    :math:`W = J^{-1}J_\\lambda`, :math:`S = C W`, :math:`x_0 = J^{-1}a`,
-    :math:`y = S^{-1}(C x_0 - b)`, :math:`x = x_0 - W y`.
+    :math:`W = J^{-1}B`, :math:`S = C W`, :math:`x_0 = J^{-1}a`,
+    :math:`y = S^{-1}(C x_0 - b)`, :math:`x = x_0 - W y`. The transpose is the same
+    construction with :math:`(J^T, C^T, B^T)`, built on first use.
     """
 
-    def __init__(self, inner, Jl, Cth, rtol):
-        self.inner, self.Cth = inner, Cth
-        self.n = Jl.shape[0]
-        self.W = inner.solve(Jl, rtol=rtol)
-        self.S_lu = dense_lu(np.asarray(Cth @ self.W))
+    def __init__(self, inner, B, C, rtol, transposed=False):
+        self.inner, self.B, self.C, self.rtol = inner, B, C, rtol
+        self.transposed = transposed
+        self._solve_inner = inner.solve_transpose if transposed else inner.solve
+        self.n = B.shape[0]
+        self.W = self._solve_inner(np.asarray(B.toarray() if sp.issparse(B) else B), rtol=rtol)
+        self.S_lu = dense_lu(np.asarray(C @ self.W))
+        self._T = None
 
     @property
     def singular(self):
@@ -384,8 +420,8 @@ class SchurFactor:
 
     def _solve_col(self, rhs, rtol):
         a, b = rhs[: self.n], rhs[self.n :]
-        x0 = self.inner.solve(a, rtol=rtol)
-        y = sla.lu_solve(self.S_lu, self.Cth @ x0 - b, check_finite=False)
+        x0 = self._solve_inner(a, rtol=rtol)
+        y = sla.lu_solve(self.S_lu, self.C @ x0 - b, check_finite=False)
         return np.concatenate([x0 - self.W @ y, y])
 
     def solve(self, rhs, rtol=None):
@@ -393,6 +429,16 @@ class SchurFactor:
         if rhs.ndim == 1:
             return self._solve_col(rhs, rtol)
         return np.column_stack([self._solve_col(rhs[:, j], rtol) for j in range(rhs.shape[1])])
+
+    def solve_transpose(self, rhs, rtol=None):
+        """Solve with the transposed bordered matrix (adjoint of the ECFM step)."""
+        if self._T is None:
+            if self.transposed:
+                raise ValueError("the transpose of a transposed Schur factor is the original")
+            self._T = SchurFactor(self.inner, self.C.T, self.B.T, self.rtol, transposed=True)
+            if self._T.singular:
+                raise SingularSystemError("the transposed ECFM Schur complement is singular")
+        return self._T.solve(rhs, rtol)
 
 
 # --------------------------------------------------------------------------------------

@@ -44,6 +44,9 @@ class _LinearPart:
     def apply(self, X):
         return self.coef * self.term.action(X)
 
+    def apply_transpose(self, Y):
+        return self.coef * self.term.action_transpose(Y)
+
     def dense(self):
         return self.coef * self.term.kron("dense")
 
@@ -64,6 +67,16 @@ class _QuadraticLinearization:
 
     def apply(self, X):
         return self.coef * self.term.linear_action(self.Theta, X)
+
+    def apply_transpose(self, Y):
+        # (J^T Y)[j, b] = sum_k sum_a E3[a, b, k] (S_k^T Y)[j, a]
+        E3 = self.term._E3
+        out = np.zeros_like(Y)
+        for k, Sk in enumerate(self.term.matrices(self.Theta)):
+            Ek = E3[:, :, k]
+            if np.any(Ek):
+                out += (Sk.T @ Y) @ Ek
+        return self.coef * out
 
     def dense(self):
         N, P = self.Theta.shape
@@ -156,9 +169,22 @@ class GalerkinOperator:
             Y += self.system.apply_mass(X) / self.dt
         return Y
 
+    def apply_transpose(self, Y):
+        """:math:`J^T\\,\\mathrm{vec}(Y)` reshaped (the adjoint action), matrix-free."""
+        X = np.zeros((self.N, self.P))
+        for part in self.parts:
+            X += part.apply_transpose(Y)
+        if self.dt is not None:
+            X += self.system.apply_mass(Y, transpose=True) / self.dt
+        return X
+
     def matvec(self, x):
         """:math:`J x` for a flat ``x`` of length NP."""
         return self.apply(np.reshape(x, (self.N, self.P))).ravel()
+
+    def rmatvec(self, y):
+        """:math:`J^T y` for a flat ``y`` of length NP."""
+        return self.apply_transpose(np.reshape(y, (self.N, self.P))).ravel()
 
     def matmat(self, X):
         """:math:`J X` for ``X`` of shape (NP, m)."""
@@ -166,7 +192,13 @@ class GalerkinOperator:
 
     def as_linear_operator(self):
         """A ``scipy.sparse.linalg.LinearOperator`` applying :math:`J` matrix-free."""
-        return spla.LinearOperator(self.shape, matvec=self.matvec, dtype=float)
+        return spla.LinearOperator(
+            self.shape, matvec=self.matvec, rmatvec=self.rmatvec, dtype=float
+        )
+
+    def transpose(self):
+        """:math:`J^T` as an object with ``apply``/``size`` (for adjoint Krylov solves)."""
+        return _Transposed(self)
 
     # -- assembly --------------------------------------------------------------------
     def dense_nbytes(self):
@@ -217,6 +249,22 @@ class GalerkinOperator:
         if K is None:
             raise ValueError(f"system {self.system.name!r} has no operator acting on Theta")
         return K.tocsc() if sp.issparse(K) else K
+
+
+class _Transposed:
+    """View of a GalerkinOperator as its transpose (apply = the adjoint action)."""
+
+    def __init__(self, op):
+        self.op, self.N, self.P, self.shape = op, op.N, op.P, op.shape
+
+    def apply(self, Y):
+        return self.op.apply_transpose(Y)
+
+    def matvec(self, y):
+        return self.op.rmatvec(y)
+
+    def as_linear_operator(self):
+        return spla.LinearOperator(self.shape, matvec=self.matvec, dtype=float)
 
 
 class AugmentedOperator:

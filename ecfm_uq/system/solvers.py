@@ -192,6 +192,39 @@ class SteadySolution:
             raise ValueError(f"`rhs` must have shape ({n},) or ({n}, m), got {rhs.shape}")
         return self._solve(rhs)
 
+    def adjoint_gradient(self, g_theta, g_lam=None):
+        """Gradient in :math:`\\epsilon` of a scalar :math:`z(\\Theta, \\lambda)` by one adjoint solve.
+
+        With :math:`J` the (augmented, under a data constraint) Jacobian at the solution,
+        solve :math:`J^T\\mu = \\partial z/\\partial(\\Theta, \\lambda)` and return
+        :math:`dz/d\\epsilon = -(\\partial R/\\partial\\epsilon)^T\\mu_\\Theta` (the constraint
+        rows do not depend on :math:`\\epsilon`). One transposed solve with the stored
+        factors, whatever ``n_eps``; equal to the forward-sensitivity gradient.
+
+        Parameters
+        ----------
+        g_theta : (N, P) array_like
+            :math:`\\partial z/\\partial\\Theta`.
+        g_lam : (C,) array_like, optional
+            :math:`\\partial z/\\partial\\lambda` (constrained solves only).
+
+        Returns
+        -------
+        (n_eps,) ndarray
+        """
+        self._require()
+        sysm = self.system
+        n = sysm.N * sysm.P
+        rhs = as_finite_array("g_theta", g_theta, shape=sysm.shape).ravel()
+        if self.constrained:
+            g_lam = np.zeros(sysm.n_forces) if g_lam is None else g_lam
+            g_lam = as_finite_array("g_lam", g_lam, shape=(sysm.n_forces,))
+            rhs = np.concatenate([rhs, g_lam])
+        elif g_lam is not None:
+            raise ValueError("`g_lam` is only defined for a solve under a data constraint")
+        mu = self._lu.solve_transpose(rhs)
+        return -(sysm.eps_jacobian(self.Theta, self.eps).T @ mu[:n])
+
     def eps_sensitivity(self):
         """:math:`\\partial\\Theta/\\partial\\epsilon` (N, P, n_eps) and, under a data
         constraint, :math:`\\partial\\lambda/\\partial\\epsilon` (C, n_eps) (else ``None``)."""
@@ -423,6 +456,62 @@ class Trajectory:
     nit: np.ndarray
     solver: str = "dense"
     linear_iterations: list = field(default_factory=list)
+    _adjoint: object = field(default=None, repr=False)
+
+    def adjoint_gradient(self, g_theta, g_lam=None):
+        """Gradient in :math:`\\epsilon` of :math:`z = \\sum_t z_t(\\Theta_t, \\lambda_t)` by the
+        discrete adjoint of backward Euler (needs ``march(..., keep_factors=True)``).
+
+        Backward in time, with :math:`A_t` the (augmented) step Jacobian,
+
+        .. math::
+
+            A_t^T\\mu_t = \\frac{\\partial z}{\\partial(\\Theta_t, \\lambda_t)}
+                + \\begin{bmatrix}(M/\\Delta t)^T\\mu_{t+1,\\Theta}\\\\0\\end{bmatrix},
+            \\qquad
+            \\frac{dz}{d\\epsilon} = -\\sum_t
+                \\Bigl(\\frac{\\partial R_t}{\\partial\\epsilon}\\Bigr)^T\\mu_{t,\\Theta},
+
+        one transposed solve per step with the factors kept from the forward march,
+        whatever the number of parameters (the forward sensitivities of Eq.
+        discrete_sens need ``n_eps`` right-hand sides per step).
+
+        Parameters
+        ----------
+        g_theta : (n_steps + 1, N, P) array_like
+            :math:`\\partial z/\\partial\\Theta_t` (row 0 is ignored: the initial state
+            does not depend on :math:`\\epsilon`).
+        g_lam : (n_steps + 1, C) array_like, optional
+            :math:`\\partial z/\\partial\\lambda_t` (constrained marches).
+
+        Returns
+        -------
+        (n_eps,) ndarray
+        """
+        if self._adjoint is None:
+            raise ValueError("march with keep_factors=True to compute adjoint gradients")
+        if not self.success:
+            raise ConvergenceError(f"adjoint of a failed march: {self.message}")
+        system, eps, factors, mass_T = self._adjoint
+        n_t, N, P = self.Theta.shape
+        n = N * P
+        g_theta = as_finite_array("g_theta", g_theta, shape=(n_t, N, P)).reshape(n_t, n)
+        C = self.lam.shape[1]
+        if C:
+            g_lam = np.zeros((n_t, C)) if g_lam is None else g_lam
+            g_lam = as_finite_array("g_lam", g_lam, shape=(n_t, C))
+        elif g_lam is not None:
+            raise ValueError("`g_lam` is only defined for a march under a data constraint")
+        grad = np.zeros(system.n_eps)
+        carry = np.zeros(n)
+        for t in range(n_t - 1, 0, -1):
+            rhs = g_theta[t] + carry
+            if C:
+                rhs = np.concatenate([rhs, g_lam[t]])
+            mu = factors[t - 1].solve_transpose(rhs)[:n]
+            grad -= system.eps_jacobian(self.Theta[t], eps, self.times[t]).T @ mu
+            carry = mass_T(mu)
+        return grad
 
 
 def march(
@@ -439,6 +528,7 @@ def march(
     maxiter=30,
     strict=False,
     solver="auto",
+    keep_factors=False,
 ):
     """Integrate :math:`M\\dot\\Theta + R(\\Theta; \\epsilon, \\lambda, t) = 0` by backward Euler.
 
@@ -465,6 +555,8 @@ def march(
     solver : str, SolverOptions or dict
         Linear solver for the step Jacobians :math:`M/\\Delta t + J`, as for
         :func:`solve_steady` (``"decoupled"`` is for steady solves only).
+    keep_factors : bool
+        Keep every step's factorized Jacobian for :meth:`Trajectory.adjoint_gradient`.
 
     Returns
     -------
@@ -493,12 +585,18 @@ def march(
 
         def mass(X):  # (NP,) or (NP, m)
             return Mdt @ X
+
+        def mass_T(x):
+            return Mdt.T @ x
     else:
 
         def mass(X):
             Xr = X.reshape(N, P, -1)
             out = np.stack([system.apply_mass(Xr[:, :, j]) for j in range(Xr.shape[2])], -1)
             return out.reshape(X.shape) / dt
+
+        def mass_T(x):
+            return system.apply_mass(x.reshape(N, P), transpose=True).ravel() / dt
 
     if constrained:
         Cth = system.constraint_jacobian(M_obs)
@@ -511,6 +609,7 @@ def march(
     dTh = np.zeros((n_steps + 1, n, system.n_eps)) if sensitivities else None
     dlam = np.zeros((n_steps + 1, C, system.n_eps)) if sensitivities and constrained else None
     nits = np.zeros(n_steps, dtype=int)
+    factors = [] if keep_factors else None
 
     for s in range(n_steps):
         t1 = times[s + 1]
@@ -558,6 +657,8 @@ def march(
                 list(linear.record.iterations),
             )
         Th[s + 1] = z[:n].reshape(N, P)
+        if keep_factors:
+            factors.append(lu)
         if constrained:
             lam[s + 1] = z[n:]
         if sensitivities:
@@ -582,4 +683,5 @@ def march(
         nits,
         linear.record.solver,
         list(linear.record.iterations),
+        (system, eps, factors, mass_T) if keep_factors else None,
     )

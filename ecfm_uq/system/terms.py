@@ -151,6 +151,11 @@ class LinearTerm:
         """:math:`K X G` (without the coefficient) for ``X`` of shape (N, P)."""
         return right_multiply(np.asarray(self.K @ X), self.G, self._G_sparse)
 
+    def action_transpose(self, Y):
+        """:math:`K^T Y G^T` for ``Y`` of shape (N, P): the transposed Jacobian's action."""
+        GT = None if self._G_sparse is None else self._G_sparse.T.tocsr()
+        return right_multiply(np.asarray(self.K.T @ Y), self.G.T, GT)
+
     def kron(self, kind):
         """:math:`K \\otimes G^T` as a dense (``kind="dense"``) or CSR (``"sparse"``) matrix.
 
