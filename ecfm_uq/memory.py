@@ -9,6 +9,7 @@ or with a suffix ``K``, ``M``, ``G``).
 
 from __future__ import annotations
 
+import functools
 import os
 
 from .errors import MemoryBudgetError
@@ -19,6 +20,7 @@ _DEFAULT_FRACTION = 0.8
 _budget_override = None
 
 
+@functools.cache
 def _physical_memory():
     try:
         return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")

@@ -164,7 +164,9 @@ class GalerkinSystem:
     @property
     def is_linear(self):
         """True when no term is quadratic in the state."""
-        return not any(isinstance(t, QuadraticTerm) for t in self.terms)
+        if not hasattr(self, "_is_linear"):
+            self._is_linear = not any(isinstance(t, QuadraticTerm) for t in self.terms)
+        return self._is_linear
 
     @property
     def sparse_input(self):
@@ -202,16 +204,21 @@ class GalerkinSystem:
         """:math:`M \\otimes \\mathbb E[\\Psi_k\\Psi_\\ell]`, shape (NP, NP) (CSR if ``sparse``)."""
         if self.M is None:
             raise ValueError(f"system {self.name!r} has no mass matrix; pass M= for time stepping")
-        if sparse:
-            return sp.kron(self.M, sp.csr_matrix(self.E2.T), format="csr")
-        n = self.N * self.P
-        check_allocation(
-            8.0 * n * n,
-            f"the dense mass matrix of {self.name!r} (NP = {n})",
-            "pass a sparse M and solver='cg' or 'gmres'",
-        )
-        M = self.M.toarray() if sp.issparse(self.M) else self.M
-        return np.kron(M, self.E2.T)
+        kind = "sparse" if sparse else "dense"
+        cache = self.__dict__.setdefault("_mass_cache", {})  # M is fixed: build once
+        if kind not in cache:
+            if sparse:
+                cache[kind] = sp.kron(self.M, sp.csr_matrix(self.E2.T), format="csr")
+            else:
+                n = self.N * self.P
+                check_allocation(
+                    8.0 * n * n,
+                    f"the dense mass matrix of {self.name!r} (NP = {n})",
+                    "pass a sparse M and solver='cg' or 'gmres'",
+                )
+                M = self.M.toarray() if sp.issparse(self.M) else self.M
+                cache[kind] = np.kron(M, self.E2.T)
+        return cache[kind]
 
     def apply_mass(self, X, transpose=False):
         """:math:`M X \\mathbb E[\\Psi\\Psi^T]` (or :math:`M^T X \\ldots`) for ``X`` (N, P), matrix-free."""

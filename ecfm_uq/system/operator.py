@@ -217,7 +217,12 @@ class GalerkinOperator:
         for part in self.parts:
             J += part.dense()
         if self.dt is not None:
-            J = self.system.mass_matrix() / self.dt + J
+            # M (x) E2 / dt is fixed during a march: divide once, not per Newton step
+            cache = self.system.__dict__.setdefault("_mass_dt_cache", {})
+            if self.dt not in cache:
+                cache.clear()
+                cache[self.dt] = self.system.mass_matrix() / self.dt
+            J = cache[self.dt] + J
         return J
 
     def to_sparse(self):
