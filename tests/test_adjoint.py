@@ -144,3 +144,30 @@ def test_adjoint_needs_kept_factors_and_matching_shapes():
         traj.adjoint_gradient(np.zeros((2, 6, 1)))
     with pytest.raises(ValueError, match="`g_lam` is only defined"):
         traj.adjoint_gradient(np.zeros(traj.Theta.shape), np.zeros((4, 4)))
+
+
+@pytest.mark.parametrize("formulation", ["standard", "ecfm"])
+def test_adjoint_on_the_matrix_free_fem_model_with_patch_conductivity(formulation):
+    pytest.importorskip("skfem")
+    from ecfm_uq.problems.fem_diffusion import build_fem_diffusion
+
+    problem = build_fem_diffusion(8, 2, patches=3)
+    system, M_obs = problem.system, problem.M_obs
+    assert system.n_eps == 10
+    # the patch operators partition the Laplacian
+    K = sum(K for K, _, name in problem.mean_terms if name.startswith("a0 patch"))
+    assert abs(K - problem.K0).max() < 1e-13 * abs(problem.K0).max()
+    rng = np.random.default_rng(5)
+    v = M_obs @ system.mean(solve_steady(system, 0.2 * rng.standard_normal(10)).Theta)
+    eps = 0.2 * rng.standard_normal(10)
+    objective = standard_objective if formulation == "standard" else ecfm_objective
+    opts = {"solver": solver_options("cg", rtol=1e-12)}
+    (_, g1, sol), (_, g2, _) = _steady_pair(objective, system, M_obs, v, eps, **opts)
+    assert sol.solver == "cg+mean"
+    np.testing.assert_allclose(g2, g1, rtol=1e-8, atol=1e-10 * np.abs(g1).max())
+
+    def fg(e):
+        z, g, _ = objective(system, M_obs, v, e, gradient="adjoint", **opts)
+        return z, g
+
+    assert_second_order(fg, eps, rng.standard_normal(10))

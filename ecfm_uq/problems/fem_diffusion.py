@@ -8,6 +8,10 @@
     a(x,\\omega;\\epsilon) = 10^{\\epsilon_0} a_0 + \\epsilon_1\\,b(x)
         + \\sum_{k=1}^{d} \\sigma_k\\,\\phi_k(x)\\,(\\omega_k - \\tfrac12),
 
+or, with ``patches=m``, a spatially varying mean conductivity
+:math:`10^{\\epsilon_p} a_0` on each of :math:`m\\times m` square patches (then
+:math:`\\epsilon_{m^2}` is the inclusion amplitude),
+
 with smooth modes :math:`\\phi_k(x) = \\cos(\\pi m_k x_1)\\cos(\\pi n_k x_2)`, a Gaussian
 inclusion :math:`b(x)` and :math:`\\omega\\sim U(0,1)^d`. The Galerkin projection in
 space (scikit-fem assembles sparse :math:`K_0, K_b, K_k` and :math:`F` on the interior
@@ -75,8 +79,13 @@ class FemDiffusion:
     sensors : (C, 2) ndarray
     M_obs : (C, N) scipy.sparse.csr_matrix
         Sensor matrix: P1 basis functions at the sensor points.
+    mean_terms : list of (csr_matrix, Coefficient, str)
+        The deterministic part of the conductivity: ``(K, c(eps), name)`` for
+        :math:`10^{\\epsilon_0}a_0 K_0` (or one per patch) and the inclusion
+        :math:`\\epsilon_{-1} K_b`.
     K0, Kb : (N, N) csr_matrix
-        :math:`\\int \\nabla u\\cdot\\nabla v` and :math:`\\int b\\,\\nabla u\\cdot\\nabla v`.
+        :math:`\\int \\nabla u\\cdot\\nabla v` and :math:`\\int b\\,\\nabla u\\cdot\\nabla v`
+        (``Kb`` is ``None`` without an inclusion).
     K_modes : list of (N, N) csr_matrix
         :math:`\\int \\sigma_k\\phi_k\\nabla u\\cdot\\nabla v`.
     F : (N,) ndarray
@@ -91,8 +100,9 @@ class FemDiffusion:
     interior: np.ndarray
     sensors: np.ndarray
     M_obs: sp.csr_matrix
+    mean_terms: list
     K0: sp.csr_matrix
-    Kb: sp.csr_matrix
+    Kb: sp.csr_matrix | None
     K_modes: list
     F: np.ndarray
     Gamma: np.ndarray
@@ -114,13 +124,13 @@ class FemDiffusion:
         if np.any((omega < 0) | (omega > 1)):
             raise ValueError(f"`omega` must lie in [0, 1]^{d}, got {omega}")
         K_omega = sum((w - 0.5) * K for w, K in zip(omega, self.K_modes, strict=True))
-        terms = [
-            LinearTerm(self.K0, Coefficient.power10(0, sign=1.0, scale=self.a0), name="a0"),
-            LinearTerm(self.Kb, Coefficient.parameter(1), name="inclusion"),
+        terms = [LinearTerm(K, c, name=name) for K, c, name in self.mean_terms]
+        terms += [
             LinearTerm(sp.csr_matrix(K_omega), name="random field at omega"),
             LoadTerm.constant(self.F),
         ]
-        return GalerkinSystem(terms, 2, Gamma=self.Gamma, name="fem-diffusion (sample)")
+        n_eps = self.system.n_eps
+        return GalerkinSystem(terms, n_eps, Gamma=self.Gamma, name="fem-diffusion (sample)")
 
     def nodal(self, values):
         """Interior values (N,) -> values at every mesh node (zero on the boundary)."""
@@ -139,6 +149,7 @@ def build_fem_diffusion(
     sensors=None,
     force_width=None,
     inclusion=((0.3, 0.6), 0.1),
+    patches=None,
 ):
     """Assemble the stochastic 2-D diffusion problem.
 
@@ -160,8 +171,12 @@ def build_fem_diffusion(
     force_width : float, optional
         Standard deviation of the Gaussian constraint forces (default: half the sensor
         spacing, 0.125 for the default grid).
-    inclusion : ((float, float), float)
-        Centre and standard deviation of :math:`b(x)`.
+    inclusion : ((float, float), float) or None
+        Centre and standard deviation of :math:`b(x)`; ``None``: no inclusion term (and
+        no parameter for it).
+    patches : int, optional
+        Calibrate a spatially varying mean conductivity: ``patches**2`` parameters, one
+        log-conductivity per square patch, plus the inclusion amplitude last.
 
     Returns
     -------
@@ -192,8 +207,9 @@ def build_fem_diffusion(
     if np.any((sensors <= 0) | (sensors >= 1)):
         raise ValueError("`sensors` must lie strictly inside the unit square (0, 1)^2")
     force_width = 0.125 if force_width is None else check_positive("force_width", force_width)
-    (cx, cy), cw = inclusion
-    cw = check_positive("inclusion width", cw)
+    if inclusion is not None:
+        (cx, cy), cw = inclusion
+        cw = check_positive("inclusion width", cw)
 
     x = np.linspace(0.0, 1.0, n_cells + 1)
     mesh = skfem.MeshTri.init_tensor(x, x)
@@ -214,7 +230,24 @@ def build_fem_diffusion(
         return lambda X, Y: np.exp(-((X - x0) ** 2 + (Y - y0) ** 2) / (2 * s**2))
 
     K0 = stiffness(lambda X, Y: np.ones_like(X))
-    Kb = stiffness(bump(cx, cy, cw))
+    Kb = None if inclusion is None else stiffness(bump(cx, cy, cw))
+    if patches is None:
+        mean_terms = [(K0, Coefficient.power10(0, sign=1.0, scale=a0), "a0")]
+    else:
+        m = check_int("patches", patches, minimum=1)
+        mean_terms = []
+        for p in range(m * m):
+            ix, iy = p % m, p // m
+
+            def indicator(X, Y, ix=ix, iy=iy):
+                inside_x = np.minimum(np.floor(X * m), m - 1) == ix
+                return (inside_x & (np.minimum(np.floor(Y * m), m - 1) == iy)).astype(float)
+
+            coef = Coefficient.power10(p, sign=1.0, scale=a0)
+            mean_terms.append((stiffness(indicator), coef, f"a0 patch {p}"))
+    n_eps = len(mean_terms) + (Kb is not None)
+    if Kb is not None:
+        mean_terms.append((Kb, Coefficient.parameter(n_eps - 1), "inclusion"))
     K_modes = [
         stiffness(lambda X, Y, m=m, s=s: s * phi(m)(X, Y))
         for m, s in zip(modes, sigmas, strict=True)
@@ -237,15 +270,25 @@ def build_fem_diffusion(
     M_obs = sp.csr_matrix(basis.probes(sensors.T))[:, interior]
 
     chaos = ChaosBasis(order, len(modes))
-    terms = [
-        LinearTerm(K0, Coefficient.power10(0, sign=1.0, scale=a0), name="a0"),
-        LinearTerm(Kb, Coefficient.parameter(1), name="inclusion"),
-    ]
+    terms = [LinearTerm(K, c, name=name) for K, c, name in mean_terms]
     for k, K in enumerate(K_modes):
         G = weighted_gram(chaos, lambda w, k=k: (w[:, k] if w.ndim == 2 else w) - 0.5)
         terms.append(LinearTerm(K, G=G, name=f"random mode {k + 1}"))
     terms.append(LoadTerm.constant(F))
-    system = GalerkinSystem(terms, 2, basis=chaos, Gamma=Gamma, name="fem-diffusion")
+    system = GalerkinSystem(terms, n_eps, basis=chaos, Gamma=Gamma, name="fem-diffusion")
     return FemDiffusion(
-        system, chaos, mesh, basis, interior, sensors, M_obs, K0, Kb, K_modes, F, Gamma, a0
+        system,
+        chaos,
+        mesh,
+        basis,
+        interior,
+        sensors,
+        M_obs,
+        mean_terms,
+        K0,
+        Kb,
+        K_modes,
+        F,
+        Gamma,
+        a0,
     )

@@ -184,6 +184,18 @@ class GalerkinSystem:
             D += term.eps_jacobian(Theta, eps, t)
         return D
 
+    def eps_vjp(self, Theta, eps, mu, t=None):
+        """:math:`(\\partial\\,\\mathrm{vec}R/\\partial\\epsilon)^T\\mu`, (n_eps,), for adjoints.
+
+        Term by term, without forming the (NP, n_eps) matrix (which for a large system
+        and many parameters costs more than the adjoint solve itself).
+        """
+        mu = np.reshape(mu, self.shape)
+        g = np.zeros(self.n_eps)
+        for term in self.terms:
+            g += term.eps_vjp(Theta, eps, mu, t)
+        return g
+
     def lam_jacobian(self):
         """:math:`\\partial\\,\\mathrm{vec}R / \\partial\\lambda = -\\Gamma\\otimes\\mathbb E[\\Psi]`, (NP, C)."""
         if self.Gamma is None:

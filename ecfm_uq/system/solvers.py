@@ -223,7 +223,7 @@ class SteadySolution:
         elif g_lam is not None:
             raise ValueError("`g_lam` is only defined for a solve under a data constraint")
         mu = self._lu.solve_transpose(rhs)
-        return -(sysm.eps_jacobian(self.Theta, self.eps).T @ mu[:n])
+        return -sysm.eps_vjp(self.Theta, self.eps, mu[:n])
 
     def eps_sensitivity(self):
         """:math:`\\partial\\Theta/\\partial\\epsilon` (N, P, n_eps) and, under a data
@@ -509,7 +509,7 @@ class Trajectory:
             if C:
                 rhs = np.concatenate([rhs, g_lam[t]])
             mu = factors[t - 1].solve_transpose(rhs)[:n]
-            grad -= system.eps_jacobian(self.Theta[t], eps, self.times[t]).T @ mu
+            grad -= system.eps_vjp(self.Theta[t], eps, mu, self.times[t])
             carry = mass_T(mu)
         return grad
 

@@ -181,6 +181,10 @@ class LinearTerm:
     def eps_jacobian(self, Theta, eps, t=None):
         return np.outer(self.action(Theta).ravel(), self.coef.grad(eps))
 
+    def eps_vjp(self, Theta, eps, mu, t=None):
+        """:math:`(\\partial R/\\partial\\epsilon)^T\\mu` without the (NP, n_eps) matrix."""
+        return self.coef.grad(eps) * float(np.vdot(self.action(Theta), mu))
+
 
 def _symmetric(A):
     if is_sparse(A):
@@ -268,6 +272,10 @@ class QuadraticTerm:
     def eps_jacobian(self, Theta, eps, t=None):
         return np.outer(self._raw(Theta).ravel(), self.coef.grad(eps))
 
+    def eps_vjp(self, Theta, eps, mu, t=None):
+        """:math:`(\\partial R/\\partial\\epsilon)^T\\mu` without the (NP, n_eps) matrix."""
+        return self.coef.grad(eps) * float(np.vdot(self._raw(Theta), mu))
+
 
 class LoadTerm:
     """Load :math:`-F(\\epsilon, t)`, projected on :math:`\\mathbb E[\\Psi_\\ell]` when deterministic.
@@ -340,3 +348,13 @@ class LoadTerm:
         if d.ndim == 2:
             d = d[:, None, :] * self._E1[None, :, None]
         return -d.reshape(N * P, len(eps))
+
+    def eps_vjp(self, Theta, eps, mu, t=None):
+        """:math:`(\\partial R/\\partial\\epsilon)^T\\mu` without the (NP, n_eps) matrix."""
+        if self.dF is None:
+            return np.zeros(len(eps))
+        d = np.asarray(self.dF(eps, t), dtype=float)
+        mu = np.reshape(mu, Theta.shape)
+        if d.ndim == 2:  # deterministic load: only the E[Psi] projection sees it
+            return -(d.T @ (mu @ self._E1))
+        return -np.einsum("ikm,ik->m", d, mu)
