@@ -309,3 +309,49 @@ def test_inverse_layer_takes_a_sparse_sensor_matrix():
         strict=True,
     ):
         np.testing.assert_array_equal(a, b)
+
+
+def test_sparse_load_vectors_are_accepted():
+    F = np.linspace(0.0, 1.0, 6)
+    for Fs in (sp.csr_matrix(F[:, None]), sp.csr_matrix(F[None, :])):
+        term = LoadTerm.constant(Fs)
+        term.bind(np.ones(1))
+        np.testing.assert_array_equal(term.apply(np.zeros((6, 1)), []), -F[:, None])
+    with pytest.raises(ValueError, match="`F` must be a vector"):
+        LoadTerm.constant(sp.identity(3))
+
+
+@settings(max_examples=20, deadline=None)
+@given(
+    N=st.integers(3, 10),
+    dim=st.integers(1, 3),
+    order=st.integers(1, 3),
+    seed=st.integers(0, 10_000),
+    constrained=st.booleans(),
+)
+def test_every_solver_gives_the_dense_solution(N, dim, order, seed, constrained):
+    # random SPD diffusion-type systems: a positive mean operator plus random symmetric
+    # perturbations small enough to keep J positive definite
+    rng = np.random.default_rng(seed)
+    basis = ChaosBasis(order, dim)
+    A = rng.standard_normal((N, N))
+    K0 = A @ A.T + N * np.eye(N)
+    terms = [LinearTerm(sp.csr_matrix(K0), Coefficient.power10(0, sign=1.0))]
+    for k in range(dim):
+        B = rng.standard_normal((N, N))
+        G = weighted_gram(basis, lambda w, k=k: (w[:, k] if w.ndim == 2 else w) - 0.5)
+        terms.append(LinearTerm(sp.csr_matrix(0.1 * (B + B.T)), G=G))
+    terms.append(LoadTerm.scaled(rng.standard_normal(N), Coefficient.parameter(1)))
+    Gamma = np.eye(N)[:, :2]
+    system = GalerkinSystem(terms, 2, basis=basis, Gamma=sp.csr_matrix(Gamma))
+    constraint = (Gamma.T, np.array([0.1, -0.2])) if constrained else None
+    ref = solve_steady(system, EPS, constraint=constraint, solver="dense")
+    assert ref.success
+    for solver in ("sparse-direct", "cg", "gmres"):
+        sol = solve_steady(
+            system, EPS, constraint=constraint, solver=solver_options(solver, **TIGHT)
+        )
+        assert sol.success, (solver, sol.message)
+        assert rel(sol.Theta, ref.Theta) < 1e-10
+        if constrained:
+            assert rel(sol.lam, ref.lam) < 1e-10

@@ -277,6 +277,15 @@ class QuadraticTerm:
         return self.coef.grad(eps) * float(np.vdot(self._raw(Theta), mu))
 
 
+def _as_load_vector(F):
+    """A load vector (N,) from an array or a sparse (N, 1) / (1, N) matrix."""
+    if is_sparse(F):
+        if 1 not in F.shape:
+            raise ValueError(f"`F` must be a vector; got a sparse matrix of shape {F.shape}")
+        F = as_operator("F", F).toarray().ravel()
+    return as_finite_array("F", F, ndim=1)
+
+
 class LoadTerm:
     """Load :math:`-F(\\epsilon, t)`, projected on :math:`\\mathbb E[\\Psi_\\ell]` when deterministic.
 
@@ -304,8 +313,8 @@ class LoadTerm:
 
     @classmethod
     def constant(cls, F, name="load"):
-        """Fixed load vector."""
-        F = as_finite_array("F", F, ndim=1)
+        """Fixed load vector (a ``scipy.sparse`` column or row is accepted too)."""
+        F = _as_load_vector(F)
         return cls(lambda eps, t: F, None, name=name)
 
     @classmethod
@@ -315,7 +324,7 @@ class LoadTerm:
         if callable(F):
             Ft = F
         else:
-            F = as_finite_array("F", F, ndim=1)
+            F = _as_load_vector(F)
             Ft = lambda t: F
         return cls(
             lambda eps, t: coef.value(eps) * Ft(t),
