@@ -57,27 +57,31 @@ def interleaved(fns, repeats):
     return {k: statistics.median(v) for k, v in times.items()}
 
 
+def steady_timings(system, M_obs, v, eps, repeats):
+    """Forward solve, forward-sensitivity and adjoint gradients of the standard objective."""
+
+    def gradient(kind):
+        return standard_objective(system, M_obs, v, eps, gradient=kind)[1]
+
+    g_f, g_a = gradient("forward"), gradient("adjoint")
+    agree = float(np.abs(g_a - g_f).max() / np.abs(g_f).max())
+    t = interleaved(
+        {
+            "forward solve": lambda: solve_steady(system, eps, strict=True),
+            "gradient (forward sens.)": lambda: gradient("forward"),
+            "gradient (adjoint)": lambda: gradient("adjoint"),
+        },
+        repeats,
+    )
+    return system.n_eps, t, agree
+
+
 def kpp_case(repeats):
     problem = build_kpp(n_state=10, n_source=8, sensors=sensor_grid(5))
     data = make_data(problem, sigma=0.05, seed=0)
     system, M_obs, v = problem.system, problem.M_obs, data.v
     eps = np.random.default_rng(0).uniform(0.0, 3.0, system.n_eps)
-    g_f = standard_objective(system, M_obs, v, eps, gradient="forward")[1]
-    g_a = standard_objective(system, M_obs, v, eps, gradient="adjoint")[1]
-    agree = float(np.abs(g_a - g_f).max() / np.abs(g_f).max())
-    t = interleaved(
-        {
-            "forward solve": lambda: solve_steady(system, eps, strict=True),
-            "gradient (forward sens.)": lambda: standard_objective(
-                system, M_obs, v, eps, gradient="forward"
-            ),
-            "gradient (adjoint)": lambda: standard_objective(
-                system, M_obs, v, eps, gradient="adjoint"
-            ),
-        },
-        repeats,
-    )
-    return system.n_eps, t, agree
+    return steady_timings(system, M_obs, v, eps, repeats)
 
 
 def fem_case(repeats):
@@ -87,23 +91,7 @@ def fem_case(repeats):
     system, M_obs = problem.system, problem.M_obs
     rng = np.random.default_rng(2)
     v = M_obs @ system.mean(solve_steady(system, 0.1 * rng.standard_normal(64)).Theta)
-    eps = 0.1 * rng.standard_normal(64)
-    g_f = standard_objective(system, M_obs, v, eps, gradient="forward")[1]
-    g_a = standard_objective(system, M_obs, v, eps, gradient="adjoint")[1]
-    agree = float(np.abs(g_a - g_f).max() / np.abs(g_f).max())
-    t = interleaved(
-        {
-            "forward solve": lambda: solve_steady(system, eps, strict=True),
-            "gradient (forward sens.)": lambda: standard_objective(
-                system, M_obs, v, eps, gradient="forward"
-            ),
-            "gradient (adjoint)": lambda: standard_objective(
-                system, M_obs, v, eps, gradient="adjoint"
-            ),
-        },
-        repeats,
-    )
-    return system.n_eps, t, agree
+    return steady_timings(system, M_obs, v, 0.1 * rng.standard_normal(64), repeats)
 
 
 def burgers_case(repeats):

@@ -286,37 +286,32 @@ def _pcg(op, b, precond, rtol, maxiter):
     bnorm = np.linalg.norm(b)
     if bnorm == 0.0:
         return x, 0, 0.0
-    z = precond(r)
-    rz = np.vdot(r, z)
-    if not rz > 0:
-        raise ValueError(
-            "solver='cg' needs a symmetric positive definite preconditioner; the mean "
-            f"block gave r'Mr = {rz:.3g}: use solver='gmres'"
-        )
-    p = z.copy()
-    for k in range(1, maxiter + 1):
+    p = rz_old = None
+    for k in range(maxiter + 1):
+        res = np.linalg.norm(r) / bnorm
+        if res <= rtol:
+            return x, k, res
+        if k == maxiter:
+            break
+        z = precond(r)
+        rz = np.vdot(r, z)
+        if not rz > 0:
+            raise ValueError(
+                "solver='cg' needs a symmetric positive definite preconditioner "
+                f"(r'Mr = {rz:.3g} at iteration {k + 1}): use solver='gmres'"
+            )
+        p = z if p is None else z + (rz / rz_old) * p
         Ap = op.apply(p)
         curv = np.vdot(p, Ap)
         if not curv > 0:
             raise ValueError(
                 "solver='cg' needs a symmetric positive definite Jacobian: negative "
-                f"curvature p'Jp = {curv:.3g} at iteration {k}; use solver='gmres'"
+                f"curvature p'Jp = {curv:.3g} at iteration {k + 1}; use solver='gmres'"
             )
         alpha = rz / curv
         x += alpha * p
         r -= alpha * Ap
-        res = np.linalg.norm(r) / bnorm
-        if res <= rtol:
-            return x, k, res
-        z = precond(r)
-        rz_new = np.vdot(r, z)
-        if not rz_new > 0:
-            raise ValueError(
-                "solver='cg' needs a symmetric positive definite preconditioner "
-                f"(r'Mr = {rz_new:.3g} at iteration {k}): use solver='gmres'"
-            )
-        p = z + (rz_new / rz) * p
-        rz = rz_new
+        rz_old = rz
     return x, maxiter, np.linalg.norm(r) / bnorm
 
 
