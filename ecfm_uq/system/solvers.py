@@ -104,6 +104,17 @@ def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None):
     return z, None, info(False, maxiter, f"no convergence in {maxiter} iterations")
 
 
+def _bordered(J, Jl, Cth):
+    """The ECFM bordered operator of ``J``; the same object for the same (linear) ``J``,
+    so the linear solver reuses its factors (Schur complement included) across steps."""
+    cached = getattr(J, "_bordered", None)
+    if cached is None or cached.Jl is not Jl or cached.Cth is not Cth:
+        cached = AugmentedOperator(J, Jl, Cth)
+        if J.is_linear:
+            J._bordered = cached
+    return cached
+
+
 def _check_constraint(system, constraint, n_rows=None):
     if constraint is None:
         return None, None
@@ -322,7 +333,7 @@ def solve_steady(
         def fun(z):
             Th, lm = z[:n].reshape(N, P), z[n:]
             r = np.concatenate([system.residual(Th, eps, lm).ravel(), Cth @ z[:n] - v])
-            return r, AugmentedOperator(system.jacobian_operator(Th, eps), Jl, Cth)
+            return r, _bordered(system.jacobian_operator(Th, eps), Jl, Cth)
 
         z0 = np.concatenate([Theta0.ravel(), np.zeros(system.n_forces)])
         z, factor, info = newton(fun, z0, tol, maxiter, linear_solver=linear)
@@ -621,7 +632,7 @@ def march(
             def fun(z, prev=prev, t1=t1, v1=v1):
                 T1, l1 = z[:n].reshape(N, P), z[n:]
                 r1 = mass(z[:n] - prev) + system.residual(T1, eps, l1, t1).ravel()
-                J = AugmentedOperator(system.jacobian_operator(T1, eps, t1, dt=dt), Jl, Cth)
+                J = _bordered(system.jacobian_operator(T1, eps, t1, dt=dt), Jl, Cth)
                 return np.concatenate([r1, Cth @ z[:n] - v1]), J
 
             z0 = np.concatenate([prev, lam[s]])
