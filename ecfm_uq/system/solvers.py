@@ -22,11 +22,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 
 from .._validation import as_finite_array, as_operator, check_choice, check_int, check_positive
 from ..errors import ConvergenceError, KrylovError
 from .linear import DenseFactor, LinearSolver, dense_lu, solver_options
 from .operator import AugmentedOperator
+from .terms import LinearTerm, LoadTerm, QuadraticTerm
 
 
 @dataclass
@@ -525,6 +527,103 @@ class Trajectory:
         return grad
 
 
+_COMPILED_MAX_N = 128
+
+
+def _compiled_march(
+    linear, system, eps, Theta0, dt, n_steps, t0, M_obs, V, sens, tol, maxiter, keep, guess
+):
+    """March with the compiled kernel when the system qualifies, else ``None``.
+
+    Qualifies: ``P = 1``, the dense solver, at most one quadratic term, ``N`` at most
+    128 (its tensor is kept as a coordinate list of the nonzeros), terms of the library's
+    types. The load and its derivative are evaluated at every step time beforehand.
+    """
+    from . import _kernels
+
+    N, P = system.shape
+    quads = [t for t in system.terms if isinstance(t, QuadraticTerm)]
+    if P != 1 or linear.name != "dense" or len(quads) > 1 or N > _COMPILED_MAX_N:
+        return None
+    lin = [t for t in system.terms if isinstance(t, LinearTerm)]
+    loads = [t for t in system.terms if isinstance(t, LoadTerm)]
+    n_eps = system.n_eps
+    times = t0 + dt * np.arange(n_steps + 1)
+    dense = [t.K.toarray() if t.sparse else t.K for t in lin]
+    Ks = np.array(dense).reshape(len(lin), N, N)
+    # with P = 1 the coupling G = E[g Psi_0 Psi_0] is a scalar factor of the term
+    g00 = np.array([t.G[0, 0] for t in lin])
+    cs = np.array([t.coef.value(eps) for t in lin]) * g00
+    gK = np.array([t.coef.grad(eps) for t in lin], dtype=float).reshape(len(lin), n_eps)
+    gK = gK * g00[:, None]
+    Klin = np.einsum("q,qij->ij", cs, Ks) if lin else np.zeros((N, N))
+    if quads:
+        qi, qj, qk, qv = quads[0].coordinates()
+        cq, gq = quads[0].coef.value(eps), np.asarray(quads[0].coef.grad(eps), dtype=float)
+    else:
+        qi = qj = qk = np.zeros(0, dtype=np.int64)
+        qv, cq, gq = np.zeros(0), 0.0, np.zeros(n_eps)
+    F = np.zeros((n_steps + 1, N))
+    dF = np.zeros((n_steps + 1, N, n_eps))
+    for term in loads:
+        for s, t in enumerate(times):
+            F[s] -= term.apply(np.zeros((N, 1)), eps, t)[:, 0]
+            if sens:
+                dF[s] -= term.eps_jacobian(np.zeros((N, 1)), eps, t)
+    Mdt = system.mass_matrix() / dt
+    if M_obs is None:
+        Cobs, Gam, Vd = np.zeros((0, N)), np.zeros((N, 0)), np.zeros((n_steps + 1, 0))
+    else:
+        Cobs = M_obs.toarray() if sp.issparse(M_obs) else np.asarray(M_obs)
+        Gam = -system.lam_jacobian()
+        Vd = np.asarray(V, dtype=float)
+    C = Cobs.shape[0]
+    if guess is None:
+        start = np.zeros((n_steps + 1, N + C))
+    else:
+        start = np.concatenate([guess.Theta[:, :, 0], guess.lam.reshape(n_steps + 1, C)], 1)
+    try:
+        with np.errstate(all="ignore"):
+            Th, lam, dTh, dlam, nits, failed, rnorm, Js = _kernels.march_p1(
+                Mdt, Klin, Ks, gK, qi, qj, qk, qv, float(cq), gq, F, dF, Cobs, Gam, Vd,
+                np.ascontiguousarray(Theta0[:, 0]), start, guess is not None,
+                tol, maxiter, bool(sens), bool(keep),
+            )  # fmt: skip
+        message = None
+    except np.linalg.LinAlgError:  # a singular step Jacobian inside the kernel
+        failed, rnorm, message = -2, np.inf, "Jacobian is singular"
+    label = "dense (compiled)"
+    if failed != -1:
+        k = (failed if failed >= 0 else 0) + 1
+        msg = (
+            f"{system.name}: Newton failed at step {k} (t={times[k]:.6g}) with "
+            f"||R||={rnorm:.3e}: {message or f'no convergence in {maxiter} iterations'}"
+        )
+        if failed == -2:
+            return Trajectory(
+                times[:1], Theta0[None], np.zeros((1, C)), None, None, False, msg, 1,
+                np.zeros(0, dtype=int), label,
+            )  # fmt: skip
+        return Trajectory(
+            times[:k], Th[:k, :, None], lam[:k], None, None, False, msg, k, nits[:k], label
+        )
+    factors = [DenseFactor(dense_lu(J)) for J in Js] if keep else None
+    return Trajectory(
+        times,
+        Th[:, :, None],
+        lam,
+        dTh[:, :, None, :] if sens else None,
+        dlam if sens and M_obs is not None else None,
+        True,
+        "converged at every step",
+        None,
+        nits,
+        label,
+        [],
+        (system, eps, factors, lambda x: Mdt.T @ x) if keep else None,
+    )
+
+
 def march(
     system,
     eps,
@@ -540,6 +639,7 @@ def march(
     strict=False,
     solver="auto",
     keep_factors=False,
+    guess=None,
 ):
     """Integrate :math:`M\\dot\\Theta + R(\\Theta; \\epsilon, \\lambda, t) = 0` by backward Euler.
 
@@ -568,6 +668,18 @@ def march(
         :func:`solve_steady` (``"decoupled"`` is for steady solves only).
     keep_factors : bool
         Keep every step's factorized Jacobian for :meth:`Trajectory.adjoint_gradient`.
+    guess : Trajectory, optional
+        A trajectory on the same time grid (e.g. at the previous parameters of an
+        optimizer) whose states start each step's Newton iteration instead of the
+        previous step's state (a warm start: fewer Newton iterations, same solution to
+        ``tol``).
+
+    Notes
+    -----
+    Small deterministic systems (``P = 1``, dense solver, at most one quadratic term,
+    ``N <= 128``) are marched by one compiled kernel (:mod:`._kernels`) with the same
+    maths and no Python work per step; ``Trajectory.solver`` then reads
+    ``"dense (compiled)"``.
 
     Returns
     -------
@@ -591,6 +703,20 @@ def march(
     if system.M is None:
         system.mass_matrix()  # raises the "no mass matrix" error
     linear = LinearSolver(system, solver_options(solver), constrained=constrained, steady=False)
+    if guess is not None:
+        if not isinstance(guess, Trajectory) or guess.Theta.shape != (n_steps + 1, N, P):
+            raise ValueError(
+                f"`guess` must be a Trajectory of shape {(n_steps + 1, N, P)} (a previous "
+                "march on the same grid)"
+            )
+        if constrained and guess.lam.shape != (n_steps + 1, C):
+            raise ValueError("`guess` must come from a march under the same data constraint")
+    args = (system, eps, Theta0, dt, n_steps, t0, M_obs, V, sensitivities, tol, maxiter)
+    traj = _compiled_march(linear, *args, keep_factors, guess)
+    if traj is not None:
+        if strict and not traj.success:
+            raise ConvergenceError(traj.message)
+        return traj
     if linear.name == "dense":
         Mdt = system.mass_matrix() / dt
 
@@ -636,6 +762,8 @@ def march(
                 return np.concatenate([r1, Cth @ z[:n] - v1]), J
 
             z0 = np.concatenate([prev, lam[s]])
+            if guess is not None:
+                z0 = np.concatenate([guess.Theta[s + 1].ravel(), guess.lam[s + 1]])
         else:
 
             def fun(z, prev=prev, t1=t1):
@@ -643,7 +771,7 @@ def march(
                 r1 = mass(z - prev) + system.residual(T1, eps, None, t1).ravel()
                 return r1, system.jacobian_operator(T1, eps, t1, dt=dt)
 
-            z0 = prev
+            z0 = prev if guess is None else guess.Theta[s + 1].ravel()
         z, lu, info = newton(fun, z0, tol, maxiter, linear_solver=linear)
         nits[s] = info.nit
         if not info.success:

@@ -265,6 +265,27 @@ class QuadraticTerm:
             self.form.apply(X[:, bs], Theta[:, cs]) + self.form.apply(Theta[:, bs], X[:, cs])
         ) @ self._W
 
+    def coordinates(self):
+        """Nonzeros of the tensor :math:`A_{ijk}` as ``(i, j, k, value)`` arrays (cached).
+
+        Built from the form by contracting unit vectors (``N^2`` columns), so any form
+        with ``apply`` works; entries below 1e-14 of the largest are dropped (a sine
+        basis' triple products vanish unless the wavenumbers add up).
+        """
+        if getattr(self, "_coo", None) is None:
+            n = self.form.size
+            if hasattr(self.form, "A"):
+                A = self.form.A
+            else:
+                eye = np.eye(n)
+                X = np.repeat(eye, n, axis=1)  # column j * n + k is e_j
+                Y = np.tile(eye, (1, n))  # ... and e_k
+                A = self.form.apply(X, Y).reshape(n, n, n)
+            keep = np.abs(A) > 1e-14 * max(np.abs(A).max(), 1e-300)
+            i, j, k = np.nonzero(keep)
+            self._coo = (i.astype(np.int64), j.astype(np.int64), k.astype(np.int64), A[keep])
+        return self._coo
+
     def matrices(self, Theta):
         """:math:`S_k = S(\\Theta_{:,k})`, the form's linearization per chaos column, (P, N, N)."""
         return [self.form.matrix(Theta[:, k]) for k in range(Theta.shape[1])]
