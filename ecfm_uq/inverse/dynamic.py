@@ -79,6 +79,10 @@ class DynamicInverseProblem:
         ``n_eps > 1``.
     solver : str, SolverOptions or dict
         Linear solver of every step (see :func:`ecfm_uq.system.march`).
+    warm_start : bool
+        Start each step's Newton iteration from the last trajectory of the same
+        formulation (the previous optimizer iterate's) instead of the previous step: fewer
+        Newton iterations, the same solution to ``tol``.
 
     Raises
     ------
@@ -101,6 +105,7 @@ class DynamicInverseProblem:
         maxiter=30,
         gradient="auto",
         solver="auto",
+        warm_start=True,
     ):
         if getattr(system, "M", None) is None:
             raise ValueError("`system` needs a mass matrix M for time stepping (build it with M=)")
@@ -112,6 +117,8 @@ class DynamicInverseProblem:
         self.maxiter = check_int("maxiter", maxiter, minimum=1)
         self.gradient = choose_gradient(gradient, system.n_eps)
         self.solver = solver
+        self.warm_start = bool(warm_start)
+        self._last = {}  # formulation -> last trajectory (the warm start)
         N, P = system.shape
         Theta0 = as_finite_array("Theta0", Theta0)
         if Theta0.shape == (N,):
@@ -155,7 +162,7 @@ class DynamicInverseProblem:
             constraint = (self.M_obs, self.V)
         eps = self.system.check_eps(eps)
         try:
-            return march(
+            traj = march(
                 self.system,
                 eps,
                 self.Theta0,
@@ -169,11 +176,19 @@ class DynamicInverseProblem:
                 strict=True,
                 solver=self.solver,
                 keep_factors=keep_factors,
+                guess=self._last.get(formulation) if self.warm_start else None,
             )
         except ConvergenceError as e:
+            if self.warm_start and formulation in self._last:
+                # a warm start far from this eps can mislead Newton: retry cold
+                del self._last[formulation]
+                return self.solve(eps, formulation, sensitivities, keep_factors)
             raise ConvergenceError(
                 f"{formulation} forward solve at eps={np.array2string(eps)} failed: {e}"
             ) from e
+        if self.warm_start:
+            self._last[formulation] = traj
+        return traj
 
     def predictions(self, trajectory):
         """Sensor readings of the mean state, :math:`\\mathcal M\\,\\Theta_i\\mathbb E[\\Psi]`.
