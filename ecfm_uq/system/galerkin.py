@@ -53,7 +53,8 @@ class GalerkinSystem:
         for term in self.terms:
             if not isinstance(term, LinearTerm | QuadraticTerm | LoadTerm):
                 raise TypeError(
-                    f"unsupported term {term!r}; use LinearTerm, QuadraticTerm, LoadTerm"
+                    f"`terms` holds an unsupported {type(term).__name__} {term!r:.40}; "
+                    "use LinearTerm, QuadraticTerm or LoadTerm (e.g. LoadTerm.constant(F))"
                 )
         self.n_eps = check_int("n_eps", n_eps, minimum=0)
         self.basis = basis
@@ -71,9 +72,23 @@ class GalerkinSystem:
         self.P = self.E1.size
         sizes = {t.K.shape[0] for t in self.terms if isinstance(t, LinearTerm)}
         sizes |= {t.form.size for t in self.terms if isinstance(t, QuadraticTerm)}
+        if not sizes:
+            raise ValueError(
+                "`terms` has no LinearTerm or QuadraticTerm, so the state size N is unknown; "
+                "add the model's operator (e.g. LinearTerm(K))"
+            )
         if len(sizes) != 1:
-            raise ValueError(f"terms disagree on the state size N: {sorted(sizes)}")
+            named = sorted(
+                f"{t.name!r}: {t.K.shape[0] if isinstance(t, LinearTerm) else t.form.size}"
+                for t in self.terms
+                if isinstance(t, LinearTerm | QuadraticTerm)
+            )
+            raise ValueError(
+                f"terms disagree on the state size N ({', '.join(named)}); "
+                "build every operator on the same discretization"
+            )
         self.N = sizes.pop()
+        self._check_parameters()
         for term in self.terms:
             if isinstance(term, LinearTerm):
                 term.bind(self.E2)
@@ -81,12 +96,28 @@ class GalerkinSystem:
                 term.bind(self.E3)
             else:
                 term.bind(self.E1)
+                term.check_sizes(self.N, self.n_eps)
         self.Gamma = None if Gamma is None else as_operator("Gamma", Gamma)
         if self.Gamma is not None and self.Gamma.shape[0] != self.N:
             raise ValueError(f"`Gamma` must have {self.N} rows (N), got {self.Gamma.shape}")
         self.M = None if M is None else as_operator("M", M, shape=(self.N, self.N))
         self._operator_cache = None
         self.name = name
+
+    def _check_parameters(self):
+        """Every coefficient must read parameter indices below ``n_eps``."""
+        for term in self.terms:
+            coef = getattr(term, "coef", None)
+            indices = getattr(coef, "indices", None)
+            if not indices:
+                continue
+            bad = [m for m in indices if m >= self.n_eps]
+            if bad:
+                raise ValueError(
+                    f"term {term.name!r}: coefficient {coef.label} uses parameter index "
+                    f"{bad[0]} but the system has n_eps={self.n_eps} parameters "
+                    f"(indices 0..{self.n_eps - 1}); raise `n_eps` or fix the index"
+                )
 
     # -- sizes -------------------------------------------------------------------------
     @property
