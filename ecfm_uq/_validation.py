@@ -64,8 +64,12 @@ def check_positive(name, value):
 
 def check_choice(name, value, choices):
     """Raise ValueError unless ``value`` is one of ``choices``."""
-    if value not in choices:
-        raise ValueError(f"unknown `{name}` {value!r}; choose one of {sorted(choices)}")
+    # only strings and numbers compare: an array's == is element-wise, a list never matches
+    known = isinstance(value, str | numbers.Number) and any(value == c for c in choices)
+    if not known:
+        raise ValueError(
+            f"unknown `{name}` {describe(value)}; choose one of {sorted(choices, key=str)}"
+        )
     return value
 
 

@@ -22,6 +22,7 @@ from .._validation import as_finite_array, as_operator
 from ..errors import ConvergenceError
 from ..system import solve_steady
 from .result import InverseResult
+from .verdict import consistency_verdict
 
 
 def _data(system, M_obs, v):
@@ -162,7 +163,10 @@ def fit_steady(
     res = sopt.minimize(
         fun, eps0, jac=True, method=method, bounds=bounds, options=opts, callback=callback
     )
-    z, g, sol = objective(system, M_obs, v, res.x, **solve_kw)
+    try:
+        z, g, sol = objective(system, M_obs, v, res.x, **solve_kw)
+    except ConvergenceError as e:  # the optimizer stopped where the model fails
+        return _failed_fit(res, formulation, hist_eps, hist_loss, e)
     msg = str(res.message)
     success = bool(res.success)
     if not success and res.status == 2 and not failures:
@@ -179,6 +183,10 @@ def fit_steady(
             msg += f" (stopped at the round-off limit; relative optimality {rel_opt:.1e})"
     if failures:
         msg += f" ({len(failures)} inner solves failed; first: {failures[0]})"
+    lam = sol.lam if formulation == "ecfm" else np.zeros(0)
+    verdict = consistency_verdict(system, M_obs, v, res.x, lam, bounds, solve_options=solve_kw)
+    if not verdict["consistent"]:
+        msg += f" [{verdict['message']}]"
     return InverseResult(
         eps=np.asarray(res.x),
         loss=z,
@@ -188,5 +196,20 @@ def fit_steady(
         method=formulation,
         eps_history=np.array(hist_eps),
         loss_history=np.array(hist_loss),
-        extra={"Theta": sol.Theta, "lam": sol.lam if formulation == "ecfm" else np.zeros(0)},
+        extra={"Theta": sol.Theta, "lam": lam, "verdict": verdict},
+    )
+
+
+def _failed_fit(res, formulation, hist_eps, hist_loss, error):
+    """A reported failure: the model cannot be solved at the optimizer's last point."""
+    return InverseResult(
+        eps=np.asarray(res.x),
+        loss=np.inf,
+        success=False,
+        message=f"{res.message} (the model cannot be solved at the final eps: {error})",
+        nit=int(res.nit),
+        method=formulation,
+        eps_history=np.array(hist_eps),
+        loss_history=np.array(hist_loss),
+        extra={"verdict": {"consistent": False, "message": str(error)}},
     )

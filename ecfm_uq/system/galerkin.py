@@ -136,7 +136,9 @@ class GalerkinSystem:
 
     def check_eps(self, eps):
         """Validate ``eps`` as a finite (n_eps,) vector."""
-        return as_finite_array("eps", np.atleast_1d(eps), shape=(self.n_eps,))
+        if not isinstance(eps, str | bytes):  # a string is refused by name, not as an array
+            eps = np.atleast_1d(eps)
+        return as_finite_array("eps", eps, shape=(self.n_eps,))
 
     def check_lam(self, lam):
         """Validate ``lam`` (None means zero forces)."""
@@ -144,7 +146,9 @@ class GalerkinSystem:
             return np.zeros(self.n_forces)
         if self.Gamma is None:
             raise ValueError("`lam` given but the system has no constraint forces (Gamma=None)")
-        return as_finite_array("lam", np.atleast_1d(lam), shape=(self.n_forces,))
+        if not isinstance(lam, str | bytes):
+            lam = np.atleast_1d(lam)
+        return as_finite_array("lam", lam, shape=(self.n_forces,))
 
     # -- residual and derivatives ------------------------------------------------------
     def residual(self, Theta, eps, lam=None, t=None):
