@@ -36,7 +36,7 @@ def as_finite_array(name, value, *, ndim=None, shape=None, dtype=float):
 
 def describe(value):
     """``"str 'abc'"``: a user value's type and short repr, for error messages."""
-    r = repr(value)
+    r = " ".join(repr(value).split())
     if len(r) > 40:
         r = r[:37] + "..."
     return f"{type(value).__name__} {r}"

@@ -161,13 +161,17 @@ def sensor_matrix(basis, points):
         if p.shape[1] != 2:
             raise ValueError(f"`points` must have shape (C, 2), got {p.shape}")
         if np.any((p < 0) | (p > 1)):
-            raise ValueError("`points` must lie in the unit square [0, 1]^2")
+            j = int(np.flatnonzero(np.any((p < 0) | (p > 1), axis=1))[0])
+            raise ValueError(
+                f"`points` must lie in the unit square [0, 1]^2, got sensor {j} at {p[j].tolist()}"
+            )
         return basis.evaluate(p)
     p = as_finite_array("points", points, ndim=1)
     if p.size == 0:
         raise ValueError("`points` is empty; pass at least one sensor position")
     if np.any((p < 0) | (p > 1)):
-        raise ValueError("`points` must lie in [0, 1]")
+        j = int(np.flatnonzero((p < 0) | (p > 1))[0])
+        raise ValueError(f"`points` must lie in [0, 1], got sensor {j} at {p[j]}")
     return basis.evaluate(p)
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .._validation import as_finite_array, as_operator, check_int
+from .._validation import as_finite_array, as_operator, check_int, describe
 from ..memory import check_allocation
 from .operator import GalerkinOperator, _LinearPart, _QuadraticLinearization
 from .terms import LinearTerm, LoadTerm, QuadraticTerm, _symmetric
@@ -53,7 +53,7 @@ class GalerkinSystem:
         for term in self.terms:
             if not isinstance(term, LinearTerm | QuadraticTerm | LoadTerm):
                 raise TypeError(
-                    f"`terms` holds an unsupported {type(term).__name__} {term!r:.40}; "
+                    f"`terms` holds an unsupported {describe(term)}; "
                     "use LinearTerm, QuadraticTerm or LoadTerm (e.g. LoadTerm.constant(F))"
                 )
         self.n_eps = check_int("n_eps", n_eps, minimum=0)
