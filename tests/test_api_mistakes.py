@@ -140,6 +140,33 @@ MISTAKES = [
         ValueError,
         "load term 'src': F(eps, t) returned shape (5,), expected (3,)",
     ),
+    (
+        "random load of the wrong chaos size",
+        lambda: solve_steady(
+            GalerkinSystem(
+                [LinearTerm(K), LoadTerm(lambda e, t: np.ones((N, 2)), name="rand")],
+                1,
+                basis=ChaosBasis(2),
+            ),
+            [0.0],
+        ),
+        ValueError,
+        "load term 'rand': F(eps, t) returned shape (3, 2), expected (3,) or (3, 3)",
+    ),
+    (
+        "load derivative of the wrong shape",
+        lambda: solve_steady(
+            _system(LoadTerm(lambda e, t: F, lambda e, t: np.ones((N, 2)), name="src")), [0.0]
+        ).eps_sensitivity(),
+        ValueError,
+        "load term 'src': dF(eps, t) returned shape (3, 2), expected (3, 1)",
+    ),
+    (
+        "quadratic form without size",
+        lambda: QuadraticTerm(type("Form", (), {"matrix": None})()),
+        TypeError,
+        "lacks ['apply', 'size']",
+    ),
     # -- chaos -------------------------------------------------------------------------
     ("order negative", lambda: ChaosBasis(-1), ValueError, "`order` must be >= 0"),
     ("dim zero", lambda: ChaosBasis(2, dim=0), ValueError, "`dim` must be >= 1"),

@@ -297,7 +297,16 @@ class QuadraticTerm:
     """
 
     def __init__(self, form, coef=1.0, name="quadratic"):
-        self.form = form if hasattr(form, "matrix") else DenseQuadraticForm(form)
+        if hasattr(form, "matrix"):
+            missing = [a for a in ("apply", "matrix", "size") if not hasattr(form, a)]
+            if missing:
+                raise TypeError(
+                    f"`form` {type(form).__name__} lacks {missing}; pass an (N, N, N) array or "
+                    "an object with apply(X, Y), matrix(x) and size (see DenseQuadraticForm)"
+                )
+            self.form = form
+        else:
+            self.form = DenseQuadraticForm(form)
         self.coef = as_coefficient(coef)
         self.name = name
 
@@ -453,6 +462,13 @@ class LoadTerm:
         if self.dF is None:
             return np.zeros((N * P, len(eps)))
         d = np.asarray(self.dF(eps, t), dtype=float)
+        n_eps = len(eps)
+        if d.shape not in {(N, n_eps), (N, P, n_eps)}:
+            raise ValueError(
+                f"load term {self.name!r}: dF(eps, t) returned shape {d.shape}, expected "
+                f"({N}, {n_eps}) or ({N}, {P}, {n_eps}) (N, [P,] n_eps); fix the load's "
+                "derivative"
+            )
         if d.ndim == 2:
             d = d[:, None, :] * self._E1[None, :, None]
         return -d.reshape(N * P, len(eps))
