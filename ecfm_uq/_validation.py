@@ -67,9 +67,8 @@ def check_choice(name, value, choices):
     # only strings and numbers compare: an array's == is element-wise, a list never matches
     known = isinstance(value, str | numbers.Number) and any(value == c for c in choices)
     if not known:
-        raise ValueError(
-            f"unknown `{name}` {describe(value)}; choose one of {sorted(choices, key=str)}"
-        )
+        shown = repr(value) if isinstance(value, str) else describe(value)
+        raise ValueError(f"unknown `{name}` {shown}; choose one of {sorted(choices, key=str)}")
     return value
 
 
