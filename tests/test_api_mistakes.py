@@ -127,6 +127,12 @@ MISTAKES = [
     ),
     ("unknown solver", lambda: SolverOptions(solver="lu"), ValueError, "unknown `solver`"),
     ("solver a list", lambda: SolverOptions(solver=["cg"]), ValueError, "list ['cg']"),
+    (
+        "unknown solver option",
+        lambda: solve_steady(_ok_system(), [0.0], solver={"solver": "cg", "tol": 1e-8}),
+        TypeError,
+        "`solver` has unknown option(s) ['tol']; known options are ['solver',",
+    ),
     ("rtol zero", lambda: SolverOptions(rtol=0.0), ValueError, "`rtol` must be positive"),
     (
         "march without M",
@@ -201,6 +207,12 @@ MISTAKES = [
         lambda: rbf_forces(TensorBasis2D(SineBasis(2)), [[0.5, 0.5], [0.5, 2.0]], 50.0),
         ValueError,
         "the unit square [0, 1]^2 (the domain), got centre 1",
+    ),
+    (
+        "gaussian force far too narrow",
+        lambda: gaussian_forces(B1, [0.5], 1e16),
+        MemoryBudgetError,
+        "pass a smaller `omega`",
     ),
     ("half_width zero", lambda: hat_forces(B1, [0.5], 0.0), ValueError, "`half_width`"),
     ("no centres", lambda: hat_forces(B1, [], 0.1), ValueError, "`centers` is empty"),
@@ -522,3 +534,30 @@ _CONSTRUCTORS = [
 @given(which=st.integers(0, len(_CONSTRUCTORS) - 1), a=_junk, b=_junk)
 def test_malformed_input_gives_only_clear_errors(which, a, b):
     _call(_CONSTRUCTORS[which], a, b)
+
+
+_GAMMA_SYSTEM = GalerkinSystem(
+    [LinearTerm(K, Coefficient.power10(0)), LoadTerm.constant(F)], 1, Gamma=np.eye(N)[:, :2]
+)
+_CALLS = [
+    lambda a, b: solve_steady(_GAMMA_SYSTEM, a),
+    lambda a, b: solve_steady(_GAMMA_SYSTEM, [0.0], lam=a),
+    lambda a, b: solve_steady(_GAMMA_SYSTEM, [0.0], tol=a, maxiter=b),
+    lambda a, b: solve_steady(_GAMMA_SYSTEM, [0.0], solver=a),
+    lambda a, b: solve_steady(_GAMMA_SYSTEM, [0.0], constraint=(a, b)),
+    lambda a, b: solve_steady(_GAMMA_SYSTEM, [0.0], Theta0=a),
+    lambda a, b: fit_steady(_GAMMA_SYSTEM, a, b, [0.0]),
+    lambda a, b: fit_steady(_GAMMA_SYSTEM, np.eye(N)[:2], [1.0, 1.0], a, b),
+    lambda a, b: fit_steady(_GAMMA_SYSTEM, np.eye(N)[:2], [1.0, 1.0], [0.0], method=a),
+    lambda a, b: fit_steady(
+        _GAMMA_SYSTEM, np.eye(N)[:2], [1.0, 1.0], [0.0], method="L-BFGS-B", bounds=a
+    ),
+    lambda a, b: fit_steady(_GAMMA_SYSTEM, np.eye(N)[:2], [1.0, 1.0], [0.0], gtol=a, maxiter=b),
+    lambda a, b: consistency_verdict(_GAMMA_SYSTEM, np.eye(N)[:2], a, [0.0], sigma=b),
+]
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(which=st.integers(0, len(_CALLS) - 1), a=_junk, b=_junk)
+def test_malformed_solver_arguments_give_only_clear_errors(which, a, b):
+    _call(_CALLS[which], a, b)

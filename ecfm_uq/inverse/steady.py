@@ -15,10 +15,12 @@ sensitivities:
 
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
 import scipy.optimize as sopt
 
-from .._validation import as_finite_array, as_operator
+from .._validation import as_finite_array, as_operator, check_int, check_positive
 from ..errors import ConvergenceError
 from ..system import solve_steady
 from .result import InverseResult
@@ -117,12 +119,13 @@ def fit_steady(
         ``extra`` holds ``Theta`` and ``lam`` at the optimum (``lam`` is the ECFM
         constraint force, zero-length for the standard formulation).
     """
-    if formulation not in _OBJECTIVES:
+    if not isinstance(formulation, str) or formulation not in _OBJECTIVES:
         raise ValueError(f"unknown `formulation` {formulation!r}; choose 'standard' or 'ecfm'")
     if formulation == "ecfm" and system.Gamma is None:
         raise ValueError("formulation='ecfm' needs a system with constraint forces (Gamma)")
     M_obs, v = _data(system, M_obs, v)
     eps0 = system.check_eps(eps0)
+    method, gtol, maxiter, bounds = _check_fit_options(system, method, gtol, maxiter, bounds)
     objective = _OBJECTIVES[formulation]
     solve_kw = dict(solve_options or {})
     hist_eps, hist_loss = [], []
@@ -169,7 +172,7 @@ def fit_steady(
         return _failed_fit(res, formulation, hist_eps, hist_loss, e)
     msg = str(res.message)
     success = bool(res.success)
-    if not success and res.status == 2 and not failures:
+    if not success and res.get("status") == 2 and not failures:
         # the line search could not decrease z at machine precision. That is convergence
         # when z is at round-off zero (both objectives are >= 0: a global minimum) or
         # when first-order optimality holds relative to z itself: a relative change of
@@ -192,12 +195,44 @@ def fit_steady(
         loss=z,
         success=success,
         message=msg,
-        nit=int(res.nit),
+        nit=int(res.get("nit", 0)),
         method=formulation,
         eps_history=np.array(hist_eps),
         loss_history=np.array(hist_loss),
         extra={"Theta": sol.Theta, "lam": lam, "verdict": verdict},
     )
+
+
+_METHODS = ("BFGS", "CG", "L-BFGS-B", "TNC", "SLSQP", "Newton-CG", "trust-constr")
+
+
+def _check_fit_options(system, method, gtol, maxiter, bounds):
+    """Validate the optimizer arguments of :func:`fit_steady` (before any solve)."""
+    if not isinstance(method, str) or method.upper() not in {m.upper() for m in _METHODS}:
+        raise ValueError(f"unknown `method` {method!r}; choose a gradient method of {_METHODS}")
+    gtol = check_positive("gtol", gtol)
+    maxiter = check_int("maxiter", maxiter, minimum=1)
+    if bounds is not None:
+        try:
+            pairs = [tuple(b) for b in bounds]
+            ok = len(pairs) == system.n_eps and all(len(b) == 2 for b in pairs)
+        except TypeError:
+            ok = False
+        if not ok:
+            raise ValueError(
+                f"`bounds` must be {system.n_eps} pairs (lo, hi), one per parameter "
+                f"(None for an open side), got {bounds!r:.60}"
+            )
+        for m, (lo, hi) in enumerate(pairs):
+            for side in (lo, hi):
+                if side is not None and (
+                    isinstance(side, bool) or not isinstance(side, numbers.Real) or np.isnan(side)
+                ):
+                    raise ValueError(f"`bounds[{m}]` must hold numbers or None, got {(lo, hi)}")
+            if lo is not None and hi is not None and lo > hi:
+                raise ValueError(f"`bounds[{m}]` has lo > hi: {(lo, hi)}; swap them")
+        bounds = pairs
+    return method, gtol, maxiter, bounds
 
 
 def _failed_fit(res, formulation, hist_eps, hist_loss, error):
@@ -207,7 +242,7 @@ def _failed_fit(res, formulation, hist_eps, hist_loss, error):
         loss=np.inf,
         success=False,
         message=f"{res.message} (the model cannot be solved at the final eps: {error})",
-        nit=int(res.nit),
+        nit=int(res.get("nit", 0)),
         method=formulation,
         eps_history=np.array(hist_eps),
         loss_history=np.array(hist_loss),

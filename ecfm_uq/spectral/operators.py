@@ -17,6 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._validation import as_finite_array, check_positive
+from ..memory import check_allocation
 from .basis import SinusoidBasis, TensorBasis2D
 from .quadrature import composite_gauss, default_points
 
@@ -212,6 +213,12 @@ def gaussian_forces(basis, centers, omega):
     _check_centers(c)
     om = check_positive("omega", omega)
     n = default_points(basis, extra=2) + int(4 * np.sqrt(om))
+    C, panels = c.size, c.size + 1
+    check_allocation(
+        8.0 * max(float(n) ** 2, float(n) * panels * (basis.size + C + 2)),
+        f"gaussian_forces quadrature with {n} points per panel (omega={om:g})",
+        "pass a smaller `omega` (a wider force; width ~ 1/sqrt(omega))",
+    )
     x, w = composite_gauss(tuple(c), n)
     g = np.sqrt(om / np.pi) * np.exp(-om * (x[:, None] - c[None, :]) ** 2)
     return basis.evaluate(x).T @ (w[:, None] * g)

@@ -136,8 +136,7 @@ class GalerkinSystem:
 
     def check_eps(self, eps):
         """Validate ``eps`` as a finite (n_eps,) vector."""
-        if not isinstance(eps, str | bytes):  # a string is refused by name, not as an array
-            eps = np.atleast_1d(eps)
+        eps = np.atleast_1d(as_finite_array("eps", eps))  # strings, ragged lists refused
         return as_finite_array("eps", eps, shape=(self.n_eps,))
 
     def check_lam(self, lam):
@@ -146,8 +145,7 @@ class GalerkinSystem:
             return np.zeros(self.n_forces)
         if self.Gamma is None:
             raise ValueError("`lam` given but the system has no constraint forces (Gamma=None)")
-        if not isinstance(lam, str | bytes):
-            lam = np.atleast_1d(lam)
+        lam = np.atleast_1d(as_finite_array("lam", lam))
         return as_finite_array("lam", lam, shape=(self.n_forces,))
 
     # -- residual and derivatives ------------------------------------------------------

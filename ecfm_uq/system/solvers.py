@@ -19,13 +19,13 @@ sensitivity right-hand sides.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
 from .._validation import as_finite_array, as_operator, check_choice, check_int, check_positive
 from ..errors import ConvergenceError, KrylovError, ModelEvaluationError
-from .linear import DenseFactor, LinearSolver, dense_lu, solver_options
+from .linear import DenseFactor, LinearSolver, SolverOptions, dense_lu, solver_options
 from .operator import AugmentedOperator
 
 
@@ -218,6 +218,21 @@ class SteadySolution:
         return S.reshape(sysm.N, sysm.P, sysm.n_forces)
 
 
+def _solver_options(solver):
+    """:func:`solver_options` with an unknown option named and the known ones listed."""
+    try:
+        return solver_options(solver)
+    except TypeError as e:
+        if "unexpected keyword" not in str(e):
+            raise
+        known = [f.name for f in fields(SolverOptions)]
+        unknown = sorted(set(solver) - set(known)) if isinstance(solver, dict) else []
+        raise TypeError(
+            f"`solver` has unknown option(s) {unknown}; known options are {known} "
+            "(Newton's `tol`/`maxiter` are arguments of the solve itself)"
+        ) from e
+
+
 def solve_steady(
     system,
     eps,
@@ -270,7 +285,7 @@ def solve_steady(
     maxiter = check_int("maxiter", maxiter, minimum=1)
     if structure is not None:
         solver = check_choice("structure", structure, ("auto", "dense"))
-    opts = solver_options(solver)
+    opts = _solver_options(solver)
     M_obs, v = _check_constraint(system, constraint)
     N, P = system.shape
     n = N * P
@@ -490,7 +505,7 @@ def march(
     C = system.n_forces if constrained else 0
     if system.M is None:
         system.mass_matrix()  # raises the "no mass matrix" error
-    linear = LinearSolver(system, solver_options(solver), constrained=constrained, steady=False)
+    linear = LinearSolver(system, _solver_options(solver), constrained=constrained, steady=False)
     if linear.name == "dense":
         Mdt = system.mass_matrix() / dt
 
