@@ -561,3 +561,11 @@ _CALLS = [
 @given(which=st.integers(0, len(_CALLS) - 1), a=_junk, b=_junk)
 def test_malformed_solver_arguments_give_only_clear_errors(which, a, b):
     _call(_CALLS[which], a, b)
+
+
+def test_every_mistake_is_documented():
+    from pathlib import Path
+
+    doc = (Path(__file__).parents[1] / "docs" / "mistakes.md").read_text()
+    missing = [m[0] for m in MISTAKES if f"| {m[0]} |" not in doc]
+    assert not missing, f"add to docs/mistakes.md: {missing}"

@@ -117,7 +117,20 @@ def fit_steady(
     -------
     InverseResult
         ``extra`` holds ``Theta`` and ``lam`` at the optimum (``lam`` is the ECFM
-        constraint force, zero-length for the standard formulation).
+        constraint force, zero-length for the standard formulation) and ``verdict``, the
+        :func:`~ecfm_uq.inverse.verdict.consistency_verdict` of the fit (whether model
+        and data agree, where the forces peak, parameters at a bound or extreme); its
+        message is appended to ``message`` when the fit is not consistent. Inner solves
+        that fail (including a coefficient that overflows at a trial ``eps``) count as
+        ``z = inf`` and are reported in ``message``; no numpy/Python arithmetic error
+        escapes.
+
+    Raises
+    ------
+    ValueError, TypeError
+        For malformed data, ``eps0``, ``method``, ``gtol``, ``maxiter`` or ``bounds``.
+    ConvergenceError
+        When the model cannot be solved at ``eps0``.
     """
     if not isinstance(formulation, str) or formulation not in _OBJECTIVES:
         raise ValueError(f"unknown `formulation` {formulation!r}; choose 'standard' or 'ecfm'")
