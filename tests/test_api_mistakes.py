@@ -526,11 +526,18 @@ _CONSTRUCTORS = [
     lambda a, b: gaussian_forces(B1, a, b),
     lambda a, b: rbf_forces(TensorBasis2D(SineBasis(2)), a, b),
     lambda a, b: sensor_matrix(B1, a),
+    lambda a, b: SineBasis(a),
+    lambda a, b: TensorBasis2D(a, b),
+    lambda a, b: ChaosBasis(2, index_set=a, normalized=b),
+    lambda a, b: expectation_tensor(ChaosBasis(2), a, sparse=b),
+    lambda a, b: weighted_gram(ChaosBasis(2), a, n_points=b),
+    lambda a, b: Coefficient(a, b),
+    lambda a, b: LoadTerm(a, b),
     lambda a, b: sensor_matrix(TensorBasis2D(SineBasis(2)), a),
 ]
 
 
-@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=600, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(which=st.integers(0, len(_CONSTRUCTORS) - 1), a=_junk, b=_junk)
 def test_malformed_input_gives_only_clear_errors(which, a, b):
     _call(_CONSTRUCTORS[which], a, b)
@@ -539,6 +546,7 @@ def test_malformed_input_gives_only_clear_errors(which, a, b):
 _GAMMA_SYSTEM = GalerkinSystem(
     [LinearTerm(K, Coefficient.power10(0)), LoadTerm.constant(F)], 1, Gamma=np.eye(N)[:, :2]
 )
+_MASS_SYSTEM = GalerkinSystem([LinearTerm(K), LoadTerm.constant(F)], 1, M=np.eye(N))
 _CALLS = [
     lambda a, b: solve_steady(_GAMMA_SYSTEM, a),
     lambda a, b: solve_steady(_GAMMA_SYSTEM, [0.0], lam=a),
@@ -553,11 +561,14 @@ _CALLS = [
         _GAMMA_SYSTEM, np.eye(N)[:2], [1.0, 1.0], [0.0], method="L-BFGS-B", bounds=a
     ),
     lambda a, b: fit_steady(_GAMMA_SYSTEM, np.eye(N)[:2], [1.0, 1.0], [0.0], gtol=a, maxiter=b),
+    lambda a, b: march(_MASS_SYSTEM, [0.0], a, 0.1, 2),
+    lambda a, b: march(_MASS_SYSTEM, [0.0], np.zeros(N), a, b),
+    lambda a, b: consistency_verdict(_GAMMA_SYSTEM, np.eye(N)[:2], [1.0, 1.0], [0.0], a, b),
     lambda a, b: consistency_verdict(_GAMMA_SYSTEM, np.eye(N)[:2], a, [0.0], sigma=b),
 ]
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(which=st.integers(0, len(_CALLS) - 1), a=_junk, b=_junk)
 def test_malformed_solver_arguments_give_only_clear_errors(which, a, b):
     _call(_CALLS[which], a, b)

@@ -15,8 +15,6 @@ sensitivities:
 
 from __future__ import annotations
 
-import numbers
-
 import numpy as np
 import scipy.optimize as sopt
 
@@ -24,7 +22,7 @@ from .._validation import as_finite_array, as_operator, check_int, check_positiv
 from ..errors import ConvergenceError
 from ..system import solve_steady
 from .result import InverseResult
-from .verdict import consistency_verdict
+from .verdict import check_bounds, consistency_verdict
 
 
 def _data(system, M_obs, v):
@@ -225,26 +223,7 @@ def _check_fit_options(system, method, gtol, maxiter, bounds):
         raise ValueError(f"unknown `method` {method!r}; choose a gradient method of {_METHODS}")
     gtol = check_positive("gtol", gtol)
     maxiter = check_int("maxiter", maxiter, minimum=1)
-    if bounds is not None:
-        try:
-            pairs = [tuple(b) for b in bounds]
-            ok = len(pairs) == system.n_eps and all(len(b) == 2 for b in pairs)
-        except TypeError:
-            ok = False
-        if not ok:
-            raise ValueError(
-                f"`bounds` must be {system.n_eps} pairs (lo, hi), one per parameter "
-                f"(None for an open side), got {bounds!r:.60}"
-            )
-        for m, (lo, hi) in enumerate(pairs):
-            for side in (lo, hi):
-                if side is not None and (
-                    isinstance(side, bool) or not isinstance(side, numbers.Real) or np.isnan(side)
-                ):
-                    raise ValueError(f"`bounds[{m}]` must hold numbers or None, got {(lo, hi)}")
-            if lo is not None and hi is not None and lo > hi:
-                raise ValueError(f"`bounds[{m}]` has lo > hi: {(lo, hi)}; swap them")
-        bounds = pairs
+    bounds = check_bounds(bounds, system.n_eps)
     return method, gtol, maxiter, bounds
 
 

@@ -9,6 +9,8 @@ units of the data, and whether the parameters ran to a bound or to an extreme va
 
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
 
 from .._validation import as_finite_array, as_operator, check_positive
@@ -93,7 +95,8 @@ def consistency_verdict(
     eps = system.check_eps(eps)
     rtol = check_positive("rtol", rtol)
     extreme_decades = check_positive("extreme_decades", extreme_decades)
-    lam = None if lam is None else np.atleast_1d(np.asarray(lam, dtype=float))
+    lam = None if lam is None else as_finite_array("lam", lam).ravel()
+    bounds = check_bounds(bounds, system.n_eps)
     out = {"force_to_data": np.inf, "peak_sensor_index": None, "peak_force_index": None}
     if lam is not None and lam.size:
         out["peak_force_index"] = int(np.argmax(np.abs(lam)))
@@ -137,6 +140,36 @@ def consistency_verdict(
     verdict = "model and data are consistent" if out["consistent"] else "NOT consistent"
     out["message"] = f"{verdict}: " + "; ".join(parts)
     return out
+
+
+def check_bounds(bounds, n_eps):
+    """Validate optimizer ``bounds``: ``n_eps`` pairs ``(lo, hi)`` of numbers or None.
+
+    Returns
+    -------
+    list of tuple or None
+    """
+    if bounds is None:
+        return None
+    try:
+        pairs = [tuple(b) for b in bounds]
+        ok = len(pairs) == n_eps and all(len(b) == 2 for b in pairs)
+    except TypeError:
+        ok = False
+    if not ok:
+        raise ValueError(
+            f"`bounds` must be {n_eps} pairs (lo, hi), one per parameter "
+            f"(None for an open side), got {bounds!r:.60}"
+        )
+    for m, (lo, hi) in enumerate(pairs):
+        for side in (lo, hi):
+            if side is not None and (
+                isinstance(side, bool) or not isinstance(side, numbers.Real) or np.isnan(side)
+            ):
+                raise ValueError(f"`bounds[{m}]` must hold numbers or None, got {(lo, hi)}")
+        if lo is not None and hi is not None and lo > hi:
+            raise ValueError(f"`bounds[{m}]` has lo > hi: {(lo, hi)}; swap them")
+    return pairs
 
 
 def _at_bound(eps, bounds):
