@@ -494,6 +494,9 @@ _junk = st.one_of(
     st.lists(st.lists(st.floats(-2, 2), max_size=3), max_size=3),
     st.builds(lambda s: np.ones(s), st.lists(st.integers(0, 3), max_size=3)),
     st.builds(lambda n: sp.eye(n, format="csr"), st.integers(1, 3)),
+    st.complex_numbers(allow_nan=False, allow_infinity=False, max_magnitude=10),
+    st.dictionaries(st.text(max_size=2), st.integers(), max_size=2),
+    st.builds(lambda s: np.full(s, np.nan), st.lists(st.integers(1, 3), min_size=1, max_size=2)),
 )
 
 

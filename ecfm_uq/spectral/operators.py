@@ -161,6 +161,8 @@ def sensor_matrix(basis, points):
         p = as_finite_array("points", points, ndim=2)
         if p.shape[1] != 2:
             raise ValueError(f"`points` must have shape (C, 2), got {p.shape}")
+        if p.shape[0] == 0:
+            raise ValueError("`points` is empty; pass at least one sensor position")
         if np.any((p < 0) | (p > 1)):
             j = int(np.flatnonzero(np.any((p < 0) | (p > 1), axis=1))[0])
             raise ValueError(
