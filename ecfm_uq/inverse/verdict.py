@@ -110,7 +110,8 @@ def consistency_verdict(
             from scipy.stats import chi2
 
             sigma = check_positive("sigma", sigma)
-            out["chi2"] = float(e @ e) / sigma**2
+            r = e / sigma  # not (e @ e) / sigma**2: sigma**2 may overflow
+            out["chi2"] = float(r @ r)
             out["chi2_limit"] = float(chi2.ppf(0.99, df=v.size))
             explained = out["chi2"] <= out["chi2_limit"]
             parts.append(
