@@ -114,6 +114,12 @@ MISTAKES = [
     ("Gamma wrong rows", lambda: _ok_system(Gamma=np.ones((4, 2))), ValueError, "3 rows (N)"),
     ("M wrong shape", lambda: _ok_system(M=np.eye(2)), ValueError, "`M` must have shape"),
     ("basis not a ChaosBasis", lambda: _ok_system(basis="P3"), TypeError, "ChaosBasis"),
+    (
+        "residual of a flat state",
+        lambda: _ok_system().residual(np.zeros(N), [0.0]),
+        ValueError,
+        "`Theta` must have shape (N, P) = (3, 1), got (3,)",
+    ),
     # -- solving -----------------------------------------------------------------------
     ("eps wrong length", lambda: solve_steady(_ok_system(), [1.0, 2.0]), ValueError, "`eps`"),
     ("eps a string", lambda: solve_steady(_ok_system(), "0.5"), TypeError, "got str '0.5'"),

@@ -151,6 +151,11 @@ class GalerkinSystem:
     # -- residual and derivatives ------------------------------------------------------
     def residual(self, Theta, eps, lam=None, t=None):
         """:math:`R(\\Theta; \\epsilon, \\lambda)` of shape (N, P)."""
+        if np.shape(Theta) != self.shape:  # cheap: a shape, no copy
+            raise ValueError(
+                f"`Theta` must have shape (N, P) = {self.shape}, got {np.shape(Theta)}; "
+                "a deterministic state is (N, 1), use system.zeros() for a template"
+            )
         R = np.zeros(self.shape)
         for term in self.terms:
             R += term.apply(Theta, eps, t)
