@@ -13,12 +13,14 @@ def as_finite_array(name, value, *, ndim=None, shape=None, dtype=float):
 
     ``shape`` may contain ``None`` for free axes.
     """
+    if isinstance(value, str | bytes):
+        raise TypeError(f"`{name}` must be array-like of numbers, got {describe(value)}")
     try:
         arr = np.asarray(value, dtype=dtype)
     except (TypeError, ValueError) as e:
-        raise TypeError(
-            f"`{name}` must be array-like of numbers, got {type(value).__name__}"
-        ) from e
+        raise TypeError(f"`{name}` must be array-like of numbers, got {describe(value)}") from e
+    if arr.dtype == object:
+        raise TypeError(f"`{name}` must be array-like of numbers, got {describe(value)}")
     if ndim is not None and arr.ndim != ndim:
         raise ValueError(f"`{name}` must be {ndim}-D, got shape {arr.shape}")
     if shape is not None:
@@ -30,6 +32,14 @@ def as_finite_array(name, value, *, ndim=None, shape=None, dtype=float):
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"`{name}` contains NaN or inf; pass finite values only")
     return arr
+
+
+def describe(value):
+    """``"str 'abc'"``: a user value's type and short repr, for error messages."""
+    r = " ".join(repr(value).split())
+    if len(r) > 40:
+        r = r[:37] + "..."
+    return f"{type(value).__name__} {r}"
 
 
 def check_int(name, value, *, minimum=None):
@@ -54,8 +64,11 @@ def check_positive(name, value):
 
 def check_choice(name, value, choices):
     """Raise ValueError unless ``value`` is one of ``choices``."""
-    if value not in choices:
-        raise ValueError(f"unknown `{name}` {value!r}; choose one of {sorted(choices)}")
+    # only strings and numbers compare: an array's == is element-wise, a list never matches
+    known = isinstance(value, str | numbers.Number) and any(value == c for c in choices)
+    if not known:
+        shown = repr(value) if isinstance(value, str) else describe(value)
+        raise ValueError(f"unknown `{name}` {shown}; choose one of {sorted(choices, key=str)}")
     return value
 
 

@@ -19,3 +19,12 @@ class MemoryBudgetError(MemoryError):
     Raised *before* allocating; the message gives the size needed, the budget and the
     options that avoid the allocation.
     """
+
+
+class ModelEvaluationError(ConvergenceError):
+    """The model could not be evaluated at the given parameters (overflow, NaN, inf).
+
+    E.g. a coefficient :math:`10^{\\epsilon_m}` overflows at a huge :math:`\\epsilon_m`.
+    Solvers turn it into a reported failure (``success=False``); inverse fits treat it like
+    a failed inner solve. The message names the term and the parameters.
+    """

@@ -18,11 +18,12 @@ from __future__ import annotations
 import numpy as np
 import scipy.optimize as sopt
 
-from .._validation import as_finite_array, as_operator
+from .._validation import as_finite_array, as_operator, check_int, check_positive
 from ..errors import ConvergenceError
 from ..system import solve_steady
 from .gradients import choose_gradient
 from .result import InverseResult
+from .verdict import check_bounds, consistency_verdict
 
 
 def _data(system, M_obs, v):
@@ -128,14 +129,28 @@ def fit_steady(
     -------
     InverseResult
         ``extra`` holds ``Theta`` and ``lam`` at the optimum (``lam`` is the ECFM
-        constraint force, zero-length for the standard formulation).
+        constraint force, zero-length for the standard formulation) and ``verdict``, the
+        :func:`~ecfm_uq.inverse.verdict.consistency_verdict` of the fit (whether model
+        and data agree, where the forces peak, parameters at a bound or extreme); its
+        message is appended to ``message`` when the fit is not consistent. Inner solves
+        that fail (including a coefficient that overflows at a trial ``eps``) count as
+        ``z = inf`` and are reported in ``message``; no numpy/Python arithmetic error
+        escapes.
+
+    Raises
+    ------
+    ValueError, TypeError
+        For malformed data, ``eps0``, ``method``, ``gtol``, ``maxiter`` or ``bounds``.
+    ConvergenceError
+        When the model cannot be solved at ``eps0``.
     """
-    if formulation not in _OBJECTIVES:
+    if not isinstance(formulation, str) or formulation not in _OBJECTIVES:
         raise ValueError(f"unknown `formulation` {formulation!r}; choose 'standard' or 'ecfm'")
     if formulation == "ecfm" and system.Gamma is None:
         raise ValueError("formulation='ecfm' needs a system with constraint forces (Gamma)")
     M_obs, v = _data(system, M_obs, v)
     eps0 = system.check_eps(eps0)
+    method, gtol, maxiter, bounds = _check_fit_options(system, method, gtol, maxiter, bounds)
     objective = _OBJECTIVES[formulation]
     solve_kw = dict(solve_options or {})
     solve_kw["gradient"] = choose_gradient(gradient, system.n_eps)
@@ -177,10 +192,13 @@ def fit_steady(
     res = sopt.minimize(
         fun, eps0, jac=True, method=method, bounds=bounds, options=opts, callback=callback
     )
-    z, g, sol = objective(system, M_obs, v, res.x, **solve_kw)
+    try:
+        z, g, sol = objective(system, M_obs, v, res.x, **solve_kw)
+    except ConvergenceError as e:  # the optimizer stopped where the model fails
+        return _failed_fit(res, formulation, hist_eps, hist_loss, e)
     msg = str(res.message)
     success = bool(res.success)
-    if not success and res.status == 2 and not failures:
+    if not success and res.get("status") == 2 and not failures:
         # the line search could not decrease z at machine precision. That is convergence
         # when z is at round-off zero (both objectives are >= 0: a global minimum) or
         # when first-order optimality holds relative to z itself: a relative change of
@@ -194,14 +212,46 @@ def fit_steady(
             msg += f" (stopped at the round-off limit; relative optimality {rel_opt:.1e})"
     if failures:
         msg += f" ({len(failures)} inner solves failed; first: {failures[0]})"
+    lam = sol.lam if formulation == "ecfm" else np.zeros(0)
+    verdict = consistency_verdict(system, M_obs, v, res.x, lam, bounds, solve_options=solve_options)
+    if not verdict["consistent"]:
+        msg += f" [{verdict['message']}]"
     return InverseResult(
         eps=np.asarray(res.x),
         loss=z,
         success=success,
         message=msg,
-        nit=int(res.nit),
+        nit=int(res.get("nit", 0)),
         method=formulation,
         eps_history=np.array(hist_eps),
         loss_history=np.array(hist_loss),
-        extra={"Theta": sol.Theta, "lam": sol.lam if formulation == "ecfm" else np.zeros(0)},
+        extra={"Theta": sol.Theta, "lam": lam, "verdict": verdict},
+    )
+
+
+_METHODS = ("BFGS", "CG", "L-BFGS-B", "TNC", "SLSQP", "Newton-CG", "trust-constr")
+
+
+def _check_fit_options(system, method, gtol, maxiter, bounds):
+    """Validate the optimizer arguments of :func:`fit_steady` (before any solve)."""
+    if not isinstance(method, str) or method.upper() not in {m.upper() for m in _METHODS}:
+        raise ValueError(f"unknown `method` {method!r}; choose a gradient method of {_METHODS}")
+    gtol = check_positive("gtol", gtol)
+    maxiter = check_int("maxiter", maxiter, minimum=1)
+    bounds = check_bounds(bounds, system.n_eps)
+    return method, gtol, maxiter, bounds
+
+
+def _failed_fit(res, formulation, hist_eps, hist_loss, error):
+    """A reported failure: the model cannot be solved at the optimizer's last point."""
+    return InverseResult(
+        eps=np.asarray(res.x),
+        loss=np.inf,
+        success=False,
+        message=f"{res.message} (the model cannot be solved at the final eps: {error})",
+        nit=int(res.get("nit", 0)),
+        method=formulation,
+        eps_history=np.array(hist_eps),
+        loss_history=np.array(hist_loss),
+        extra={"verdict": {"consistent": False, "message": str(error)}},
     )

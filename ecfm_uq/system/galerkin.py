@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .._validation import as_finite_array, as_operator, check_int
+from .._validation import as_finite_array, as_operator, check_int, describe
 from ..memory import check_allocation
 from .operator import GalerkinOperator, _LinearPart, _QuadraticLinearization
 from .terms import LinearTerm, LoadTerm, QuadraticTerm, _symmetric
@@ -53,7 +53,8 @@ class GalerkinSystem:
         for term in self.terms:
             if not isinstance(term, LinearTerm | QuadraticTerm | LoadTerm):
                 raise TypeError(
-                    f"unsupported term {term!r}; use LinearTerm, QuadraticTerm, LoadTerm"
+                    f"`terms` holds an unsupported {describe(term)}; "
+                    "use LinearTerm, QuadraticTerm or LoadTerm (e.g. LoadTerm.constant(F))"
                 )
         self.n_eps = check_int("n_eps", n_eps, minimum=0)
         self.basis = basis
@@ -71,9 +72,23 @@ class GalerkinSystem:
         self.P = self.E1.size
         sizes = {t.K.shape[0] for t in self.terms if isinstance(t, LinearTerm)}
         sizes |= {t.form.size for t in self.terms if isinstance(t, QuadraticTerm)}
+        if not sizes:
+            raise ValueError(
+                "`terms` has no LinearTerm or QuadraticTerm, so the state size N is unknown; "
+                "add the model's operator (e.g. LinearTerm(K))"
+            )
         if len(sizes) != 1:
-            raise ValueError(f"terms disagree on the state size N: {sorted(sizes)}")
+            named = sorted(
+                f"{t.name!r}: {t.K.shape[0] if isinstance(t, LinearTerm) else t.form.size}"
+                for t in self.terms
+                if isinstance(t, LinearTerm | QuadraticTerm)
+            )
+            raise ValueError(
+                f"terms disagree on the state size N ({', '.join(named)}); "
+                "build every operator on the same discretization"
+            )
         self.N = sizes.pop()
+        self._check_parameters()
         for term in self.terms:
             if isinstance(term, LinearTerm):
                 term.bind(self.E2)
@@ -81,12 +96,28 @@ class GalerkinSystem:
                 term.bind(self.E3)
             else:
                 term.bind(self.E1)
+                term.check_sizes(self.N, self.n_eps)
         self.Gamma = None if Gamma is None else as_operator("Gamma", Gamma)
         if self.Gamma is not None and self.Gamma.shape[0] != self.N:
             raise ValueError(f"`Gamma` must have {self.N} rows (N), got {self.Gamma.shape}")
         self.M = None if M is None else as_operator("M", M, shape=(self.N, self.N))
         self._operator_cache = None
         self.name = name
+
+    def _check_parameters(self):
+        """Every coefficient must read parameter indices below ``n_eps``."""
+        for term in self.terms:
+            coef = getattr(term, "coef", None)
+            indices = getattr(coef, "indices", None)
+            if not indices:
+                continue
+            bad = [m for m in indices if m >= self.n_eps]
+            if bad:
+                raise ValueError(
+                    f"term {term.name!r}: coefficient {coef.label} uses parameter index "
+                    f"{bad[0]} but the system has n_eps={self.n_eps} parameters "
+                    f"(indices 0..{self.n_eps - 1}); raise `n_eps` or fix the index"
+                )
 
     # -- sizes -------------------------------------------------------------------------
     @property
@@ -105,7 +136,8 @@ class GalerkinSystem:
 
     def check_eps(self, eps):
         """Validate ``eps`` as a finite (n_eps,) vector."""
-        return as_finite_array("eps", np.atleast_1d(eps), shape=(self.n_eps,))
+        eps = np.atleast_1d(as_finite_array("eps", eps))  # strings, ragged lists refused
+        return as_finite_array("eps", eps, shape=(self.n_eps,))
 
     def check_lam(self, lam):
         """Validate ``lam`` (None means zero forces)."""
@@ -113,11 +145,17 @@ class GalerkinSystem:
             return np.zeros(self.n_forces)
         if self.Gamma is None:
             raise ValueError("`lam` given but the system has no constraint forces (Gamma=None)")
-        return as_finite_array("lam", np.atleast_1d(lam), shape=(self.n_forces,))
+        lam = np.atleast_1d(as_finite_array("lam", lam))
+        return as_finite_array("lam", lam, shape=(self.n_forces,))
 
     # -- residual and derivatives ------------------------------------------------------
     def residual(self, Theta, eps, lam=None, t=None):
         """:math:`R(\\Theta; \\epsilon, \\lambda)` of shape (N, P)."""
+        if np.shape(Theta) != self.shape:  # cheap: a shape, no copy
+            raise ValueError(
+                f"`Theta` must have shape (N, P) = {self.shape}, got {np.shape(Theta)}; "
+                "a deterministic state is (N, 1), use system.zeros() for a template"
+            )
         R = np.zeros(self.shape)
         for term in self.terms:
             R += term.apply(Theta, eps, t)

@@ -33,6 +33,7 @@ decoupled and Krylov solvers, and assembled whole for the direct ones.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -93,14 +94,26 @@ class SolverOptions:
         check_int("restart", self.restart, minimum=1)
 
 
+def _options(**kw):
+    """SolverOptions(**kw) with an unknown option named and the known ones listed."""
+    known = [f.name for f in dataclasses.fields(SolverOptions)]
+    unknown = sorted(set(kw) - set(known))
+    if unknown:
+        raise TypeError(
+            f"`solver` has unknown option(s) {unknown}; known options are {known} "
+            "(Newton's `tol`/`maxiter` are arguments of the solve itself)"
+        )
+    return SolverOptions(**kw)
+
+
 def solver_options(solver="auto", **kw):
     """Normalize ``solver=`` (a name, a :class:`SolverOptions` or a dict) to SolverOptions."""
     if isinstance(solver, SolverOptions):
-        return solver if not kw else SolverOptions(**{**solver.__dict__, **kw})
+        return solver if not kw else _options(**{**solver.__dict__, **kw})
     if isinstance(solver, dict):
-        return SolverOptions(**{**solver, **kw})
+        return _options(**{**solver, **kw})
     if isinstance(solver, str):
-        return SolverOptions(solver=solver, **kw)
+        return _options(solver=solver, **kw)
     raise TypeError(
         f"`solver` must be a name from {SOLVERS}, a SolverOptions or a dict, "
         f"got {type(solver).__name__}"

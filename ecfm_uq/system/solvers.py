@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._validation import as_finite_array, as_operator, check_choice, check_int, check_positive
-from ..errors import ConvergenceError, KrylovError
+from ..errors import ConvergenceError, KrylovError, ModelEvaluationError
 from .linear import DenseFactor, LinearSolver, dense_lu, solver_options
 from .operator import AugmentedOperator
 from .terms import LinearTerm, LoadTerm, QuadraticTerm
@@ -83,7 +83,10 @@ def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None):
         return NewtonInfo(success, k, rnorm, message, label, its)
 
     for k in range(maxiter + 1):
-        r, J = fun(z)
+        try:
+            r, J = fun(z)
+        except ModelEvaluationError as e:
+            return z, None, info(False, k, f"model evaluation failed: {e}")
         rnorm = float(np.linalg.norm(r))
         if not np.isfinite(rnorm):
             return z, None, info(False, k, "residual became non-finite")

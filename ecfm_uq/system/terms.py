@@ -24,6 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._validation import as_finite_array, as_operator, check_int, is_sparse
+from .._validation import describe as _describe
 
 
 class Coefficient:
@@ -35,34 +36,82 @@ class Coefficient:
         ``value(eps) -> float``.
     grad : callable
         ``grad(eps) -> (n_eps,)``.
+    indices : sequence of int, optional
+        The parameter indices :math:`m` the coefficient reads; the system checks them
+        against its ``n_eps`` at construction. ``None`` means unknown (a user callable).
+    label : str, optional
+        Shown in error messages, e.g. ``"10**(-eps[0])"``.
+
+    Notes
+    -----
+    Evaluation is guarded: an overflow, NaN or inf in ``value`` or ``grad`` raises
+    :class:`~ecfm_uq.errors.ModelEvaluationError` naming the coefficient and ``eps``,
+    which the solvers report as a failed solve instead of a raw numpy/Python error.
     """
 
-    def __init__(self, value, grad):
-        self.value = value
-        self.grad = grad
+    def __init__(self, value, grad, indices=None, label="coefficient"):
+        if not callable(value):
+            raise TypeError(f"`value` must be callable value(eps), got {_describe(value)}")
+        if not callable(grad):
+            raise TypeError(f"`grad` must be callable grad(eps), got {_describe(grad)}")
+        self._value = value
+        self._grad = grad
+        self.indices = None if indices is None else tuple(int(m) for m in indices)
+        self.label = label
+
+    def value(self, eps):
+        """:math:`c(\\epsilon)` as a finite float (ModelEvaluationError otherwise)."""
+        try:
+            with np.errstate(over="raise", invalid="raise"):
+                c = self._value(eps)
+        except (OverflowError, FloatingPointError, ZeroDivisionError) as e:
+            raise _evaluation_error(self.label, eps, e) from e
+        try:
+            finite = np.all(np.isfinite(c))
+        except TypeError:
+            finite = True  # not numeric: let the caller's arithmetic say so
+        if not finite:
+            raise _evaluation_error(self.label, eps, f"value {c}")
+        return c
+
+    def grad(self, eps):
+        """:math:`\\nabla_\\epsilon c`, shape ``(n_eps,)``, finite (ModelEvaluationError otherwise)."""
+        try:
+            with np.errstate(over="raise", invalid="raise"):
+                g = self._grad(eps)
+        except (OverflowError, FloatingPointError, ZeroDivisionError) as e:
+            raise _evaluation_error(self.label, eps, e) from e
+        if not np.all(np.isfinite(g)):
+            raise _evaluation_error(self.label, eps, "non-finite gradient")
+        return g
 
     @classmethod
     def constant(cls, c):
         """:math:`c(\\epsilon) = c`."""
-        c = float(c)
-        return cls(lambda eps: c, lambda eps: np.zeros(len(eps)))
+        c = _real("c", c)
+        return cls(lambda eps: c, lambda eps: np.zeros(len(eps)), indices=(), label=f"{c:g}")
 
     @classmethod
     def parameter(cls, index, scale=1.0):
         """:math:`c(\\epsilon) = s\\,\\epsilon_m` (e.g. the source scale :math:`\\epsilon_2`)."""
         m = check_int("index", index, minimum=0)
+        scale = _real("scale", scale)
 
         def grad(eps):
             g = np.zeros(len(eps))
             g[m] = scale
             return g
 
-        return cls(lambda eps: scale * float(eps[m]), grad)
+        return cls(
+            lambda eps: scale * float(eps[m]), grad, indices=(m,), label=f"{scale:g}*eps[{m}]"
+        )
 
     @classmethod
     def power10(cls, index, sign=-1.0, scale=1.0):
         """:math:`c(\\epsilon) = s\\,10^{\\pm\\epsilon_m}` (the viscosity :math:`10^{-\\epsilon_1}`)."""
         m = check_int("index", index, minimum=0)
+        sign = _real("sign", sign)
+        scale = _real("scale", scale)
 
         def value(eps):
             return scale * 10.0 ** (sign * float(eps[m]))
@@ -72,7 +121,29 @@ class Coefficient:
             g[m] = np.log(10.0) * sign * value(eps)
             return g
 
-        return cls(value, grad)
+        return cls(value, grad, indices=(m,), label=f"{scale:g}*10**({sign:g}*eps[{m}])")
+
+
+def _real(name, value):
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"`{name}` must be a real number, got {_describe(value)}")
+    value = float(value)
+    if not np.isfinite(value):
+        raise ValueError(f"`{name}` must be finite, got {value}")
+    return value
+
+
+def _evaluation_error(label, eps, cause):
+    from ..errors import ModelEvaluationError
+
+    if isinstance(cause, OverflowError):
+        cause = "overflow"
+    elif isinstance(cause, FloatingPointError | ZeroDivisionError):
+        cause = f"floating-point error: {cause}"
+    return ModelEvaluationError(
+        f"coefficient {label} cannot be evaluated at eps={np.asarray(eps).tolist()} "
+        f"({cause}); keep the parameters in a physical range (e.g. `bounds`)"
+    )
 
 
 def as_coefficient(c):
@@ -81,7 +152,10 @@ def as_coefficient(c):
         return c
     if isinstance(c, numbers.Real) and not isinstance(c, bool):
         return Coefficient.constant(c)
-    raise TypeError(f"`coef` must be a number or a Coefficient, got {type(c).__name__}")
+    raise TypeError(
+        f"`coef` must be a number or a Coefficient, got {_describe(c)}; "
+        "wrap functions of eps as Coefficient(value, grad)"
+    )
 
 
 def right_multiply(X, G, G_sparse=None):
@@ -232,7 +306,16 @@ class QuadraticTerm:
     """
 
     def __init__(self, form, coef=1.0, name="quadratic"):
-        self.form = form if hasattr(form, "matrix") else DenseQuadraticForm(form)
+        if hasattr(form, "matrix"):
+            missing = [a for a in ("apply", "matrix", "size") if not hasattr(form, a)]
+            if missing:
+                raise TypeError(
+                    f"`form` {type(form).__name__} lacks {missing}; pass an (N, N, N) array or "
+                    "an object with apply(X, Y), matrix(x) and size (see DenseQuadraticForm)"
+                )
+            self.form = form
+        else:
+            self.form = DenseQuadraticForm(form)
         self.coef = as_coefficient(coef)
         self.name = name
 
@@ -327,44 +410,91 @@ class LoadTerm:
 
     def __init__(self, F, dF=None, name="load"):
         if not callable(F):
-            raise TypeError("`F` must be callable F(eps, t); use LoadTerm.constant for arrays")
+            raise TypeError(
+                f"`F` must be callable F(eps, t), got {_describe(F)}; "
+                "use LoadTerm.constant(F) for a fixed array"
+            )
+        if dF is not None and not callable(dF):
+            raise TypeError(f"`dF` must be callable dF(eps, t) or None, got {_describe(dF)}")
         self.F = F
         self.dF = dF
         self.name = name
+        self.size = None  # N when known from an array (checked by the system)
+        self.coef = None  # Coefficient of a scaled load (its indices are checked)
+        self.n_eps = None  # columns of B for a linear load
 
     @classmethod
     def constant(cls, F, name="load"):
         """Fixed load vector (a ``scipy.sparse`` column or row is accepted too)."""
         F = _as_load_vector(F)
-        return cls(lambda eps, t: F, None, name=name)
+        term = cls(lambda eps, t: F, None, name=name)
+        term.size = F.shape[0]
+        return term
 
     @classmethod
     def scaled(cls, F, coef, name="load"):
         """:math:`c(\\epsilon) F(t)`; ``F`` an ``(N,)`` array or a callable ``F(t)``."""
         coef = as_coefficient(coef)
+        size = None
         if callable(F):
             Ft = F
         else:
             F = _as_load_vector(F)
+            size = F.shape[0]
             Ft = lambda t: F
-        return cls(
+        term = cls(
             lambda eps, t: coef.value(eps) * Ft(t),
             lambda eps, t: np.outer(Ft(t), coef.grad(eps)),
             name=name,
         )
+        term.size, term.coef = size, coef
+        return term
 
     @classmethod
     def linear(cls, B, name="load"):
         """Load linear in the parameters, :math:`F = B\\,\\epsilon` (Fisher-KPP source)."""
         B = as_operator("B", B)
         dB = B.toarray() if is_sparse(B) else B  # (N, n_eps): small
-        return cls(lambda eps, t: B @ np.asarray(eps, dtype=float), lambda eps, t: dB, name=name)
+        term = cls(lambda eps, t: B @ np.asarray(eps, dtype=float), lambda eps, t: dB, name=name)
+        term.size, term.n_eps = B.shape
+        return term
 
     def bind(self, E1):
         self._E1 = E1
+        self._N = self.size
+
+    def check_sizes(self, N, n_eps):
+        """Check the sizes known from arrays against the system's ``N`` and ``n_eps``."""
+        if self.size is not None and self.size != N:
+            raise ValueError(
+                f"load term {self.name!r}: the load has {self.size} entries but the system's "
+                f"state has N={N}; pass an (N,) load matching the operators"
+            )
+        if self.n_eps is not None and self.n_eps != n_eps:
+            raise ValueError(
+                f"load term {self.name!r}: `B` has {self.n_eps} columns but the system has "
+                f"n_eps={n_eps} parameters; pass B of shape (N, n_eps)"
+            )
+        self._N = N
 
     def _chaos(self, v):
-        v = np.asarray(v, dtype=float)
+        try:
+            v = np.asarray(v, dtype=float)
+        except (TypeError, ValueError) as e:
+            raise TypeError(
+                f"load term {self.name!r}: F(eps, t) must return numbers, got {_describe(v)}"
+            ) from e
+        N, P = getattr(self, "_N", None), self._E1.size
+        if N is not None and v.shape not in {(N,), (N, P)}:
+            want = f"({N},) or ({N}, {P})" if P > 1 else f"({N},)"
+            raise ValueError(
+                f"load term {self.name!r}: F(eps, t) returned shape {v.shape}, expected "
+                f"{want} (N={N} state size, P={P} chaos terms); fix the load's size"
+            )
+        if not np.all(np.isfinite(v)):
+            from ..errors import ModelEvaluationError
+
+            raise ModelEvaluationError(f"load term {self.name!r}: F(eps, t) returned NaN or inf")
         return np.outer(v, self._E1) if v.ndim == 1 else v
 
     def apply(self, Theta, eps, t=None):
@@ -375,6 +505,13 @@ class LoadTerm:
         if self.dF is None:
             return np.zeros((N * P, len(eps)))
         d = np.asarray(self.dF(eps, t), dtype=float)
+        n_eps = len(eps)
+        if d.shape not in {(N, n_eps), (N, P, n_eps)}:
+            raise ValueError(
+                f"load term {self.name!r}: dF(eps, t) returned shape {d.shape}, expected "
+                f"({N}, {n_eps}) or ({N}, {P}, {n_eps}) (N, [P,] n_eps); fix the load's "
+                "derivative"
+            )
         if d.ndim == 2:
             d = d[:, None, :] * self._E1[None, :, None]
         return -d.reshape(N * P, len(eps))
