@@ -63,3 +63,36 @@ def test_compiled_failure_is_reported(model):
     assert len(bad.times) == 1  # no unconverged state is returned
     with pytest.raises(ConvergenceError, match="Newton failed at step 1"):
         march(model.system, eps, model.Theta0, model.dt, 3, tol=1e-14, maxiter=1, strict=True)
+
+
+def test_parameter_dependent_quadratic_coefficient(model):
+    """dR/deps of c(eps) q(theta) is q gradc^T: sensitivities and the adjoint of the
+    compiled march against central differences of the march itself."""
+    from ecfm_uq.system import Coefficient, GalerkinSystem, QuadraticTerm
+
+    base = model.system
+    conv = [t for t in base.terms if isinstance(t, QuadraticTerm)][0]
+    terms = [QuadraticTerm(conv.form, Coefficient.power10(3, sign=1.0), name="convection")]
+    terms += [t for t in base.terms if t is not conv]
+    system = GalerkinSystem(terms, n_eps=base.n_eps, basis=base.basis, M=base.M)
+    eps = np.array([1.6, 1.5, 1.7, -0.2])
+    args = (system, eps, model.Theta0, model.dt, model.n_steps)
+    tr = march(*args, tol=1e-12, sensitivities=True, keep_factors=True)
+    assert tr.solver == "dense (compiled)"
+    h = 1e-6
+    fd = np.stack(
+        [
+            (
+                march(system, eps + h * e, *args[2:], tol=1e-13).Theta
+                - march(system, eps - h * e, *args[2:], tol=1e-13).Theta
+            )
+            / (2 * h)
+            for e in np.eye(4)
+        ],
+        axis=-1,
+    )
+    scale = np.abs(fd).max()
+    np.testing.assert_allclose(tr.dTheta, fd, rtol=0, atol=1e-7 * scale)
+    g = np.random.default_rng(1).standard_normal(tr.Theta.shape)
+    forward = np.einsum("tipm,tip->m", tr.dTheta[1:], g[1:])
+    np.testing.assert_allclose(tr.adjoint_gradient(g), forward, rtol=1e-9)

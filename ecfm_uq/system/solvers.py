@@ -508,26 +508,38 @@ class Trajectory:
             raise ValueError("march with keep_factors=True to compute adjoint gradients")
         if not self.success:
             raise ConvergenceError(f"adjoint of a failed march: {self.message}")
-        system, eps, factors, mass_T = self._adjoint
         n_t, N, P = self.Theta.shape
-        n = N * P
-        g_theta = as_finite_array("g_theta", g_theta, shape=(n_t, N, P)).reshape(n_t, n)
+        g_theta = as_finite_array("g_theta", g_theta, shape=(n_t, N, P)).reshape(n_t, N * P)
         C = self.lam.shape[1]
         if C:
             g_lam = np.zeros((n_t, C)) if g_lam is None else g_lam
             g_lam = as_finite_array("g_lam", g_lam, shape=(n_t, C))
+            g_theta = np.concatenate([g_theta, g_lam], axis=1)
         elif g_lam is not None:
             raise ValueError("`g_lam` is only defined for a march under a data constraint")
+        return self._adjoint(g_theta)
+
+
+def _generic_adjoint(system, eps, Theta, times, factors, mass_T):
+    """The backward pass of :meth:`Trajectory.adjoint_gradient` with kept factors.
+
+    Returns ``adjoint(g)``, ``g`` of shape (n_t, NP + C) holding
+    :math:`\\partial z/\\partial(\\Theta_t, \\lambda_t)`.
+    """
+    n = Theta[0].size
+
+    def adjoint(g):
         grad = np.zeros(system.n_eps)
         carry = np.zeros(n)
-        for t in range(n_t - 1, 0, -1):
-            rhs = g_theta[t] + carry
-            if C:
-                rhs = np.concatenate([rhs, g_lam[t]])
+        for t in range(len(times) - 1, 0, -1):
+            rhs = g[t].copy()
+            rhs[:n] += carry
             mu = factors[t - 1].solve_transpose(rhs)[:n]
-            grad -= system.eps_vjp(self.Theta[t], eps, mu, self.times[t])
+            grad -= system.eps_vjp(Theta[t], eps, mu, times[t])
             carry = mass_T(mu)
         return grad
+
+    return adjoint
 
 
 _COMPILED_MAX_N = 128
@@ -539,7 +551,7 @@ def _compiled_march(
     """March with the compiled kernel when the system qualifies, else ``None``.
 
     Qualifies: ``P = 1``, the dense solver, at most one quadratic term, ``N`` at most
-    128 (its tensor is kept as a coordinate list of the nonzeros), terms of the library's
+    128 (its tensor is kept as compressed rows of the nonzeros), terms of the library's
     types. The load and its derivative are evaluated at every step time beforehand.
     """
     from . import _kernels
@@ -561,18 +573,19 @@ def _compiled_march(
     gK = gK * g00[:, None]
     Klin = np.einsum("q,qij->ij", cs, Ks) if lin else np.zeros((N, N))
     if quads:
-        qi, qj, qk, qv = quads[0].coordinates()
+        rows, ptr, idx, val = quads[0].linearization_table()
         cq, gq = quads[0].coef.value(eps), np.asarray(quads[0].coef.grad(eps), dtype=float)
     else:
-        qi = qj = qk = np.zeros(0, dtype=np.int64)
-        qv, cq, gq = np.zeros(0), 0.0, np.zeros(n_eps)
+        rows = idx = np.zeros(0, dtype=np.int64)
+        ptr = np.zeros(1, dtype=np.int64)
+        val, cq, gq = np.zeros(0), 0.0, np.zeros(n_eps)
     F = np.zeros((n_steps + 1, N))
     dF = np.zeros((n_steps + 1, N, n_eps))
     for term in loads:
-        for s, t in enumerate(times):
-            F[s] -= term.apply(np.zeros((N, 1)), eps, t)[:, 0]
-            if sens:
-                dF[s] -= term.eps_jacobian(np.zeros((N, 1)), eps, t)
+        Ft, dFt = term.on_grid(eps, times, derivative=sens or keep)
+        F += Ft
+        if dFt is not None:
+            dF += dFt
     Mdt = system.mass_matrix() / dt
     if M_obs is None:
         Cobs, Gam, Vd = np.zeros((0, N)), np.zeros((N, 0)), np.zeros((n_steps + 1, 0))
@@ -585,32 +598,44 @@ def _compiled_march(
         start = np.zeros((n_steps + 1, N + C))
     else:
         start = np.concatenate([guess.Theta[:, :, 0], guess.lam.reshape(n_steps + 1, C)], 1)
-    try:
-        with np.errstate(all="ignore"):
-            Th, lam, dTh, dlam, nits, failed, rnorm, Js = _kernels.march_p1(
-                Mdt, Klin, Ks, gK, qi, qj, qk, qv, float(cq), gq, F, dF, Cobs, Gam, Vd,
-                np.ascontiguousarray(Theta0[:, 0]), start, guess is not None,
-                tol, maxiter, bool(sens), bool(keep),
-            )  # fmt: skip
-        message = None
-    except np.linalg.LinAlgError:  # a singular step Jacobian inside the kernel
-        failed, rnorm, message = -2, np.inf, "Jacobian is singular"
+    with np.errstate(all="ignore"):
+        Th, lam, dTh, dlam, nits, failed, rnorm, LUs, pivs = _kernels.march_p1(
+            Mdt, Klin, Ks, gK, rows, ptr, idx, val, float(cq), gq, F, dF, Cobs, Gam, Vd,
+            np.ascontiguousarray(Theta0[:, 0]), start, guess is not None,
+            tol, maxiter, bool(sens), bool(keep),
+        )  # fmt: skip
     label = "dense (compiled)"
     if failed != -1:
-        k = (failed if failed >= 0 else 0) + 1
-        msg = (
-            f"{system.name}: Newton failed at step {k} (t={times[k]:.6g}) with "
-            f"||R||={rnorm:.3e}: {message or f'no convergence in {maxiter} iterations'}"
-        )
-        if failed == -2:
-            return Trajectory(
-                times[:1], Theta0[None], np.zeros((1, C)), None, None, False, msg, 1,
-                np.zeros(0, dtype=int), label,
-            )  # fmt: skip
+        k = failed + 1
+        where = f"{system.name}: Newton failed at step {k} (t={times[k]:.6g})"
+        if rnorm < 0:
+            msg = f"{where}: the step Jacobian is singular"
+        else:
+            msg = f"{where} with ||R||={rnorm:.3e}: no convergence in {maxiter} iterations"
         return Trajectory(
             times[:k], Th[:k, :, None], lam[:k], None, None, False, msg, k, nits[:k], label
         )
-    factors = [DenseFactor(dense_lu(J)) for J in Js] if keep else None
+    adjoint = None
+    if keep:
+
+        def adjoint(g):  # g: (n_t, N + C) = dz/d(Theta_t, lam_t)
+            with np.errstate(all="ignore"):
+                return _kernels.adjoint_p1(
+                    LUs,
+                    pivs,
+                    Th,
+                    Mdt,
+                    Ks,
+                    gK,
+                    rows,
+                    ptr,
+                    idx,
+                    val,
+                    gq,
+                    dF,
+                    np.ascontiguousarray(g),
+                )
+
     return Trajectory(
         times,
         Th[:, :, None],
@@ -623,7 +648,7 @@ def _compiled_march(
         nits,
         label,
         [],
-        (system, eps, factors, lambda x: Mdt.T @ x) if keep else None,
+        adjoint,
     )
 
 
@@ -825,5 +850,5 @@ def march(
         nits,
         linear.record.solver,
         list(linear.record.iterations),
-        (system, eps, factors, mass_T) if keep_factors else None,
+        _generic_adjoint(system, eps, Th, times, factors, mass_T) if keep_factors else None,
     )

@@ -369,6 +369,31 @@ class QuadraticTerm:
             self._coo = (i.astype(np.int64), j.astype(np.int64), k.astype(np.int64), A[keep])
         return self._coo
 
+    def linearization_table(self):
+        """The folded tensor :math:`B_{(ij),k} = A_{ijk} + A_{ikj}` in compressed rows (cached).
+
+        ``S(\\theta) = (B\\theta)`` reshaped to (N, N) is the form's linearization and
+        :math:`q(\\theta) = \\tfrac12 S(\\theta)\\theta` its value (Euler's identity for a
+        form homogeneous of degree 2). Returns ``(rows, indptr, indices, data)`` with
+        ``rows`` the flat indices ``i N + j`` of the nonzero rows only.
+        """
+        if getattr(self, "_folded", None) is None:
+            i, j, k, v = self.coordinates()
+            n = self.form.size
+            B = sp.coo_matrix(
+                (
+                    np.concatenate([v, v]),
+                    (np.concatenate([i * n + j, i * n + k]), np.concatenate([k, j])),
+                ),
+                shape=(n * n, n),
+            ).tocsr()
+            B.sum_duplicates()
+            counts = np.diff(B.indptr)
+            rows = np.flatnonzero(counts).astype(np.int64)
+            indptr = np.concatenate([[0], np.cumsum(counts[rows])]).astype(np.int64)
+            self._folded = (rows, indptr, B.indices.astype(np.int64), B.data.astype(float))
+        return self._folded
+
     def matrices(self, Theta):
         """:math:`S_k = S(\\Theta_{:,k})`, the form's linearization per chaos column, (P, N, N)."""
         return [self.form.matrix(Theta[:, k]) for k in range(Theta.shape[1])]
@@ -422,6 +447,8 @@ class LoadTerm:
         self.size = None  # N when known from an array (checked by the system)
         self.coef = None  # Coefficient of a scaled load (its indices are checked)
         self.n_eps = None  # columns of B for a linear load
+        self._Ft = None  # F(t) of a scaled load: its values on a time grid are cached
+        self._grid = (None, None)  # (time grid bytes, (n_t, N) table of F(t))
 
     @classmethod
     def constant(cls, F, name="load"):
@@ -447,7 +474,7 @@ class LoadTerm:
             lambda eps, t: np.outer(Ft(t), coef.grad(eps)),
             name=name,
         )
-        term.size, term.coef = size, coef
+        term.size, term.coef, term._Ft = size, coef, Ft
         return term
 
     @classmethod
@@ -515,6 +542,33 @@ class LoadTerm:
         if d.ndim == 2:
             d = d[:, None, :] * self._E1[None, :, None]
         return -d.reshape(N * P, len(eps))
+
+    def on_grid(self, eps, times, derivative=False):
+        """The deterministic load :math:`F(\\epsilon, t)` at every time of a grid (``P = 1``).
+
+        Returns ``F`` of shape (n_t, N) and, with ``derivative``, ``dF`` of shape
+        (n_t, N, n_eps) (else ``None``). A scaled load :math:`c(\\epsilon) F(t)` evaluates
+        ``F(t)`` once per time grid and keeps the table (``F(t)`` must depend on ``t``
+        only), so a march at new parameters costs no Python call per step.
+        """
+        N = self._N
+        zero = np.zeros((N, 1))
+        if self._Ft is None:
+            F = np.array([-self.apply(zero, eps, t)[:, 0] for t in times]).reshape(-1, N)
+            if not derivative:
+                return F, None
+            dF = np.array([-self.eps_jacobian(zero, eps, t) for t in times])
+            return F, dF.reshape(len(times), N, len(eps))
+        key = np.asarray(times, dtype=float).tobytes()
+        if self._grid[0] != key:
+            table = np.array([self._chaos(self._Ft(t))[:, 0] for t in times]).reshape(-1, N)
+            self._grid = (key, table)
+        table = self._grid[1]
+        F = self.coef.value(eps) * table
+        if not derivative:
+            return F, None
+        grad = np.asarray(self.coef.grad(eps), dtype=float)
+        return F, table[:, :, None] * grad[None, None, :]
 
     def eps_vjp(self, Theta, eps, mu, t=None):
         """:math:`(\\partial R/\\partial\\epsilon)^T\\mu` without the (NP, n_eps) matrix."""
