@@ -261,15 +261,20 @@ def adjoint_p1(LUs, pivs, Th, Mdt, Ks, gK, rows, ptr, idx, val, gq, dF, g):
     q = np.empty(N)
     S = np.empty((N, N))
     x = np.empty(n)
+    quad_eps = np.any(gq != 0.0)
+    lin_eps = np.array([np.any(gK[j] != 0.0) for j in range(Ks.shape[0])])
     for t in range(n_t - 1, 0, -1):
         x[:] = g[t]
         x[:N] += carry
         _lu_solve_transpose(LUs[t - 1], pivs[t - 1], x)
         mu = x[:N]
         th = Th[t]
-        _quadratic(th, rows, ptr, idx, val, q, S)
-        grad -= (mu @ q) * gq - dF[t].T @ mu
+        grad += dF[t].T @ mu
+        if quad_eps:  # skipped when the quadratic coefficient does not depend on eps
+            _quadratic(th, rows, ptr, idx, val, q, S)
+            grad -= (mu @ q) * gq
         for j in range(Ks.shape[0]):
-            grad -= (mu @ (Ks[j] @ th)) * gK[j]
+            if lin_eps[j]:
+                grad -= (mu @ (Ks[j] @ th)) * gK[j]
         carry = Mdt.T @ mu
     return grad
