@@ -16,11 +16,18 @@ SparseTensor3        coordinate-form third-order tensor with contractions
 
 from .basis import ChaosBasis
 from .quadrature import gauss_legendre
-from .tensors import SparseTensor3, expectation_tensor, triple_product_1d, weighted_gram
+from .tensors import (
+    SparseTensor3,
+    common_eigenbasis,
+    expectation_tensor,
+    triple_product_1d,
+    weighted_gram,
+)
 
 __all__ = [
     "ChaosBasis",
     "SparseTensor3",
+    "common_eigenbasis",
     "expectation_tensor",
     "gauss_legendre",
     "triple_product_1d",

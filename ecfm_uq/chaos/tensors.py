@@ -23,7 +23,7 @@ from ..memory import check_allocation
 from ._kernels import triple_1d, triple_dense, triple_sparse
 from .basis import ChaosBasis
 
-__all__ = ["SparseTensor3", "expectation_tensor", "weighted_gram"]
+__all__ = ["SparseTensor3", "common_eigenbasis", "expectation_tensor", "weighted_gram"]
 
 
 def _check_basis(basis):
@@ -326,3 +326,40 @@ def weighted_gram(basis, g, n_points=None):
     Psi = basis.evaluate(nodes)
     G = Psi.T @ (Psi * (weights * vals)[:, None])
     return 0.5 * (G + G.T)
+
+
+def common_eigenbasis(couplings, tol=1e-11):
+    """An orthonormal basis diagonalizing every coupling matrix at once, if there is one.
+
+    Couplings :math:`G_q = \\mathbb E[g_q\\Psi\\Psi^T]` are symmetric; when they commute
+    (e.g. every coupling is affine in one germ: :math:`\\mathbb E[\\omega\\Psi\\Psi^T]` is
+    the Jacobi matrix, whose eigenvectors sit at the Gauss nodes), :math:`G_q = Q D_q Q^T`
+    with one orthogonal :math:`Q`. Block systems :math:`\\sum_q K_q\\otimes G_q` then split
+    into ``P`` independent ``N x N`` systems.
+
+    Parameters
+    ----------
+    couplings : sequence of (P, P) ndarray
+    tol : float
+        Off-diagonal entries of :math:`Q^T G_q Q` above ``tol * max|G_q|`` mean no common
+        basis.
+
+    Returns
+    -------
+    (Q (P, P), D (n, P)) or None
+        ``D[q]`` the eigenvalues of ``couplings[q]`` in the columns of ``Q``.
+    """
+    Gs = [np.asarray(G, dtype=float) for G in couplings]
+    if not Gs:
+        return None
+    # a generic combination has simple eigenvalues whenever a common eigenbasis exists
+    combo = sum((1.0 + 0.618034 * q) * G / max(np.abs(G).max(), 1e-300) for q, G in enumerate(Gs))
+    _, Q = np.linalg.eigh(0.5 * (combo + combo.T))
+    D = []
+    for G in Gs:
+        H = Q.T @ G @ Q
+        d = np.diag(H).copy()
+        if np.abs(H - np.diag(d)).max() > tol * max(np.abs(G).max(), 1e-300):
+            return None
+        D.append(d)
+    return Q, np.array(D)

@@ -303,22 +303,11 @@ class GalerkinSystem:
         return self._decoupling
 
     def _find_decoupling(self):
+        from ..chaos.tensors import common_eigenbasis
+
         if self.P == 1 or not self.is_linear:
             return None
-        Gs = [t.G for t in self.terms if isinstance(t, LinearTerm)]
-        # a generic combination has simple eigenvalues whenever a common eigenbasis exists
-        combo = sum(
-            (1.0 + 0.618034 * q) * G / max(np.abs(G).max(), 1e-300) for q, G in enumerate(Gs)
-        )
-        _, Q = np.linalg.eigh(0.5 * (combo + combo.T))
-        D = []
-        for G in Gs:
-            H = Q.T @ G @ Q
-            d = np.diag(H).copy()
-            if np.abs(H - np.diag(d)).max() > 1e-11 * max(np.abs(G).max(), 1e-300):
-                return None
-            D.append(d)
-        return Q, np.array(D)
+        return common_eigenbasis([t.G for t in self.terms if isinstance(t, LinearTerm)])
 
     # -- statistics --------------------------------------------------------------------
     def mean(self, Theta):

@@ -51,13 +51,15 @@ from .operator import AugmentedOperator
 __all__ = ["SOLVERS", "PRECONDITIONERS", "LinearSolver", "SolverOptions", "solver_options"]
 
 SOLVERS = ("auto", "dense", "decoupled", "sparse-direct", "cg", "gmres")
-PRECONDITIONERS = ("auto", "mean", "mean-amg", "none")
+PRECONDITIONERS = ("auto", "mean", "mean-amg", "decoupled", "none")
 
 # "auto" assembles a dense Jacobian only below this size (LU copy included): above it a
 # structured solver is faster as well as smaller.
 _DENSE_AUTO_BYTES = 256 * 2**20
 # "auto" preconditioner: splu of the mean block up to this N, algebraic multigrid beyond.
 _SPLU_AUTO_SIZE = 400_000
+# "auto" preconditioner: the decoupled one (P factorizations) when available up to this N
+_DECOUPLED_AUTO_SIZE = 5_000
 
 
 @dataclass(frozen=True)
@@ -67,10 +69,13 @@ class SolverOptions:
     Parameters
     ----------
     solver : {"auto", "dense", "decoupled", "sparse-direct", "cg", "gmres"}
-    preconditioner : {"auto", "mean", "mean-amg", "none"}
+    preconditioner : {"auto", "mean", "mean-amg", "decoupled", "none"}
         For ``"cg"``/``"gmres"``: the mean-based preconditioner with the mean block
         factorized by ``splu`` (``"mean"``) or approximated by one AMG V-cycle
-        (``"mean-amg"``, needs ``pyamg``); ``"auto"`` picks by ``N``.
+        (``"mean-amg"``, needs ``pyamg``); or ``"decoupled"``, exact for the linear terms
+        when their couplings share an eigenbasis (``P`` factorized ``N x N`` blocks) and
+        mean-based for the quadratic ones. ``"auto"``: ``"decoupled"`` when available
+        and ``N <= 5000``, else ``"mean"`` (``"mean-amg"`` for very large ``N``).
     rtol : float
         Relative residual of Krylov solves outside Newton (sensitivities, adjoints).
         Newton steps choose their own, tighter as the residual approaches ``tol``.
@@ -284,6 +289,121 @@ class MeanPreconditioner:
     def apply_transpose(self, R):
         """The transposed preconditioner (for adjoint solves)."""
         return self._solve_t(R) / self.d[None, :]
+
+
+class DecoupledPreconditioner:
+    """Exact on the linear part in the couplings' common eigenbasis, mean-based on the rest.
+
+    With :math:`G_q = Q D_q Q^T` for every linear term and for :math:`\\mathbb E[\\Psi\\Psi^T]`
+    (the mass and the quadratic terms' mean blocks couple through it), the operator
+
+    .. math:: B = \\sum_q c_q K_q\\otimes G_q
+              + (M/\\Delta t + \\bar S)\\otimes\\mathbb E[\\Psi\\Psi^T]
+
+    is ``P`` independent blocks :math:`B_p = \\sum_q c_q d_{qp} K_q + e_p(M/\\Delta t +
+    \\bar S)` in that basis (:math:`\\bar S` the quadratic terms linearized at the mean
+    state). For a linear system :math:`B = J` (one Krylov iteration); a random
+    coefficient then costs the preconditioner nothing, and only the quadratic terms'
+    fluctuation is left to the Krylov method (Burgers with a random viscosity: 7 GMRES
+    iterations to 1e-10 at P = 3..7, against 17-19 with the mean block).
+
+    Parameters
+    ----------
+    op : GalerkinOperator
+
+    Raises
+    ------
+    ValueError
+        If the couplings have no common eigenbasis.
+    SingularSystemError
+        If a block cannot be factorized.
+    """
+
+    def __init__(self, op):
+        from ..chaos.tensors import common_eigenbasis
+
+        system = op.system
+        E2 = np.asarray(system.E2, dtype=float)
+        lin = [p for p in op.parts if not p.is_quadratic]
+        quad = [p for p in op.parts if p.is_quadratic]
+        found = common_eigenbasis([p.term.G for p in lin] + [E2])
+        if found is None:
+            raise ValueError(
+                "`preconditioner`='decoupled' needs couplings E[g_q Psi Psi^T] with a common "
+                "eigenbasis (e.g. every random coefficient affine in one germ); these do "
+                "not have one: pass preconditioner='mean'"
+            )
+        Q, D = found
+        self.Q = Q
+        shared = None  # (M / dt + S_bar), coupled through E[Psi Psi^T]
+        for part in quad:
+            block = part.mean_block(E2[0, 0])
+            shared = block if shared is None else shared + block
+        if op.dt is not None:
+            block = system.M / op.dt
+            shared = block if shared is None else shared + block
+        # a block whose coupling eigenvalues all vanish is singular whatever K is: the
+        # Galerkin operator itself is then singular (e.g. a zero-mean coefficient alone)
+        weight = np.zeros(Q.shape[0])
+        for part, d in zip(lin, D[:-1], strict=True):
+            weight += abs(part.coef) * np.abs(d) * abs(part.term.K).max()
+        if shared is not None:
+            weight += np.abs(D[-1]) * abs(shared).max()
+        self.factors = []
+        for k in range(Q.shape[0]):
+            if weight[k] <= 1e-12 * weight.max():
+                raise SingularSystemError(
+                    f"`preconditioner`='decoupled': chaos mode {k} of the decoupled operator "
+                    "vanishes (every coupling's eigenvalue is zero there), so the Galerkin "
+                    "operator is singular; check the random coefficients' means"
+                )
+            B = None
+            for part, d in zip(lin, D[:-1], strict=True):
+                block = (part.coef * d[k]) * part.term.K
+                B = block if B is None else B + block
+            if shared is not None:
+                B = D[-1][k] * shared if B is None else B + D[-1][k] * shared
+            if sp.issparse(B):
+                B = sp.csc_matrix(B)
+            factor = _lu_any(B)
+            if factor is None:
+                raise SingularSystemError(
+                    f"`preconditioner`='decoupled': block {k} of the decoupled operator is "
+                    "singular; pass preconditioner='mean' or 'none'"
+                )
+            self.factors.append(factor)
+        self.inverses = None
+        if all(isinstance(f, DenseFactor) for f in self.factors) and system.N <= 1000:
+            # small dense blocks: one batched product beats P triangular-solve calls
+            eye = np.eye(system.N)
+            self.inverses = np.stack([f.solve(eye) for f in self.factors])  # (P, N, N)
+
+    def apply(self, R):
+        """Apply to ``R`` of shape (N, P)."""
+        Rh = R @ self.Q
+        if self.inverses is not None:
+            X = np.einsum("kij,jk->ik", self.inverses, Rh)
+        else:
+            X = np.column_stack([f.solve(Rh[:, k]) for k, f in enumerate(self.factors)])
+        return X @ self.Q.T
+
+    def apply_transpose(self, R):
+        """The transposed preconditioner (for adjoint solves)."""
+        Rh = R @ self.Q
+        if self.inverses is not None:
+            X = np.einsum("kji,jk->ik", self.inverses, Rh)
+        else:
+            X = np.column_stack([f.solve_transpose(Rh[:, k]) for k, f in enumerate(self.factors)])
+        return X @ self.Q.T
+
+
+def _make_preconditioner(op, kind):
+    """The Krylov preconditioner of ``kind`` for ``op`` (``None`` for ``"none"``)."""
+    if kind is None:
+        return None
+    if kind == "decoupled":
+        return DecoupledPreconditioner(op)
+    return MeanPreconditioner(op, kind)
 
 
 def _pcg(op, b, precond, rtol, maxiter):
@@ -557,8 +677,21 @@ class LinearSolver:
         if kind == "none":
             return None
         if kind == "auto":
+            if self.system.N <= _DECOUPLED_AUTO_SIZE and self._couplings_decouple():
+                return "decoupled"
             return "mean" if self.system.N <= _SPLU_AUTO_SIZE else "mean-amg"
         return kind
+
+    def _couplings_decouple(self):
+        """Whether the linear terms' couplings and E[Psi Psi^T] share an eigenbasis."""
+        from ..chaos.tensors import common_eigenbasis
+        from .terms import LinearTerm
+
+        if not hasattr(self, "_decouples"):
+            system = self.system
+            Gs = [t.G for t in system.terms if isinstance(t, LinearTerm)]
+            self._decouples = system.P > 1 and common_eigenbasis([*Gs, system.E2]) is not None
+        return self._decouples
 
     @property
     def iterative(self):
@@ -604,8 +737,7 @@ class LinearSolver:
             except np.linalg.LinAlgError:
                 return None
         else:
-            kind = self._preconditioner_kind()
-            precond = None if kind is None else MeanPreconditioner(J, kind)
+            precond = _make_preconditioner(J, self._preconditioner_kind())
             inner = KrylovFactor(J, name, precond, self.options, self.record)
         if not augmented:
             return inner
