@@ -183,6 +183,7 @@ def march_p1(
     lu = np.empty((n, n))
     piv = np.empty(n, dtype=np.int32)
     base = Mdt + Klin
+    Kflat = Ks.reshape(Ks.shape[0] * N, N)
     for s in range(n_t - 1):
         t1 = s + 1
         if use_guess:
@@ -213,8 +214,9 @@ def march_p1(
                 converged = True
                 if sens:
                     D = -dF[t1] + np.outer(q, gq)
-                    for j in range(Ks.shape[0]):
-                        D += np.outer(Ks[j] @ th, gK[j])
+                    if Ks.shape[0] > 0:  # sum_j (K_j th) gK_j^T as one product
+                        KTh = (Kflat @ th).reshape(Ks.shape[0], N)
+                        D += KTh.T @ gK
                     rhs = Mdt @ dTh[s] - D
             x[:] = r
             _lu_solve(lu, piv, x)
@@ -262,7 +264,10 @@ def adjoint_p1(LUs, pivs, Th, Mdt, Ks, gK, rows, ptr, idx, val, gq, dF, g):
     S = np.empty((N, N))
     x = np.empty(n)
     quad_eps = np.any(gq != 0.0)
-    lin_eps = np.array([np.any(gK[j] != 0.0) for j in range(Ks.shape[0])])
+    # only the linear terms whose coefficients depend on eps: one stacked product each step
+    live = np.array([j for j in range(Ks.shape[0]) if np.any(gK[j] != 0.0)], dtype=np.int64)
+    Klive = np.ascontiguousarray(Ks[live].reshape(live.shape[0] * N, N))
+    glive = np.ascontiguousarray(gK[live])
     for t in range(n_t - 1, 0, -1):
         x[:] = g[t]
         x[:N] += carry
@@ -273,8 +278,8 @@ def adjoint_p1(LUs, pivs, Th, Mdt, Ks, gK, rows, ptr, idx, val, gq, dF, g):
         if quad_eps:  # skipped when the quadratic coefficient does not depend on eps
             _quadratic(th, rows, ptr, idx, val, q, S)
             grad -= (mu @ q) * gq
-        for j in range(Ks.shape[0]):
-            if lin_eps[j]:
-                grad -= (mu @ (Ks[j] @ th)) * gK[j]
+        if live.shape[0] > 0:
+            KTh = (Klive @ th).reshape(live.shape[0], N)
+            grad -= glive.T @ (KTh @ mu)
         carry = Mdt.T @ mu
     return grad
