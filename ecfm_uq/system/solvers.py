@@ -543,6 +543,24 @@ def _generic_adjoint(system, eps, Theta, times, factors, mass_T):
 
 
 _COMPILED_MAX_N = 128
+_COMPILED = {"disabled": False}
+
+
+def _compiled_kernels():
+    """The compiled march's module, or ``None`` where it cannot work.
+
+    The kernels reach LAPACK through numba's own binding (``numba.np.linalg``), which is
+    numba-internal: if a numba release moves it, every march takes the generic Python
+    path (same results, slower) instead of failing.
+    """
+    if _COMPILED["disabled"]:
+        return None
+    try:
+        from . import _kernels
+    except (ImportError, AttributeError):
+        _COMPILED["disabled"] = True
+        return None
+    return _kernels
 
 
 def _compiled_march(
@@ -554,11 +572,12 @@ def _compiled_march(
     128 (its tensor is kept as compressed rows of the nonzeros), terms of the library's
     types. The load and its derivative are evaluated at every step time beforehand.
     """
-    from . import _kernels
-
     N, P = system.shape
     quads = [t for t in system.terms if isinstance(t, QuadraticTerm)]
     if P != 1 or linear.name != "dense" or len(quads) > 1 or N > _COMPILED_MAX_N:
+        return None
+    _kernels = _compiled_kernels()
+    if _kernels is None:
         return None
     lin = [t for t in system.terms if isinstance(t, LinearTerm)]
     loads = [t for t in system.terms if isinstance(t, LoadTerm)]
@@ -598,12 +617,18 @@ def _compiled_march(
         start = np.zeros((n_steps + 1, N + C))
     else:
         start = np.concatenate([guess.Theta[:, :, 0], guess.lam.reshape(n_steps + 1, C)], 1)
-    with np.errstate(all="ignore"):
-        Th, lam, dTh, dlam, nits, failed, rnorm, LUs, pivs = _kernels.march_p1(
-            Mdt, Klin, Ks, gK, rows, ptr, idx, val, float(cq), gq, F, dF, Cobs, Gam, Vd,
-            np.ascontiguousarray(Theta0[:, 0]), start, guess is not None,
-            tol, maxiter, bool(sens), bool(keep),
-        )  # fmt: skip
+    from numba.core.errors import NumbaError
+
+    try:
+        with np.errstate(all="ignore"):
+            Th, lam, dTh, dlam, nits, failed, rnorm, LUs, pivs = _kernels.march_p1(
+                Mdt, Klin, Ks, gK, rows, ptr, idx, val, float(cq), gq, F, dF, Cobs, Gam, Vd,
+                np.ascontiguousarray(Theta0[:, 0]), start, guess is not None,
+                tol, maxiter, bool(sens), bool(keep),
+            )  # fmt: skip
+    except NumbaError:  # the kernel does not compile with this numba: use the generic march
+        _COMPILED["disabled"] = True
+        return None
     label = "dense (compiled)"
     if failed != -1:
         k = failed + 1
