@@ -85,6 +85,7 @@ def fit_steady(
     bounds=None,
     solve_options=None,
     options=None,
+    sigma=None,
 ):
     """Fit :math:`\\epsilon` of a steady system to data by the standard or ECFM formulation.
 
@@ -109,6 +110,10 @@ def fit_steady(
         Passed to :func:`solve_steady` (``tol``, ``maxiter``).
     options : dict, optional
         Extra ``scipy.optimize.minimize`` options (override the defaults above).
+    sigma : float, optional
+        Known sensor noise standard deviation. Without it the noise variance is
+        estimated from the standard residual at the estimate,
+        s^2 = ||r||^2 / (C - n_eps) (``noise_model="estimated"``).
 
     Returns
     -------
@@ -179,7 +184,9 @@ def fit_steady(
             msg += f" (stopped at the round-off limit; relative optimality {rel_opt:.1e})"
     if failures:
         msg += f" ({len(failures)} inner solves failed; first: {failures[0]})"
+    unc = _uncertainty(system, M_obs, v, np.asarray(res.x), objective, solve_kw, sigma)
     return InverseResult(
+        **unc,
         eps=np.asarray(res.x),
         loss=z,
         success=success,
@@ -190,3 +197,27 @@ def fit_steady(
         loss_history=np.array(hist_loss),
         extra={"Theta": sol.Theta, "lam": sol.lam if formulation == "ecfm" else np.zeros(0)},
     )
+
+
+def _uncertainty(system, M_obs, v, eps, objective, solve_kw, sigma):
+    """Delta-method covariance of the fitted eps (implicit differentiation of grad z = 0)."""
+    from .uncertainty import confidence_intervals, implicit_covariance, residual_variance
+
+    try:
+        if sigma is not None:
+            if not (np.isfinite(sigma) and sigma > 0):
+                raise ValueError(f"`sigma` must be a positive finite number, got {sigma}")
+            s2, model = float(sigma) ** 2, "known"
+        else:
+            sol = solve_steady(system, eps, strict=True, **solve_kw)
+            r = M_obs @ system.mean(sol.Theta) - v
+            s2, model = residual_variance(r, eps.size), "estimated"
+        cov, _ = implicit_covariance(
+            lambda e, w: objective(system, M_obs, w, e, **solve_kw)[1], eps, v, s2
+        )
+        se, ci = confidence_intervals(eps, cov)
+        return dict(eps_cov=cov, eps_stderr=se, eps_ci95=ci, noise_model=model)
+    except (ConvergenceError, ValueError) as e:
+        if sigma is not None and "sigma" in str(e):
+            raise
+        return dict(uncertainty_message=f"uncertainty not computed: {e}")

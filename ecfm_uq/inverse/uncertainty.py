@@ -137,3 +137,45 @@ def confidence_intervals(eps, eps_cov, level=0.95):
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     z = stats.norm.ppf(0.5 + level / 2)
     return se, np.column_stack([eps - z * se, eps + z * se])
+
+
+def implicit_covariance(grad, eps, v, Sigma_v, rel_step=1e-6):
+    """Delta-method covariance of an estimate defined by ``grad(eps, v) = 0``.
+
+    Second derivatives are central finite differences of the analytic gradient
+    ``grad`` (exact ones are not available for the ECFM conditions); the step is
+    ``rel_step * max(|x|, 1)`` per coordinate.
+
+    Parameters
+    ----------
+    grad : callable ``(eps (n_eps,), v (C,)) -> (n_eps,)``
+    eps : (n_eps,) ndarray
+        The estimate.
+    v : (C,) ndarray
+        The data it was fitted to.
+    Sigma_v : float or (C,) or (C, C)
+        Data covariance.
+
+    Returns
+    -------
+    eps_cov : (n_eps, n_eps) ndarray
+    deps_dv : (n_eps, C) ndarray
+    """
+    eps = np.asarray(eps, dtype=float)
+    v = np.asarray(v, dtype=float)
+
+    def fd(f, x):
+        cols = []
+        for k in range(x.size):
+            h = rel_step * max(abs(x[k]), 1.0)
+            xp, xm = x.copy(), x.copy()
+            xp[k] += h
+            xm[k] -= h
+            cols.append((f(xp) - f(xm)) / (2 * h))
+        return np.column_stack(cols)
+
+    dg_deps = fd(lambda e: grad(e, v), eps)
+    dg_deps = 0.5 * (dg_deps + dg_deps.T)
+    dg_dv = fd(lambda w: grad(eps, w), v)
+    D = estimate_jacobian(dg_deps, dg_dv)
+    return delta_method_covariance(D, Sigma_v), D
