@@ -52,3 +52,52 @@ def test_intervals_and_bad_input():
         confidence_intervals([1.0], [[4.0]], level=1.5)
     with pytest.raises(ValueError, match="singular"):
         estimate_jacobian(np.zeros((2, 2)), np.ones((2, 3)))
+
+
+def _heat_case():
+    from ecfm_uq.spectral import SineBasis, hat_forces, load, sensor_matrix, stiffness
+    from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm, solve_steady
+
+    B = SineBasis(12)
+    F = np.column_stack([load(B, np.ones_like), load(B, lambda x: x)])
+    sens = np.linspace(0.1, 0.9, 7)
+    M_obs = sensor_matrix(B, sens)
+    system = GalerkinSystem(
+        [LinearTerm(stiffness(B), 1.0), LoadTerm.linear(F)], 2, Gamma=hat_forces(B, sens, 0.1)
+    )
+    true = np.array([3.0, -2.0])
+    v0 = M_obs @ solve_steady(system, true).Theta[:, 0]
+    J = M_obs @ np.column_stack(
+        [
+            solve_steady(system, true + e).Theta[:, 0] - solve_steady(system, true).Theta[:, 0]
+            for e in np.eye(2)
+        ]
+    )  # exact: the model is linear in eps
+    return system, M_obs, v0, true, J
+
+
+def test_fit_steady_standard_covariance_is_gauss_newton():
+    from ecfm_uq.inverse import fit_steady
+
+    system, M_obs, v0, true, J = _heat_case()
+    v = v0 + 0.01 * np.random.default_rng(0).normal(size=v0.size)
+    res = fit_steady(system, M_obs, v, [1.0, 1.0], "standard", sigma=0.01)
+    assert res.success and res.noise_model == "known"
+    np.testing.assert_allclose(res.eps_cov, gauss_newton_covariance(J, 1e-4), rtol=1e-5)
+
+
+@pytest.mark.parametrize("formulation", ["standard", "ecfm"])
+def test_fit_steady_covariance_equals_refit_jacobian(formulation):
+    from ecfm_uq.inverse import fit_steady
+
+    system, M_obs, v0, true, _ = _heat_case()
+    v = v0 + 0.01 * np.random.default_rng(1).normal(size=v0.size)
+    res = fit_steady(system, M_obs, v, [1.0, 1.0], formulation, sigma=0.01)
+    h = 1e-3
+    cols = []
+    for e in np.eye(v.size):
+        ep = fit_steady(system, M_obs, v + h * e, res.eps, formulation).eps
+        em = fit_steady(system, M_obs, v - h * e, res.eps, formulation).eps
+        cols.append((ep - em) / (2 * h))
+    D = np.column_stack(cols)
+    np.testing.assert_allclose(res.eps_cov, 1e-4 * D @ D.T, rtol=1e-5)
