@@ -101,3 +101,13 @@ def test_fit_steady_covariance_equals_refit_jacobian(formulation):
         cols.append((ep - em) / (2 * h))
     D = np.column_stack(cols)
     np.testing.assert_allclose(res.eps_cov, 1e-4 * D @ D.T, rtol=1e-5)
+
+
+@pytest.mark.parametrize("formulation", ["standard", "ecfm"])
+def test_steady_coverage_with_known_sigma_is_nominal(formulation):
+    from ecfm_uq.inverse.coverage import steady_coverage
+
+    system, M_obs, _, true, _ = _heat_case()
+    r = steady_coverage(system, M_obs, true, 0.01, 200, 0, formulation, known_sigma=True)
+    assert r["n_failed"] == 0
+    assert 0.92 <= r["coverage"] <= 0.98, r
