@@ -207,15 +207,15 @@ def _uncertainty(system, M_obs, v, eps, objective, solve_kw, sigma):
         if sigma is not None:
             if not (np.isfinite(sigma) and sigma > 0):
                 raise ValueError(f"`sigma` must be a positive finite number, got {sigma}")
-            s2, model = float(sigma) ** 2, "known"
+            s2, model, dof = float(sigma) ** 2, "known", None
         else:
             sol = solve_steady(system, eps, strict=True, **solve_kw)
             r = M_obs @ system.mean(sol.Theta) - v
-            s2, model = residual_variance(r, eps.size), "estimated"
+            s2, model, dof = residual_variance(r, eps.size), "estimated", r.size - eps.size
         cov, _ = implicit_covariance(
             lambda e, w: objective(system, M_obs, w, e, **solve_kw)[1], eps, v, s2
         )
-        se, ci = confidence_intervals(eps, cov)
+        se, ci = confidence_intervals(eps, cov, dof=dof)
         return dict(eps_cov=cov, eps_stderr=se, eps_ci95=ci, noise_model=model)
     except (ConvergenceError, ValueError) as e:
         if sigma is not None and "sigma" in str(e):

@@ -122,8 +122,9 @@ def residual_variance(r, n_eps):
     return float(r @ r) / (r.size - n_eps)
 
 
-def confidence_intervals(eps, eps_cov, level=0.95):
-    """Standard errors and normal ``level`` intervals.
+def confidence_intervals(eps, eps_cov, level=0.95, dof=None):
+    """Standard errors and ``level`` intervals: normal quantile, or Student-t with
+    ``dof`` degrees of freedom when sigma was estimated from the residual (C - n_eps).
 
     Returns
     -------
@@ -135,7 +136,8 @@ def confidence_intervals(eps, eps_cov, level=0.95):
     eps = np.asarray(eps, dtype=float).ravel()
     cov = _matrix("eps_cov", eps_cov, (eps.size, eps.size))
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    z = stats.norm.ppf(0.5 + level / 2)
+    q = 0.5 + level / 2
+    z = stats.norm.ppf(q) if dof is None else stats.t.ppf(q, dof)
     return se, np.column_stack([eps - z * se, eps + z * se])
 
 
