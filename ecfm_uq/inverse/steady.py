@@ -211,6 +211,11 @@ def _uncertainty(system, M_obs, v, eps, objective, solve_kw, sigma):
         else:
             sol = solve_steady(system, eps, strict=True, **solve_kw)
             r = M_obs @ system.mean(sol.Theta) - v
+            # project out the model's tangent space: the least-squares residual of the
+            # linearized model, so the ECFM estimate's own misfit does not inflate s^2
+            dTheta, _ = sol.eps_sensitivity()
+            J = M_obs @ np.einsum("ikm,k->im", dTheta, system.E1)
+            r = r - J @ np.linalg.lstsq(J, r, rcond=None)[0]
             s2, model, dof = residual_variance(r, eps.size), "estimated", r.size - eps.size
         cov, _ = implicit_covariance(
             lambda e, w: objective(system, M_obs, w, e, **solve_kw)[1], eps, v, s2
