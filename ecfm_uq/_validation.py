@@ -5,6 +5,7 @@ from __future__ import annotations
 import numbers
 
 import numpy as np
+import scipy.sparse as sp
 
 
 def as_finite_array(name, value, *, ndim=None, shape=None, dtype=float):
@@ -12,12 +13,14 @@ def as_finite_array(name, value, *, ndim=None, shape=None, dtype=float):
 
     ``shape`` may contain ``None`` for free axes.
     """
+    if isinstance(value, str | bytes):
+        raise TypeError(f"`{name}` must be array-like of numbers, got {describe(value)}")
     try:
         arr = np.asarray(value, dtype=dtype)
     except (TypeError, ValueError) as e:
-        raise TypeError(
-            f"`{name}` must be array-like of numbers, got {type(value).__name__}"
-        ) from e
+        raise TypeError(f"`{name}` must be array-like of numbers, got {describe(value)}") from e
+    if arr.dtype == object:
+        raise TypeError(f"`{name}` must be array-like of numbers, got {describe(value)}")
     if ndim is not None and arr.ndim != ndim:
         raise ValueError(f"`{name}` must be {ndim}-D, got shape {arr.shape}")
     if shape is not None:
@@ -29,6 +32,14 @@ def as_finite_array(name, value, *, ndim=None, shape=None, dtype=float):
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"`{name}` contains NaN or inf; pass finite values only")
     return arr
+
+
+def describe(value):
+    """``"str 'abc'"``: a user value's type and short repr, for error messages."""
+    r = " ".join(repr(value).split())
+    if len(r) > 40:
+        r = r[:37] + "..."
+    return f"{type(value).__name__} {r}"
 
 
 def check_int(name, value, *, minimum=None):
@@ -53,6 +64,63 @@ def check_positive(name, value):
 
 def check_choice(name, value, choices):
     """Raise ValueError unless ``value`` is one of ``choices``."""
-    if value not in choices:
-        raise ValueError(f"unknown `{name}` {value!r}; choose one of {sorted(choices)}")
+    # only strings and numbers compare: an array's == is element-wise, a list never matches
+    known = isinstance(value, str | numbers.Number) and any(value == c for c in choices)
+    if not known:
+        shown = repr(value) if isinstance(value, str) else describe(value)
+        raise ValueError(f"unknown `{name}` {shown}; choose one of {sorted(choices, key=str)}")
     return value
+
+
+def is_sparse(value):
+    """True for a ``scipy.sparse`` matrix or array."""
+    return sp.issparse(value)
+
+
+def as_operator(name, value, *, shape=None, square=False):
+    """Return ``value`` as a finite dense ``ndarray`` or a CSR ``scipy.sparse`` matrix.
+
+    Dense input goes through :func:`as_finite_array` unchanged (2-D); sparse input is kept
+    sparse (converted to CSR, ``float``) with its stored values checked for NaN/inf, so
+    nothing of size ``N^2`` is formed for a sparse operator.
+
+    Parameters
+    ----------
+    name : str
+        Argument name used in error messages.
+    value : array_like or scipy.sparse matrix
+    shape : tuple, optional
+        Required shape; ``None`` entries are free.
+    square : bool
+        Require a square matrix.
+    """
+    if sp.issparse(value):
+        if value.ndim != 2:
+            raise ValueError(f"`{name}` must be 2-D, got shape {value.shape}")
+        try:
+            out = sp.csr_matrix(value, dtype=float)
+        except (TypeError, ValueError) as e:
+            raise TypeError(f"`{name}` must hold real numbers, got dtype {value.dtype}") from e
+        if not np.all(np.isfinite(out.data)):
+            raise ValueError(f"`{name}` contains NaN or inf; pass finite values only")
+    else:
+        out = as_finite_array(name, value, ndim=2)
+    if square and out.shape[0] != out.shape[1]:
+        raise ValueError(f"`{name}` must be square, got shape {out.shape}")
+    if shape is not None and any(
+        s is not None and s != a for s, a in zip(shape, out.shape, strict=True)
+    ):
+        want = tuple("any" if s is None else s for s in shape)
+        raise ValueError(f"`{name}` must have shape {want}, got {out.shape}")
+    return out
+
+
+def as_dense_rows(name, value, *, n_cols=None):
+    """A (C, N) matrix with few rows (sensors) as a dense array, from dense or sparse input.
+
+    For formulations whose algebra is dense in the sensors: a ``(C, N)`` array is small
+    even when ``N`` is large, so densifying a sparse sensor matrix forms nothing of size
+    ``N^2``.
+    """
+    out = as_operator(name, value, shape=None if n_cols is None else (None, n_cols))
+    return out.toarray() if sp.issparse(out) else out

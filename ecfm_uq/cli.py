@@ -8,16 +8,14 @@ a non-zero exit code, never a traceback.
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
-import time
-from pathlib import Path
 
 from threadpoolctl import threadpool_limits
 
 from .errors import ConvergenceError, SingularSystemError
-from .studies import STUDY_NAMES
-from .studies._common import Progress, write_json
+from .studies import add_common_arguments, available_studies, load_study, run_study
+from .studies._common import Progress
+from .summary import reproduce_all
 
 EXIT_USAGE = 2
 EXIT_FAILED = 1
@@ -28,31 +26,6 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message):
         self.exit(EXIT_USAGE, f"ecfm-uq: error: {message}\n")
-
-
-def load_study(name):
-    """Import ``ecfm_uq.studies.<name>``."""
-    return importlib.import_module(f"ecfm_uq.studies.{name}")
-
-
-def available_studies():
-    """Names of the studies whose modules are installed."""
-    names = []
-    for name in STUDY_NAMES:
-        try:
-            load_study(name)
-        except ModuleNotFoundError as e:
-            if e.name != f"ecfm_uq.studies.{name}":
-                raise
-            continue
-        names.append(name)
-    return names
-
-
-def _add_common(p):
-    p.add_argument("--out", required=True, type=Path, help="output folder (created if missing)")
-    p.add_argument("--seed", type=int, default=None, help="random seed (study default if omitted)")
-    p.add_argument("--quiet", action="store_true", help="no progress output")
 
 
 def build_parser():
@@ -75,24 +48,11 @@ def build_parser():
     for name in available_studies():
         mod = load_study(name)
         p = studies.add_parser(name, help=mod.DESCRIPTION, description=mod.DESCRIPTION)
-        _add_common(p)
+        add_common_arguments(p)
         mod.add_arguments(p)
     p = studies.add_parser("all", help="every study, plus summary.md")
-    _add_common(p)
+    add_common_arguments(p)
     return parser
-
-
-def run_study(name, settings, out_root, progress):
-    """Run one study with ``settings`` and write ``out_root/name/result.json``."""
-    mod = load_study(name)
-    out_dir = Path(out_root) / name
-    out_dir.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    result = mod.run(settings, out_dir, progress)
-    result.setdefault("settings", settings)
-    result["wall_time_s"] = round(time.perf_counter() - t0, 3)
-    write_json(out_dir / "result.json", result)
-    return result
 
 
 def _check_out(out):
@@ -115,8 +75,6 @@ def main(argv=None):
     try:
         _check_out(args.out)
         if args.study == "all":
-            from .summary import reproduce_all
-
             reproduce_all(args.out, progress, seed=args.seed)
         else:
             mod = load_study(args.study)

@@ -210,24 +210,29 @@ def _node_outputs(fn, nodes):
     bad = ~np.isfinite(y.reshape(len(nodes), -1)).all(axis=1)
     if bad.any():
         i = int(np.argmax(bad))
+        omega = np.array2string(np.asarray(nodes[i]), precision=6)
         raise ValueError(
-            f"`fn` returned NaN or inf at Gauss node {i} (omega={float(nodes[i]):.6g}); "
+            f"`fn` returned NaN or inf at Gauss node {i} (omega={omega}); "
             "check the model at that germ value"
         )
     return y
 
 
-def quadrature_moments(fn, n_points):
-    """Mean and variance of ``fn(omega)``, :math:`\\omega \\sim U(0,1)`, by Gauss-Legendre.
+def quadrature_moments(fn, n_points, dim=1):
+    """Mean and variance of ``fn(omega)``, :math:`\\omega \\sim U(0,1)^d`, by Gauss-Legendre.
 
-    Converges exponentially for outputs analytic in :math:`\\omega` (the beam below
-    buckling), so it is the high-accuracy reference for both PCE and Monte Carlo.
+    Tensor-product Gauss collocation: converges exponentially for outputs analytic in
+    :math:`\\omega` (the beam below buckling, diffusion with a positive random
+    conductivity), so it is the high-accuracy reference for both PCE and Monte Carlo.
 
     Parameters
     ----------
     fn : callable
-        ``fn(omega) -> (m,)``.
+        ``fn(omega) -> (m,)``, ``omega`` a float for ``dim = 1`` and a (dim,) array else.
     n_points : int
+        Nodes per variable (``n_points**dim`` model runs).
+    dim : int
+        Number of germ variables.
 
     Returns
     -------
@@ -239,8 +244,13 @@ def quadrature_moments(fn, n_points):
         If ``fn`` returns NaN or inf at a node (the message names the node).
     """
     from .chaos import gauss_legendre
+    from .chaos.quadrature import tensor_gauss_legendre
 
-    nodes, w = gauss_legendre(check_int("n_points", n_points, minimum=1))
+    n_points = check_int("n_points", n_points, minimum=1)
+    if check_int("dim", dim, minimum=1) == 1:
+        nodes, w = gauss_legendre(n_points)
+    else:
+        nodes, w = tensor_gauss_legendre(n_points, dim)
     y = _node_outputs(fn, nodes)
     mean = w @ y
     return mean, w @ (y - mean) ** 2

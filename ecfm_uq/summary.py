@@ -1,5 +1,8 @@
 """``ecfm-uq reproduce all``: run every study and write ``summary.md``.
 
+Data flows one way: the study registry (:mod:`ecfm_uq.studies`) <- this module <- the
+command line (:mod:`ecfm_uq.cli`).
+
 Each study runs with its default (paper) settings in its own folder; a failing study
 does not stop the others, but makes the command fail with a one-line reason after the
 summary (which records the failure) has been written.
@@ -10,19 +13,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from .studies import available_studies, default_settings, load_study, run_study
 from .studies._common import write_atomic
-
-
-def _default_settings(name, out, seed):
-    from .cli import build_parser
-
-    argv = ["reproduce", name, "--out", str(out), "--quiet"]
-    if seed is not None:
-        argv += ["--seed", str(seed)]
-    args = build_parser().parse_args(argv)
-    from .cli import load_study
-
-    return load_study(name).settings_from_args(args)
 
 
 def _fmt_holds(h):
@@ -63,8 +55,6 @@ def reproduce_all(out, progress, seed=None, names=None):
     RuntimeError
         After writing the summary, if any study failed (the message names them).
     """
-    from .cli import available_studies, load_study, run_study
-
     out = Path(out)
     names = available_studies() if names is None else list(names)
     entries, failed = [], []
@@ -73,7 +63,7 @@ def reproduce_all(out, progress, seed=None, names=None):
             progress.log(f"running {name} ...")
             t0 = time.perf_counter()
             try:
-                settings = _default_settings(name, out, seed)
+                settings = default_settings(name, out, seed)
                 result = run_study(name, settings, out, progress)
                 rows = load_study(name).summary_rows(result)
                 figures = sorted((out / name).glob("*.png"))

@@ -81,3 +81,18 @@ def test_summary_lists_paper_and_measured_values(tmp_path):
     assert "| eps1 | 1.750 | 1.750 | yes |" in md
     assert "[f.png](burgers/f.png)" in md
     assert "**FAILED**: ValueError: boom" in md
+
+
+def test_data_flows_one_way_studies_summary_cli():
+    # the summary and the study registry never import the command line (no cycle)
+    import ast
+    from pathlib import Path
+
+    import ecfm_uq.studies
+    import ecfm_uq.summary
+
+    for mod in (ecfm_uq.summary, ecfm_uq.studies):
+        tree = ast.parse(Path(mod.__file__).read_text())
+        imported = {n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+        imported |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+        assert not any(m.split(".")[-1] == "cli" for m in imported), (mod.__name__, imported)

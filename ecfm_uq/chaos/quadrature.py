@@ -11,6 +11,7 @@ import numpy as np
 from scipy.special import roots_legendre
 
 from .._validation import check_int
+from ..memory import check_allocation
 
 __all__ = ["gauss_legendre", "tensor_gauss_legendre"]
 
@@ -77,6 +78,12 @@ def tensor_gauss_legendre(n, dim):
             f"a tensor rule with `n_points`={n} in dim={dim} has {n**dim} nodes "
             f"(limit {_MAX_TENSOR_NODES}); pass a smaller `n_points`"
         )
+    # meshgrid copies, the stacked nodes and the weights: about (2 dim + 1) n^dim floats
+    check_allocation(
+        8.0 * (2 * dim + 1) * float(n) ** dim,
+        f"a tensor Gauss-Legendre rule with {n}^{dim} nodes",
+        "pass a smaller `n_points` or use fewer variables",
+    )
     x, w = gauss_legendre(n)
     grids = np.meshgrid(*([x] * dim), indexing="ij")
     nodes = np.stack([g.ravel() for g in grids], axis=1)

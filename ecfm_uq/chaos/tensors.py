@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._validation import as_finite_array, check_choice, check_int
+from ..memory import check_allocation
 from ._kernels import triple_1d, triple_dense, triple_sparse
 from .basis import ChaosBasis
 
@@ -232,6 +233,11 @@ def expectation_tensor(basis, rank, *, sparse=False):
         e[0] = 1.0  # Psi_0 = 1 and every other term has zero mean.
         return e
     if rank == 2:
+        check_allocation(
+            8.0 * P * P,
+            f"the (P, P) Gram matrix E[Psi_k Psi_l] at P={P}",
+            "lower the chaos `order` or `dim`",
+        )
         return np.diag(np.asarray(basis.norms2, dtype=float))
 
     t = triple_product_1d(basis.order, basis.normalized)
@@ -239,6 +245,11 @@ def expectation_tensor(basis, rank, *, sparse=False):
     if sparse:
         idx, val = triple_sparse(alpha, t)
         return SparseTensor3(idx, val, (P, P, P))
+    check_allocation(
+        8.0 * P**3,
+        f"the dense (P, P, P) tensor E[Psi_a Psi_b Psi_c] at P={P}",
+        "pass sparse=True for a SparseTensor3, or lower the chaos `order` or `dim`",
+    )
     return triple_dense(alpha, t)
 
 
@@ -281,6 +292,11 @@ def weighted_gram(basis, g, n_points=None):
     basis = _check_basis(basis)
     nodes, weights = basis.quadrature(n_points)
     n = weights.shape[0]
+    check_allocation(
+        8.0 * 2 * n * basis.size,
+        f"weighted_gram's basis values on {n} quadrature nodes x P={basis.size} terms",
+        "pass a smaller `n_points`, or lower the chaos `order` or `dim`",
+    )
     if callable(g):
         arg = nodes[:, 0] if basis.dim == 1 else nodes
         out = g(arg.copy())

@@ -38,9 +38,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import as_finite_array, check_choice, check_int, check_positive
+from .._validation import as_dense_rows, as_finite_array, check_choice, check_int, check_positive
 from ..errors import ConvergenceError
 from ..system import march
+from .gradients import choose_gradient
 from .optimizers import adam
 
 FORMULATIONS = ("standard", "ecfm")
@@ -71,6 +72,17 @@ class DynamicInverseProblem:
         Newton tolerance per step on :math:`\\|R\\|_2`.
     maxiter : int
         Newton iterations per step.
+    gradient : {"auto", "forward", "adjoint"}
+        Gradients by forward sensitivities (Eqs. discrete_sens, discrete_sens_ecfm) or by
+        the discrete adjoint of the march (one backward pass of transposed solves with
+        the forward factors, whatever ``n_eps``); ``"auto"`` takes the adjoint when
+        ``n_eps > 1``.
+    solver : str, SolverOptions or dict
+        Linear solver of every step (see :func:`ecfm_uq.system.march`).
+    warm_start : bool
+        Start each step's Newton iteration from the last trajectory of the same
+        formulation (the previous optimizer iterate's) instead of the previous step: fewer
+        Newton iterations, the same solution to ``tol``.
 
     Raises
     ------
@@ -79,7 +91,22 @@ class DynamicInverseProblem:
         non-positive ``dt``/``tol``.
     """
 
-    def __init__(self, system, Theta0, dt, n_steps, M_obs, V, *, t0=0.0, tol=1e-10, maxiter=30):
+    def __init__(
+        self,
+        system,
+        Theta0,
+        dt,
+        n_steps,
+        M_obs,
+        V,
+        *,
+        t0=0.0,
+        tol=1e-10,
+        maxiter=30,
+        gradient="auto",
+        solver="auto",
+        warm_start=True,
+    ):
         if getattr(system, "M", None) is None:
             raise ValueError("`system` needs a mass matrix M for time stepping (build it with M=)")
         self.system = system
@@ -88,6 +115,10 @@ class DynamicInverseProblem:
         self.t0 = float(as_finite_array("t0", t0, ndim=0))
         self.tol = check_positive("tol", tol)
         self.maxiter = check_int("maxiter", maxiter, minimum=1)
+        self.gradient = choose_gradient(gradient, system.n_eps)
+        self.solver = solver
+        self.warm_start = bool(warm_start)
+        self._last = {}  # formulation -> last trajectory (the warm start)
         N, P = system.shape
         Theta0 = as_finite_array("Theta0", Theta0)
         if Theta0.shape == (N,):
@@ -95,7 +126,7 @@ class DynamicInverseProblem:
         if Theta0.shape != (N, P):
             raise ValueError(f"`Theta0` must have shape {(N,)} or {(N, P)}, got {Theta0.shape}")
         self.Theta0 = Theta0
-        self.M_obs = as_finite_array("M_obs", M_obs, ndim=2)
+        self.M_obs = as_dense_rows("M_obs", M_obs)
         if self.M_obs.shape[1] != N:
             raise ValueError(f"`M_obs` must have N = {N} columns, got shape {self.M_obs.shape}")
         C = self.M_obs.shape[0]
@@ -107,7 +138,7 @@ class DynamicInverseProblem:
         return self.M_obs.shape[0]
 
     # -- forward solves --------------------------------------------------------------------
-    def solve(self, eps, formulation="standard", sensitivities=False):
+    def solve(self, eps, formulation="standard", sensitivities=False, keep_factors=False):
         """March the model at ``eps``; ``"ecfm"`` adds the data constraint at every step.
 
         Returns
@@ -131,7 +162,7 @@ class DynamicInverseProblem:
             constraint = (self.M_obs, self.V)
         eps = self.system.check_eps(eps)
         try:
-            return march(
+            traj = march(
                 self.system,
                 eps,
                 self.Theta0,
@@ -143,11 +174,21 @@ class DynamicInverseProblem:
                 tol=self.tol,
                 maxiter=self.maxiter,
                 strict=True,
+                solver=self.solver,
+                keep_factors=keep_factors,
+                guess=self._last.get(formulation) if self.warm_start else None,
             )
         except ConvergenceError as e:
+            if self.warm_start and formulation in self._last:
+                # a warm start far from this eps can mislead Newton: retry cold
+                del self._last[formulation]
+                return self.solve(eps, formulation, sensitivities, keep_factors)
             raise ConvergenceError(
                 f"{formulation} forward solve at eps={np.array2string(eps)} failed: {e}"
             ) from e
+        if self.warm_start:
+            self._last[formulation] = traj
+        return traj
 
     def predictions(self, trajectory):
         """Sensor readings of the mean state, :math:`\\mathcal M\\,\\Theta_i\\mathbb E[\\Psi]`.
@@ -174,11 +215,18 @@ class DynamicInverseProblem:
         grad : (n_eps,) ndarray or None
         trajectory : Trajectory
         """
-        traj = self.solve(eps, "standard", sensitivities=gradient)
+        adjoint = gradient and self.gradient == "adjoint"
+        traj = self.solve(
+            eps, "standard", sensitivities=gradient and not adjoint, keep_factors=adjoint
+        )
         e = self.predictions(traj)[1:] - self.V[1:]  # (P, C), i = 1..P
         z = 0.5 * self.dt * float(np.sum(e * e))
         if not gradient:
             return z, None, traj
+        if adjoint:
+            g = np.zeros(traj.Theta.shape)
+            g[1:] = self.dt * np.einsum("tc,cj,k->tjk", e, self.M_obs, self.system.E1)
+            return z, traj.adjoint_gradient(g), traj
         dmean = np.einsum("tikm,k->tim", traj.dTheta[1:], self.system.E1)  # (P, N, n_eps)
         de = np.einsum("cj,tjm->tcm", self.M_obs, dmean)  # (P, C, n_eps)
         return z, self.dt * np.einsum("tc,tcm->m", e, de), traj
@@ -194,11 +242,16 @@ class DynamicInverseProblem:
         trajectory : Trajectory
             ``trajectory.lam`` ``(n_steps + 1, C)`` are the constraint forces.
         """
-        traj = self.solve(eps, "ecfm", sensitivities=gradient)
+        adjoint = gradient and self.gradient == "adjoint"
+        traj = self.solve(eps, "ecfm", sensitivities=gradient and not adjoint, keep_factors=adjoint)
         lam = traj.lam[1:]
         z = 0.5 * self.dt * float(np.sum(lam * lam))
         if not gradient:
             return z, None, traj
+        if adjoint:
+            g_lam = np.zeros_like(traj.lam)
+            g_lam[1:] = self.dt * lam
+            return z, traj.adjoint_gradient(np.zeros(traj.Theta.shape), g_lam), traj
         return z, self.dt * np.einsum("tc,tcm->m", lam, traj.dlam[1:]), traj
 
     def objective(self, formulation):

@@ -61,7 +61,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.optimize as sopt
 
-from .._validation import as_finite_array, check_int, check_positive
+from .._validation import as_dense_rows, as_finite_array, check_int, check_positive
 from ..errors import ConvergenceError
 from ..system import LinearTerm, LoadTerm, solve_steady
 from .result import InverseResult
@@ -130,7 +130,7 @@ def sensor_moments(system, M_obs, Theta, dTheta=None):
         :math:`2\\mathcal M_{ij}\\Theta_{jk}\\mathcal M_{ip}\\partial\\Theta_{pq}
         \\mathbb E[\\Psi_k\\Psi_q] - 2\\mu_i\\partial\\mu_i`.
     """
-    M_obs = as_finite_array("M_obs", M_obs, shape=(None, system.N))
+    M_obs = as_dense_rows("M_obs", M_obs, n_cols=system.N)
     Theta = as_finite_array("Theta", Theta, shape=system.shape)
     Cpsi = _centered_gram(system.E1, system.E2)
     A = M_obs @ Theta
@@ -323,7 +323,7 @@ class PseudoLikelihood:
                 f"got P={system.P}, whose variance is identically zero"
             )
         self.system = system
-        self.M_obs = as_finite_array("M_obs", M_obs, ndim=2)
+        self.M_obs = as_dense_rows("M_obs", M_obs)
         if self.M_obs.shape[1] != system.N:
             raise ValueError(f"`M_obs` must have {system.N} columns (N), got {self.M_obs.shape}")
         self.v = _check_data(v, self.M_obs.shape[0])

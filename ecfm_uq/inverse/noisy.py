@@ -43,7 +43,7 @@ import time
 import numpy as np
 import scipy.optimize as sopt
 
-from .._validation import as_finite_array, check_int, check_positive
+from .._validation import as_dense_rows, as_finite_array, check_int, check_positive
 from ..system import solve_steady
 from .noise import noise_bounds, sample_moments
 from .result import InverseResult
@@ -86,7 +86,7 @@ class ConstrainedInverse:
             )
         self.system = system
         self.formulation = formulation
-        self.M_obs = as_finite_array("M_obs", M_obs, ndim=2)
+        self.M_obs = as_dense_rows("M_obs", M_obs)
         if self.M_obs.shape[1] != system.N:
             raise ValueError(
                 f"`M_obs` must have {system.N} columns (N), got shape {self.M_obs.shape}"

@@ -18,22 +18,27 @@ from __future__ import annotations
 import numpy as np
 import scipy.optimize as sopt
 
-from .._validation import as_finite_array
+from .._validation import as_finite_array, as_operator, check_int, check_positive
 from ..errors import ConvergenceError
 from ..system import solve_steady
+from .gradients import choose_gradient
 from .result import InverseResult
+from .verdict import check_bounds, consistency_verdict
 
 
 def _data(system, M_obs, v):
-    M_obs = as_finite_array("M_obs", M_obs, ndim=2)
+    M_obs = as_operator("M_obs", M_obs)
     if M_obs.shape[1] != system.N:
         raise ValueError(f"`M_obs` must have {system.N} columns (N), got {M_obs.shape}")
     v = as_finite_array("v", v, shape=(M_obs.shape[0],))
     return M_obs, v
 
 
-def standard_objective(system, M_obs, v, eps, **solve_kw):
+def standard_objective(system, M_obs, v, eps, gradient="auto", **solve_kw):
     """:math:`z^{INV}` and its gradient at ``eps``.
+
+    ``gradient`` chooses forward sensitivities or one adjoint solve
+    (:func:`~ecfm_uq.inverse.gradients.choose_gradient`); both give the same gradient.
 
     Returns
     -------
@@ -49,12 +54,15 @@ def standard_objective(system, M_obs, v, eps, **solve_kw):
     M_obs, v = _data(system, M_obs, v)
     sol = solve_steady(system, eps, strict=True, **solve_kw)
     e = M_obs @ system.mean(sol.Theta) - v
+    if choose_gradient(gradient, system.n_eps) == "adjoint":
+        g_theta = np.outer(M_obs.T @ e, system.E1)  # dz/dTheta
+        return 0.5 * float(e @ e), sol.adjoint_gradient(g_theta), sol
     dTheta, _ = sol.eps_sensitivity()
     dmean = np.einsum("ikm,k->im", dTheta, system.E1)
     return 0.5 * float(e @ e), (M_obs @ dmean).T @ e, sol
 
 
-def ecfm_objective(system, M_obs, v, eps, **solve_kw):
+def ecfm_objective(system, M_obs, v, eps, gradient="auto", **solve_kw):
     """:math:`z^{ECFM}` and its gradient at ``eps`` (equality-constrained forces).
 
     Returns
@@ -65,8 +73,11 @@ def ecfm_objective(system, M_obs, v, eps, **solve_kw):
         With ``sol.lam`` the constraint forces :math:`\\lambda(\\epsilon)`.
     """
     sol = solve_steady(system, eps, constraint=(M_obs, v), strict=True, **solve_kw)
+    z = 0.5 * float(sol.lam @ sol.lam)
+    if choose_gradient(gradient, system.n_eps) == "adjoint":
+        return z, sol.adjoint_gradient(system.zeros(), sol.lam), sol
     _, dlam = sol.eps_sensitivity()
-    return 0.5 * float(sol.lam @ sol.lam), dlam.T @ sol.lam, sol
+    return z, dlam.T @ sol.lam, sol
 
 
 _OBJECTIVES = {"standard": standard_objective, "ecfm": ecfm_objective}
@@ -85,6 +96,7 @@ def fit_steady(
     bounds=None,
     solve_options=None,
     options=None,
+    gradient="auto",
     sigma=None,
 ):
     """Fit :math:`\\epsilon` of a steady system to data by the standard or ECFM formulation.
@@ -93,7 +105,7 @@ def fit_steady(
     ----------
     system : GalerkinSystem
         With ``Gamma`` for ``formulation="ecfm"``.
-    M_obs : (C, N) array_like
+    M_obs : (C, N) array_like or scipy.sparse matrix
     v : (C,) array_like
     eps0 : (n_eps,) array_like
         Starting point.
@@ -107,9 +119,12 @@ def fit_steady(
     bounds : sequence of (lo, hi), optional
         For bounded methods; keeps trial parameters physical (e.g. a positive length).
     solve_options : dict, optional
-        Passed to :func:`solve_steady` (``tol``, ``maxiter``).
+        Passed to :func:`solve_steady` (``tol``, ``maxiter``, ``solver``).
     options : dict, optional
         Extra ``scipy.optimize.minimize`` options (override the defaults above).
+    gradient : {"auto", "forward", "adjoint"}
+        Forward sensitivities or one adjoint solve per evaluation
+        (:func:`~ecfm_uq.inverse.gradients.choose_gradient`).
     sigma : float, optional
         Known sensor noise standard deviation. Without it the noise variance is
         estimated from the standard residual at the estimate,
@@ -119,16 +134,31 @@ def fit_steady(
     -------
     InverseResult
         ``extra`` holds ``Theta`` and ``lam`` at the optimum (``lam`` is the ECFM
-        constraint force, zero-length for the standard formulation).
+        constraint force, zero-length for the standard formulation) and ``verdict``, the
+        :func:`~ecfm_uq.inverse.verdict.consistency_verdict` of the fit (whether model
+        and data agree, where the forces peak, parameters at a bound or extreme); its
+        message is appended to ``message`` when the fit is not consistent. Inner solves
+        that fail (including a coefficient that overflows at a trial ``eps``) count as
+        ``z = inf`` and are reported in ``message``; no numpy/Python arithmetic error
+        escapes.
+
+    Raises
+    ------
+    ValueError, TypeError
+        For malformed data, ``eps0``, ``method``, ``gtol``, ``maxiter`` or ``bounds``.
+    ConvergenceError
+        When the model cannot be solved at ``eps0``.
     """
-    if formulation not in _OBJECTIVES:
+    if not isinstance(formulation, str) or formulation not in _OBJECTIVES:
         raise ValueError(f"unknown `formulation` {formulation!r}; choose 'standard' or 'ecfm'")
     if formulation == "ecfm" and system.Gamma is None:
         raise ValueError("formulation='ecfm' needs a system with constraint forces (Gamma)")
     M_obs, v = _data(system, M_obs, v)
     eps0 = system.check_eps(eps0)
+    method, gtol, maxiter, bounds = _check_fit_options(system, method, gtol, maxiter, bounds)
     objective = _OBJECTIVES[formulation]
     solve_kw = dict(solve_options or {})
+    solve_kw["gradient"] = choose_gradient(gradient, system.n_eps)
     hist_eps, hist_loss = [], []
     failures = []
 
@@ -167,10 +197,13 @@ def fit_steady(
     res = sopt.minimize(
         fun, eps0, jac=True, method=method, bounds=bounds, options=opts, callback=callback
     )
-    z, g, sol = objective(system, M_obs, v, res.x, **solve_kw)
+    try:
+        z, g, sol = objective(system, M_obs, v, res.x, **solve_kw)
+    except ConvergenceError as e:  # the optimizer stopped where the model fails
+        return _failed_fit(res, formulation, hist_eps, hist_loss, e)
     msg = str(res.message)
     success = bool(res.success)
-    if not success and res.status == 2 and not failures:
+    if not success and res.get("status") == 2 and not failures:
         # the line search could not decrease z at machine precision. That is convergence
         # when z is at round-off zero (both objectives are >= 0: a global minimum) or
         # when first-order optimality holds relative to z itself: a relative change of
@@ -185,17 +218,49 @@ def fit_steady(
     if failures:
         msg += f" ({len(failures)} inner solves failed; first: {failures[0]})"
     unc = _uncertainty(system, M_obs, v, np.asarray(res.x), objective, solve_kw, sigma)
+    lam = sol.lam if formulation == "ecfm" else np.zeros(0)
+    verdict = consistency_verdict(system, M_obs, v, res.x, lam, bounds, solve_options=solve_options)
+    if not verdict["consistent"]:
+        msg += f" [{verdict['message']}]"
     return InverseResult(
         **unc,
         eps=np.asarray(res.x),
         loss=z,
         success=success,
         message=msg,
-        nit=int(res.nit),
+        nit=int(res.get("nit", 0)),
         method=formulation,
         eps_history=np.array(hist_eps),
         loss_history=np.array(hist_loss),
-        extra={"Theta": sol.Theta, "lam": sol.lam if formulation == "ecfm" else np.zeros(0)},
+        extra={"Theta": sol.Theta, "lam": lam, "verdict": verdict},
+    )
+
+
+_METHODS = ("BFGS", "CG", "L-BFGS-B", "TNC", "SLSQP", "Newton-CG", "trust-constr")
+
+
+def _check_fit_options(system, method, gtol, maxiter, bounds):
+    """Validate the optimizer arguments of :func:`fit_steady` (before any solve)."""
+    if not isinstance(method, str) or method.upper() not in {m.upper() for m in _METHODS}:
+        raise ValueError(f"unknown `method` {method!r}; choose a gradient method of {_METHODS}")
+    gtol = check_positive("gtol", gtol)
+    maxiter = check_int("maxiter", maxiter, minimum=1)
+    bounds = check_bounds(bounds, system.n_eps)
+    return method, gtol, maxiter, bounds
+
+
+def _failed_fit(res, formulation, hist_eps, hist_loss, error):
+    """A reported failure: the model cannot be solved at the optimizer's last point."""
+    return InverseResult(
+        eps=np.asarray(res.x),
+        loss=np.inf,
+        success=False,
+        message=f"{res.message} (the model cannot be solved at the final eps: {error})",
+        nit=int(res.get("nit", 0)),
+        method=formulation,
+        eps_history=np.array(hist_eps),
+        loss_history=np.array(hist_loss),
+        extra={"verdict": {"consistent": False, "message": str(error)}},
     )
 
 
@@ -209,7 +274,8 @@ def _uncertainty(system, M_obs, v, eps, objective, solve_kw, sigma):
                 raise ValueError(f"`sigma` must be a positive finite number, got {sigma}")
             s2, model, dof = float(sigma) ** 2, "known", None
         else:
-            sol = solve_steady(system, eps, strict=True, **solve_kw)
+            solve_options = {k: w for k, w in solve_kw.items() if k != "gradient"}
+            sol = solve_steady(system, eps, strict=True, **solve_options)
             r = M_obs @ system.mean(sol.Theta) - v
             # project out the model's tangent space: the least-squares residual of the
             # linearized model, so the ECFM estimate's own misfit does not inflate s^2

@@ -175,6 +175,12 @@ class BurgersModel:
         whose field is :math:`u_0` itself. ``"paper"``: the formula printed after
         Eq. backward_euler, :math:`\\theta_{0,i} = \\int u_0 f_i`, which for the sine basis
         (:math:`M = I/2`) starts from :math:`u_0/2`; kept to study its effect.
+    viscosity_cells : int, optional
+        A spatially varying viscosity, piecewise constant on this many equal cells:
+        :math:`\\nu(x) = 10^{-\\epsilon_c}` on cell ``c``, so ``eps = (eps_0, ...,
+        eps_{n-1}, source)`` and ``n_eps = viscosity_cells + 1`` (a many-parameter
+        calibration for adjoint gradients). ``None`` (default): the paper's uniform
+        viscosity.
 
     Attributes
     ----------
@@ -207,6 +213,7 @@ class BurgersModel:
         viscosity_chaos=None,
         viscosity_spread=0.0,
         initial_state="projection",
+        viscosity_cells=None,
     ):
         self.n_modes = check_int("n_modes", n_modes, minimum=1)
         self.n_steps = check_int("n_steps", n_steps, minimum=1)
@@ -243,6 +250,13 @@ class BurgersModel:
         self.dt = self.T / self.n_steps
         self.times = self.dt * np.arange(self.n_steps + 1)
         self.chaos = viscosity_chaos
+        self.viscosity_cells = (
+            None
+            if viscosity_cells is None
+            else check_int("viscosity_cells", viscosity_cells, minimum=1)
+        )
+        if self.viscosity_cells is not None:
+            self.n_eps = self.viscosity_cells + 1
         self._A = None
         self.system = self._build_system()
 
@@ -257,13 +271,27 @@ class BurgersModel:
             n_points = self.chaos.order + 12
             G = weighted_gram(self.chaos, lambda w: 10.0 ** (-d * (w - 0.5)), n_points=n_points)
         F0 = self.F0
-        terms = [
-            QuadraticTerm(ConvectionForm(self.basis), 1.0, name="convection"),
-            LinearTerm(self.K, Coefficient.power10(0, sign=-1.0), G=G, name="diffusion"),
-            LoadTerm.scaled(lambda t: source_time(t) * F0, Coefficient.parameter(1), name="source"),
-        ]
+        terms = [QuadraticTerm(ConvectionForm(self.basis), 1.0, name="convection")]
+        if self.viscosity_cells is None:
+            terms.append(
+                LinearTerm(self.K, Coefficient.power10(0, sign=-1.0), G=G, name="diffusion")
+            )
+        else:
+            edges = np.linspace(0.0, 1.0, self.viscosity_cells + 1)
+            for c in range(self.viscosity_cells):
+                lo, hi = edges[c], edges[c + 1]
+                Kc = stiffness(
+                    self.basis,
+                    weight=lambda x, lo=lo, hi=hi: ((x >= lo) & (x < hi)).astype(float),
+                    breakpoints=edges[1:-1],
+                )
+                terms.append(
+                    LinearTerm(Kc, Coefficient.power10(c, sign=-1.0), G=G, name=f"diffusion {c}")
+                )
+        source = Coefficient.parameter(self.n_eps - 1)
+        terms.append(LoadTerm.scaled(lambda t: source_time(t) * F0, source, name="source"))
         return GalerkinSystem(
-            terms, n_eps=2, basis=self.chaos, Gamma=self.Gamma, M=self.M, name="burgers"
+            terms, n_eps=self.n_eps, basis=self.chaos, Gamma=self.Gamma, M=self.M, name="burgers"
         )
 
     @property

@@ -112,6 +112,12 @@ class TensorBasis2D:
     """
 
     def __init__(self, bx, by=None):
+        for name, b in (("bx", bx), ("by", by)):
+            if not (b is None and name == "by") and not isinstance(b, SinusoidBasis):
+                raise TypeError(
+                    f"`{name}` must be a 1-D SinusoidBasis (e.g. SineBasis(n)), "
+                    f"got {type(b).__name__}"
+                )
         self.bx = bx
         self.by = bx if by is None else by
 

@@ -14,8 +14,10 @@ quadrature (:mod:`.quadrature`), matching the paper's definitions:
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from .._validation import as_finite_array, check_positive
+from ..memory import check_allocation
 from .basis import SinusoidBasis, TensorBasis2D
 from .quadrature import composite_gauss, default_points
 
@@ -118,6 +120,29 @@ def project(basis, u, **kw):
     return np.linalg.solve(mass(basis), load(basis, u, **kw))
 
 
+def _check_basis(basis, allow_2d=False):
+    kinds = (SinusoidBasis, TensorBasis2D) if allow_2d else (SinusoidBasis,)
+    if not isinstance(basis, kinds):
+        want = "a SinusoidBasis or TensorBasis2D" if allow_2d else "a 1-D SinusoidBasis"
+        raise TypeError(f"`basis` must be {want} (e.g. SineBasis(n)), got {type(basis).__name__}")
+
+
+def _check_centers(c, dim=1):
+    """Centres of constraint forces: at least one, inside the domain (like the sensors)."""
+    if c.shape[0] == 0:
+        raise ValueError("`centers` is empty; pass at least one force centre")
+    outside = (c < 0) | (c > 1)
+    if outside.ndim == 2:
+        outside = outside.any(axis=1)
+    if outside.any():
+        j = int(np.flatnonzero(outside)[0])
+        where = "the unit square [0, 1]^2" if dim == 2 else "[0, 1]"
+        raise ValueError(
+            f"`centers` must lie in {where} (the domain), got centre {j} at "
+            f"{c[j].tolist()}; a force outside the domain has (almost) no effect"
+        )
+
+
 def sensor_matrix(basis, points):
     """Measurement operator :math:`\\mathcal M_{ij} = f_j(x_i)`.
 
@@ -131,16 +156,25 @@ def sensor_matrix(basis, points):
     -------
     (C, N) ndarray
     """
+    _check_basis(basis, allow_2d=True)
     if isinstance(basis, TensorBasis2D):
         p = as_finite_array("points", points, ndim=2)
         if p.shape[1] != 2:
             raise ValueError(f"`points` must have shape (C, 2), got {p.shape}")
+        if p.shape[0] == 0:
+            raise ValueError("`points` is empty; pass at least one sensor position")
         if np.any((p < 0) | (p > 1)):
-            raise ValueError("`points` must lie in the unit square [0, 1]^2")
+            j = int(np.flatnonzero(np.any((p < 0) | (p > 1), axis=1))[0])
+            raise ValueError(
+                f"`points` must lie in the unit square [0, 1]^2, got sensor {j} at {p[j].tolist()}"
+            )
         return basis.evaluate(p)
     p = as_finite_array("points", points, ndim=1)
+    if p.size == 0:
+        raise ValueError("`points` is empty; pass at least one sensor position")
     if np.any((p < 0) | (p > 1)):
-        raise ValueError("`points` must lie in [0, 1]")
+        j = int(np.flatnonzero((p < 0) | (p > 1))[0])
+        raise ValueError(f"`points` must lie in [0, 1], got sensor {j} at {p[j]}")
     return basis.evaluate(p)
 
 
@@ -155,7 +189,9 @@ def hat_forces(basis, centers, half_width):
     -------
     (N, C) ndarray
     """
+    _check_basis(basis)
     c = as_finite_array("centers", centers, ndim=1)
+    _check_centers(c)
     a = check_positive("half_width", half_width)
     cols = []
     for xc in c:
@@ -174,9 +210,17 @@ def gaussian_forces(basis, centers, omega):
     -------
     (N, C) ndarray
     """
+    _check_basis(basis)
     c = as_finite_array("centers", centers, ndim=1)
+    _check_centers(c)
     om = check_positive("omega", omega)
     n = default_points(basis, extra=2) + int(4 * np.sqrt(om))
+    C, panels = c.size, c.size + 1
+    check_allocation(
+        8.0 * max(float(n) ** 2, float(n) * panels * (basis.size + C + 2)),
+        f"gaussian_forces quadrature with {n} points per panel (omega={om:g})",
+        "pass a smaller `omega` (a wider force; width ~ 1/sqrt(omega))",
+    )
     x, w = composite_gauss(tuple(c), n)
     g = np.sqrt(om / np.pi) * np.exp(-om * (x[:, None] - c[None, :]) ** 2)
     return basis.evaluate(x).T @ (w[:, None] * g)
@@ -204,13 +248,20 @@ def rbf_forces(basis, centers, omega):
     c = as_finite_array("centers", centers, ndim=2)
     if c.shape[1] != 2:
         raise ValueError(f"`centers` must have shape (C, 2), got {c.shape}")
+    _check_centers(c, dim=2)
     gx = gaussian_forces(basis.bx, c[:, 0], omega)
     gy = gaussian_forces(basis.by, c[:, 1], omega)
     return (gx[:, None, :] * gy[None, :, :]).reshape(basis.size, c.shape[0])
 
 
 def kron2(ax, ay):
-    """Dense Kronecker product of 1-D factors (row-major tensor ordering)."""
+    """Kronecker product of 1-D factors (row-major tensor ordering).
+
+    Dense for dense factors; CSR when either factor is ``scipy.sparse`` (no dense
+    ``N x N`` array is formed then).
+    """
+    if sp.issparse(ax) or sp.issparse(ay):
+        return sp.kron(ax, ay, format="csr")
     return np.kron(ax, ay)
 
 

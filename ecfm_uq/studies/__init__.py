@@ -9,4 +9,69 @@
 ``summary.md``.
 """
 
+import argparse
+import importlib
+import time
+from pathlib import Path
+
+from ._common import write_json
+
 STUDY_NAMES = ("burgers", "kpp", "beam", "mc", "boundary", "geometry")
+
+__all__ = [
+    "STUDY_NAMES",
+    "add_common_arguments",
+    "available_studies",
+    "default_settings",
+    "load_study",
+    "run_study",
+]
+
+
+def load_study(name):
+    """Import ``ecfm_uq.studies.<name>``."""
+    return importlib.import_module(f"ecfm_uq.studies.{name}")
+
+
+def available_studies():
+    """Names of the studies whose modules are installed."""
+    names = []
+    for name in STUDY_NAMES:
+        try:
+            load_study(name)
+        except ModuleNotFoundError as e:
+            if e.name != f"ecfm_uq.studies.{name}":
+                raise
+            continue
+        names.append(name)
+    return names
+
+
+def add_common_arguments(p):
+    """Options every study takes: ``--out``, ``--seed``, ``--quiet``."""
+    p.add_argument("--out", required=True, type=Path, help="output folder (created if missing)")
+    p.add_argument("--seed", type=int, default=None, help="random seed (study default if omitted)")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+
+
+def default_settings(name, out, seed=None):
+    """The settings a study runs with when given no options (the paper's)."""
+    mod = load_study(name)
+    parser = argparse.ArgumentParser(prog=name)
+    add_common_arguments(parser)
+    mod.add_arguments(parser)
+    argv = ["--out", str(out), "--quiet"] + ([] if seed is None else ["--seed", str(seed)])
+    return mod.settings_from_args(parser.parse_args(argv))
+
+
+def run_study(name, settings, out_root, progress):
+    """Run one study with ``settings`` and write ``out_root/name/result.json``."""
+    mod = load_study(name)
+    out_dir = Path(out_root) / name
+    out_dir.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    result = mod.run(settings, out_dir, progress)
+    result.setdefault("settings", settings)
+    result["wall_time_s"] = round(time.perf_counter() - t0, 3)
+    write_json(out_dir / "result.json", result)
+    return result

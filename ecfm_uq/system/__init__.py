@@ -2,6 +2,8 @@
 backward_euler, ecfm_solve, discrete_sens, discrete_sens_ecfm, pce, stochastic_sens)."""
 
 from .galerkin import GalerkinSystem
+from .linear import SOLVERS, LinearSolver, SolverOptions, solver_options
+from .operator import AugmentedOperator, GalerkinOperator
 from .solvers import (
     NewtonInfo,
     SteadySolution,
@@ -14,17 +16,23 @@ from .solvers import (
 from .terms import Coefficient, DenseQuadraticForm, LinearTerm, LoadTerm, QuadraticTerm
 
 __all__ = [
+    "SOLVERS",
+    "AugmentedOperator",
     "Coefficient",
     "DenseQuadraticForm",
+    "GalerkinOperator",
     "GalerkinSystem",
+    "LinearSolver",
     "LinearTerm",
     "LoadTerm",
     "NewtonInfo",
     "QuadraticTerm",
+    "SolverOptions",
     "SteadySolution",
     "Trajectory",
     "march",
     "newton",
     "solve_continuation",
     "solve_steady",
+    "solver_options",
 ]

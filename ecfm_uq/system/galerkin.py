@@ -15,9 +15,12 @@ polynomial nonlinearities and loads (see :mod:`.terms`), plus constraint forces
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
-from .._validation import as_finite_array, check_int
-from .terms import LinearTerm, LoadTerm, QuadraticTerm
+from .._validation import as_finite_array, as_operator, check_int, describe
+from ..memory import check_allocation
+from .operator import GalerkinOperator, _LinearPart, _QuadraticLinearization
+from .terms import LinearTerm, LoadTerm, QuadraticTerm, _symmetric
 
 
 class GalerkinSystem:
@@ -31,9 +34,9 @@ class GalerkinSystem:
         Number of model parameters :math:`\\epsilon`.
     basis : ChaosBasis, optional
         Stochastic basis; ``None`` for a deterministic system (``P = 1``).
-    Gamma : (N, C) array_like, optional
+    Gamma : (N, C) array_like or scipy.sparse matrix, optional
         Constraint-force vectors :math:`\\Gamma_{ij} = \\int f_i\\Gamma(x - x_j)`.
-    M : (N, N) array_like, optional
+    M : (N, N) array_like or scipy.sparse matrix, optional
         Mass matrix for time-dependent systems :math:`M\\dot\\theta + R = 0`.
     name : str
 
@@ -50,7 +53,8 @@ class GalerkinSystem:
         for term in self.terms:
             if not isinstance(term, LinearTerm | QuadraticTerm | LoadTerm):
                 raise TypeError(
-                    f"unsupported term {term!r}; use LinearTerm, QuadraticTerm, LoadTerm"
+                    f"`terms` holds an unsupported {describe(term)}; "
+                    "use LinearTerm, QuadraticTerm or LoadTerm (e.g. LoadTerm.constant(F))"
                 )
         self.n_eps = check_int("n_eps", n_eps, minimum=0)
         self.basis = basis
@@ -68,9 +72,23 @@ class GalerkinSystem:
         self.P = self.E1.size
         sizes = {t.K.shape[0] for t in self.terms if isinstance(t, LinearTerm)}
         sizes |= {t.form.size for t in self.terms if isinstance(t, QuadraticTerm)}
+        if not sizes:
+            raise ValueError(
+                "`terms` has no LinearTerm or QuadraticTerm, so the state size N is unknown; "
+                "add the model's operator (e.g. LinearTerm(K))"
+            )
         if len(sizes) != 1:
-            raise ValueError(f"terms disagree on the state size N: {sorted(sizes)}")
+            named = sorted(
+                f"{t.name!r}: {t.K.shape[0] if isinstance(t, LinearTerm) else t.form.size}"
+                for t in self.terms
+                if isinstance(t, LinearTerm | QuadraticTerm)
+            )
+            raise ValueError(
+                f"terms disagree on the state size N ({', '.join(named)}); "
+                "build every operator on the same discretization"
+            )
         self.N = sizes.pop()
+        self._check_parameters()
         for term in self.terms:
             if isinstance(term, LinearTerm):
                 term.bind(self.E2)
@@ -78,11 +96,28 @@ class GalerkinSystem:
                 term.bind(self.E3)
             else:
                 term.bind(self.E1)
-        self.Gamma = None if Gamma is None else as_finite_array("Gamma", Gamma, ndim=2)
+                term.check_sizes(self.N, self.n_eps)
+        self.Gamma = None if Gamma is None else as_operator("Gamma", Gamma)
         if self.Gamma is not None and self.Gamma.shape[0] != self.N:
             raise ValueError(f"`Gamma` must have {self.N} rows (N), got {self.Gamma.shape}")
-        self.M = None if M is None else as_finite_array("M", M, shape=(self.N, self.N))
+        self.M = None if M is None else as_operator("M", M, shape=(self.N, self.N))
+        self._operator_cache = None
         self.name = name
+
+    def _check_parameters(self):
+        """Every coefficient must read parameter indices below ``n_eps``."""
+        for term in self.terms:
+            coef = getattr(term, "coef", None)
+            indices = getattr(coef, "indices", None)
+            if not indices:
+                continue
+            bad = [m for m in indices if m >= self.n_eps]
+            if bad:
+                raise ValueError(
+                    f"term {term.name!r}: coefficient {coef.label} uses parameter index "
+                    f"{bad[0]} but the system has n_eps={self.n_eps} parameters "
+                    f"(indices 0..{self.n_eps - 1}); raise `n_eps` or fix the index"
+                )
 
     # -- sizes -------------------------------------------------------------------------
     @property
@@ -101,7 +136,8 @@ class GalerkinSystem:
 
     def check_eps(self, eps):
         """Validate ``eps`` as a finite (n_eps,) vector."""
-        return as_finite_array("eps", np.atleast_1d(eps), shape=(self.n_eps,))
+        eps = np.atleast_1d(as_finite_array("eps", eps))  # strings, ragged lists refused
+        return as_finite_array("eps", eps, shape=(self.n_eps,))
 
     def check_lam(self, lam):
         """Validate ``lam`` (None means zero forces)."""
@@ -109,11 +145,17 @@ class GalerkinSystem:
             return np.zeros(self.n_forces)
         if self.Gamma is None:
             raise ValueError("`lam` given but the system has no constraint forces (Gamma=None)")
-        return as_finite_array("lam", np.atleast_1d(lam), shape=(self.n_forces,))
+        lam = np.atleast_1d(as_finite_array("lam", lam))
+        return as_finite_array("lam", lam, shape=(self.n_forces,))
 
     # -- residual and derivatives ------------------------------------------------------
     def residual(self, Theta, eps, lam=None, t=None):
         """:math:`R(\\Theta; \\epsilon, \\lambda)` of shape (N, P)."""
+        if np.shape(Theta) != self.shape:  # cheap: a shape, no copy
+            raise ValueError(
+                f"`Theta` must have shape (N, P) = {self.shape}, got {np.shape(Theta)}; "
+                "a deterministic state is (N, 1), use system.zeros() for a template"
+            )
         R = np.zeros(self.shape)
         for term in self.terms:
             R += term.apply(Theta, eps, t)
@@ -122,18 +164,56 @@ class GalerkinSystem:
                 if np.any(np.asarray(lam) != 0):
                     raise ValueError("`lam` given but the system has no constraint forces (Gamma)")
             else:
-                R -= np.outer(self.Gamma @ lam, self.E1)
+                R -= np.outer(self.Gamma @ np.asarray(lam, dtype=float), self.E1)
         return R
 
-    def jacobian(self, Theta, eps, t=None):
-        """:math:`\\partial\\,\\mathrm{vec}R / \\partial\\,\\mathrm{vec}\\Theta`, shape (NP, NP)."""
-        n = self.N * self.P
-        J = np.zeros((n, n))
+    def jacobian_operator(self, Theta, eps, t=None, dt=None):
+        """The Jacobian at ``Theta`` as a structured :class:`~.operator.GalerkinOperator`.
+
+        Nothing is assembled: the operator applies itself matrix-free and assembles dense,
+        sparse or its mean block on request (the solver layer decides which). ``dt`` adds
+        the backward-Euler mass term :math:`M\\otimes\\mathbb E[\\Psi\\Psi^T]/\\Delta t`. For
+        a linear system the same object is returned for the same ``(eps, dt)``, so a
+        solver can reuse its factorization.
+        """
+        if self.is_linear:
+            key = (np.asarray(eps, dtype=float).tobytes(), dt)
+            if self._operator_cache is not None and self._operator_cache[0] == key:
+                return self._operator_cache[1]
+        parts = []
         for term in self.terms:
-            Jt = term.jacobian(Theta, eps, t)
-            if Jt is not None:
-                J += Jt
-        return J
+            if isinstance(term, LinearTerm):
+                parts.append(_LinearPart(term, term.coef.value(eps)))
+            elif isinstance(term, QuadraticTerm):
+                parts.append(_QuadraticLinearization(term, Theta, term.coef.value(eps)))
+        op = GalerkinOperator(self, parts, dt=dt)
+        if self.is_linear:
+            self._operator_cache = (key, op)
+        return op
+
+    def jacobian(self, Theta, eps, t=None):
+        """:math:`\\partial\\,\\mathrm{vec}R / \\partial\\,\\mathrm{vec}\\Theta`, dense (NP, NP).
+
+        Refused (:class:`~ecfm_uq.errors.MemoryBudgetError`) when it would not fit the
+        memory budget; use :meth:`jacobian_operator` for large systems.
+        """
+        return self.jacobian_operator(Theta, eps, t).to_dense()
+
+    @property
+    def is_linear(self):
+        """True when no term is quadratic in the state."""
+        if not hasattr(self, "_is_linear"):
+            self._is_linear = not any(isinstance(t, QuadraticTerm) for t in self.terms)
+        return self._is_linear
+
+    @property
+    def sparse_input(self):
+        """True when any spatial operator, ``M`` or ``Gamma`` is ``scipy.sparse``."""
+        return (
+            any(isinstance(t, LinearTerm) and t.sparse for t in self.terms)
+            or sp.issparse(self.M)
+            or sp.issparse(self.Gamma)
+        )
 
     def eps_jacobian(self, Theta, eps, t=None):
         """:math:`\\partial\\,\\mathrm{vec}R / \\partial\\epsilon`, shape (NP, n_eps)."""
@@ -142,17 +222,64 @@ class GalerkinSystem:
             D += term.eps_jacobian(Theta, eps, t)
         return D
 
+    def eps_vjp(self, Theta, eps, mu, t=None):
+        """:math:`(\\partial\\,\\mathrm{vec}R/\\partial\\epsilon)^T\\mu`, (n_eps,), for adjoints.
+
+        Term by term, without forming the (NP, n_eps) matrix (which for a large system
+        and many parameters costs more than the adjoint solve itself).
+        """
+        mu = np.reshape(mu, self.shape)
+        g = np.zeros(self.n_eps)
+        for term in self.terms:
+            g += term.eps_vjp(Theta, eps, mu, t)
+        return g
+
     def lam_jacobian(self):
         """:math:`\\partial\\,\\mathrm{vec}R / \\partial\\lambda = -\\Gamma\\otimes\\mathbb E[\\Psi]`, (NP, C)."""
         if self.Gamma is None:
             return np.zeros((self.N * self.P, 0))
-        return -(self.Gamma[:, None, :] * self.E1[None, :, None]).reshape(self.N * self.P, -1)
+        Gamma = self.Gamma.toarray() if sp.issparse(self.Gamma) else self.Gamma
+        return -(Gamma[:, None, :] * self.E1[None, :, None]).reshape(self.N * self.P, -1)
 
-    def mass_matrix(self):
-        """:math:`M \\otimes \\mathbb E[\\Psi_k\\Psi_\\ell]`, shape (NP, NP)."""
+    def constraint_jacobian(self, M_obs):
+        """:math:`\\mathcal M \\otimes \\mathbb E[\\Psi]^T`, (C, NP): the data constraint's Jacobian.
+
+        Sparse when ``M_obs`` is sparse.
+        """
+        if sp.issparse(M_obs):
+            return sp.kron(M_obs, sp.csr_matrix(self.E1[None, :]), format="csr")
+        return np.kron(M_obs, self.E1[None, :])
+
+    def mass_matrix(self, sparse=False):
+        """:math:`M \\otimes \\mathbb E[\\Psi_k\\Psi_\\ell]`, shape (NP, NP) (CSR if ``sparse``)."""
         if self.M is None:
             raise ValueError(f"system {self.name!r} has no mass matrix; pass M= for time stepping")
-        return np.kron(self.M, self.E2.T)
+        kind = "sparse" if sparse else "dense"
+        cache = self.__dict__.setdefault("_mass_cache", {})  # M is fixed: build once
+        if kind not in cache:
+            if sparse:
+                cache[kind] = sp.kron(self.M, sp.csr_matrix(self.E2.T), format="csr")
+            else:
+                n = self.N * self.P
+                check_allocation(
+                    8.0 * n * n,
+                    f"the dense mass matrix of {self.name!r} (NP = {n})",
+                    "pass a sparse M and solver='cg' or 'gmres'",
+                )
+                M = self.M.toarray() if sp.issparse(self.M) else self.M
+                cache[kind] = np.kron(M, self.E2.T)
+        return cache[kind]
+
+    def apply_mass(self, X, transpose=False):
+        """:math:`M X \\mathbb E[\\Psi\\Psi^T]` (or :math:`M^T X \\ldots`) for ``X`` (N, P), matrix-free."""
+        if self.M is None:
+            raise ValueError(f"system {self.name!r} has no mass matrix; pass M= for time stepping")
+        M = self.M.T if transpose else self.M
+        return np.asarray(M @ X) @ (self.E2.T if transpose else self.E2)
+
+    def mass_is_symmetric(self):
+        """Whether ``M`` is symmetric."""
+        return self.M is not None and _symmetric(self.M)
 
     # -- structure ---------------------------------------------------------------------
     def decoupling(self):
@@ -176,7 +303,7 @@ class GalerkinSystem:
         return self._decoupling
 
     def _find_decoupling(self):
-        if self.P == 1 or any(isinstance(t, QuadraticTerm) for t in self.terms):
+        if self.P == 1 or not self.is_linear:
             return None
         Gs = [t.G for t in self.terms if isinstance(t, LinearTerm)]
         # a generic combination has simple eigenvalues whenever a common eigenbasis exists
@@ -202,6 +329,11 @@ class GalerkinSystem:
         """:math:`\\mathrm{Cov}[\\theta] = \\Theta\\,\\mathbb E[\\Psi\\Psi^T]\\,\\Theta^T - \\mu\\mu^T`, (N, N)."""
         mu = self.mean(Theta)
         return Theta @ self.E2 @ Theta.T - np.outer(mu, mu)
+
+    def variance(self, Theta):
+        """Pointwise :math:`\\mathrm{Var}[\\theta_i]`, shape (N,), without the (N, N) covariance."""
+        mu = self.mean(Theta)
+        return np.einsum("ik,kl,il->i", Theta, self.E2, Theta) - mu**2
 
     def __repr__(self):
         return f"GalerkinSystem({self.name!r}, N={self.N}, P={self.P}, n_eps={self.n_eps}, C={self.n_forces})"

@@ -19,129 +19,105 @@ sensitivity right-hand sides.
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg as sla
+import scipy.sparse as sp
 
-from .._validation import as_finite_array, check_int, check_positive
-from ..errors import ConvergenceError
+from .._validation import as_finite_array, as_operator, check_choice, check_int, check_positive
+from ..errors import ConvergenceError, KrylovError, ModelEvaluationError
+from .linear import DenseFactor, LinearSolver, dense_lu, solver_options
+from .operator import AugmentedOperator
+from .terms import LinearTerm, LoadTerm, QuadraticTerm
 
 
 @dataclass
 class NewtonInfo:
-    """Outcome of one Newton solve."""
+    """Outcome of one Newton solve.
+
+    ``solver`` names the linear solver used (e.g. ``"dense"``, ``"cg+mean"``) and
+    ``linear_iterations`` the Krylov iterations of each linear solve (empty for direct
+    solvers).
+    """
 
     success: bool
     nit: int
     residual_norm: float
     message: str
+    solver: str = "dense"
+    linear_iterations: tuple = ()
 
 
-def _factor(J):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", sla.LinAlgWarning)
-        lu = sla.lu_factor(J, check_finite=False)
-    # lu_factor only warns on exact singularity; detect it ourselves
-    d = np.abs(np.diag(lu[0]))
-    if not np.all(np.isfinite(d)) or d.min() <= 1e-14 * max(d.max(), 1e-300):
-        return None
-    return lu
-
-
-class _DenseFactor:
-    """LU factors of a dense Jacobian."""
-
-    def __init__(self, lu):
-        self.lu = lu
-
-    def solve(self, rhs):
-        return sla.lu_solve(self.lu, rhs, check_finite=False)
-
-
-class _BlockFactor:
-    """Factors of a decoupled stochastic Galerkin system (see GalerkinSystem.decoupling).
-
-    Solves :math:`\\sum_q c_q K_q X G_q = B` for ``X`` as ``P`` independent ``N x N``
-    solves in the common eigenbasis ``Q`` of the couplings.
-    """
-
-    def __init__(self, Ks, coefs, Q, D):
-        self.Q = Q
-        self.N = Ks[0].shape[0]
-        self.P = Q.shape[0]
-        self.factors = []
-        for p in range(self.P):
-            Ap = sum(c * d * K for c, d, K in zip(coefs, D[:, p], Ks, strict=True))
-            lu = _factor(Ap)
-            if lu is None:
-                raise np.linalg.LinAlgError(f"decoupled block {p} is singular")
-            self.factors.append(lu)
-
-    def solve(self, rhs):
-        rhs = np.asarray(rhs, dtype=float)
-        m = rhs.shape[1] if rhs.ndim == 2 else None
-        B = rhs.reshape(self.N, self.P, -1)
-        Bh = np.einsum("ikm,kp->ipm", B, self.Q)
-        Xh = np.empty_like(Bh)
-        for p, lu in enumerate(self.factors):
-            Xh[:, p, :] = sla.lu_solve(lu, Bh[:, p, :], check_finite=False)
-        X = np.einsum("ipm,kp->ikm", Xh, self.Q)
-        return X.reshape(self.N * self.P, m) if m is not None else X.reshape(-1)
-
-
-def _solve_decoupled(system, eps, lam, tol, maxiter):
-    """Direct solve of a linear, decoupled system with iterative refinement.
-
-    Returns ``(Theta, factor, NewtonInfo)``; refinement steps (the same factors applied
-    to the residual, i.e. Newton on a linear system) count as iterations, so an
-    ill-conditioned system near a singular point still reaches ``tol`` when it can.
-    """
-    from .terms import LinearTerm
-
-    Q, D = system.decoupling()
-    lin = [t for t in system.terms if isinstance(t, LinearTerm)]
-    factor = _BlockFactor([t.K for t in lin], [t.coef.value(eps) for t in lin], Q, D)
-    Theta = system.zeros()
-    rnorm = np.inf
-    for k in range(maxiter + 1):
-        r = system.residual(Theta, eps, lam)
-        rnorm = float(np.linalg.norm(r))
-        if not np.isfinite(rnorm):
-            return Theta, factor, NewtonInfo(False, k, rnorm, "residual became non-finite")
-        if rnorm < tol:
-            return Theta, factor, NewtonInfo(True, k, rnorm, "converged (decoupled direct solve)")
-        Theta = Theta - factor.solve(r.ravel()).reshape(system.shape)
-    msg = f"decoupled direct solve: ||R||={rnorm:.3e} >= tol after {maxiter} refinements"
-    return Theta, factor, NewtonInfo(False, maxiter, rnorm, msg)
-
-
-def newton(fun, z0, tol=1e-10, maxiter=50):
+def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None):
     """Newton's method on ``fun(z) -> (r, J)``.
 
-    Returns ``(z, factor, info)`` where ``factor.solve(rhs)`` solves with the Jacobian
-    at the returned ``z`` (``None`` when the iteration failed).
+    Parameters
+    ----------
+    fun : callable
+        Returns the residual ``r`` (n,) and its Jacobian ``J``: a dense ``(n, n)`` array, or
+        a :class:`~.operator.GalerkinOperator` / :class:`~.operator.AugmentedOperator`
+        handled by ``linear_solver``.
+    z0 : (n,) array_like
+    tol : float
+        Convergence when :math:`\\|r\\|_2 < \\mathrm{tol}`.
+    maxiter : int
+    linear_solver : LinearSolver, optional
+        How the Jacobians are factorized (dense LU when omitted). With a Krylov solver
+        each step is an inexact Newton step (:meth:`LinearSolver.newton_rtol`).
 
-    Convergence is declared when :math:`\\|r\\|_2 < \\mathrm{tol}`; the Jacobian is then
-    evaluated at the converged point, factorized, and used for one final correction
-    (so the returned ``lu`` is exact for sensitivities).
+    Returns
+    -------
+    z : (n,) ndarray
+    factor : object with ``solve(rhs)``, or ``None``
+        Factors of the Jacobian at the returned ``z`` (``None`` when the iteration failed);
+        the Jacobian is evaluated at the converged point and used for one final
+        correction, so ``factor`` is exact for sensitivities.
+    info : NewtonInfo
     """
     z = np.array(z0, dtype=float)
     rnorm = np.inf
+    label = "dense" if linear_solver is None else linear_solver.record.solver
+
+    def info(success, k, message):
+        its = () if linear_solver is None else tuple(linear_solver.record.iterations)
+        return NewtonInfo(success, k, rnorm, message, label, its)
+
     for k in range(maxiter + 1):
-        r, J = fun(z)
+        try:
+            r, J = fun(z)
+        except ModelEvaluationError as e:
+            return z, None, info(False, k, f"model evaluation failed: {e}")
         rnorm = float(np.linalg.norm(r))
         if not np.isfinite(rnorm):
-            return z, None, NewtonInfo(False, k, rnorm, "residual became non-finite")
-        lu = _factor(J)
-        if lu is None:
-            return z, None, NewtonInfo(False, k, rnorm, "Jacobian is singular or not finite")
-        dz = sla.lu_solve(lu, r, check_finite=False)
+            return z, None, info(False, k, "residual became non-finite")
+        if linear_solver is None:
+            lu = dense_lu(J)
+            factor = None if lu is None else DenseFactor(lu)
+            rtol = None
+        else:
+            factor = linear_solver.factorize(J)
+            rtol = linear_solver.newton_rtol(rnorm, tol)
+        if factor is None:
+            return z, None, info(False, k, "Jacobian is singular or not finite")
+        try:
+            dz = factor.solve(r, rtol=rtol)
+        except KrylovError as e:
+            return z, None, info(False, k, f"linear solve of Newton step {k} failed: {e}")
         z = z - dz
         if rnorm < tol:
-            return z, _DenseFactor(lu), NewtonInfo(True, k, rnorm, "converged")
-    return z, None, NewtonInfo(False, maxiter, rnorm, f"no convergence in {maxiter} iterations")
+            return z, factor, info(True, k, "converged")
+    return z, None, info(False, maxiter, f"no convergence in {maxiter} iterations")
+
+
+def _bordered(J, Jl, Cth):
+    """The ECFM bordered operator of ``J``; the same object for the same (linear) ``J``,
+    so the linear solver reuses its factors (Schur complement included) across steps."""
+    cached = getattr(J, "_bordered", None)
+    if cached is None or cached.Jl is not Jl or cached.Cth is not Cth:
+        cached = AugmentedOperator(J, Jl, Cth)
+        if J.is_linear:
+            J._bordered = cached
+    return cached
 
 
 def _check_constraint(system, constraint, n_rows=None):
@@ -153,7 +129,7 @@ def _check_constraint(system, constraint, n_rows=None):
         M_obs, v = constraint
     except (TypeError, ValueError) as e:
         raise TypeError("`constraint` must be a pair (M_obs, v)") from e
-    M_obs = as_finite_array("M_obs", M_obs, shape=(system.n_forces, system.N))
+    M_obs = as_operator("M_obs", M_obs, shape=(system.n_forces, system.N))
     v = as_finite_array("v", v)
     want = (system.n_forces,) if n_rows is None else (n_rows, system.n_forces)
     if v.shape != want:
@@ -175,6 +151,12 @@ class SteadySolution:
         Constraint forces (given, or solved for under a data constraint).
     success, nit, residual_norm, message
         Newton outcome; a failed solve keeps its last iterate for diagnosis only.
+    solver : str
+        The linear solver used (``"dense"``, ``"decoupled"``, ``"sparse-direct"``,
+        ``"cg+mean"``, ``"gmres+mean-amg"``, ...).
+    linear_iterations : list of int
+        Krylov iterations of every linear solve so far (Newton steps, then sensitivities);
+        empty for direct solvers.
     """
 
     system: object
@@ -186,8 +168,14 @@ class SteadySolution:
     residual_norm: float
     message: str
     constrained: bool = False
+    solver: str = "dense"
     _lu: object = field(default=None, repr=False)
     _M_obs: object = field(default=None, repr=False)
+    _linear: object = field(default=None, repr=False)
+
+    @property
+    def linear_iterations(self):
+        return [] if self._linear is None else list(self._linear.record.iterations)
 
     def _require(self):
         if not self.success:
@@ -219,6 +207,39 @@ class SteadySolution:
         if rhs.shape[0] != n or rhs.ndim > 2:
             raise ValueError(f"`rhs` must have shape ({n},) or ({n}, m), got {rhs.shape}")
         return self._solve(rhs)
+
+    def adjoint_gradient(self, g_theta, g_lam=None):
+        """Gradient in :math:`\\epsilon` of a scalar :math:`z(\\Theta, \\lambda)` by one adjoint solve.
+
+        With :math:`J` the (augmented, under a data constraint) Jacobian at the solution,
+        solve :math:`J^T\\mu = \\partial z/\\partial(\\Theta, \\lambda)` and return
+        :math:`dz/d\\epsilon = -(\\partial R/\\partial\\epsilon)^T\\mu_\\Theta` (the constraint
+        rows do not depend on :math:`\\epsilon`). One transposed solve with the stored
+        factors, whatever ``n_eps``; equal to the forward-sensitivity gradient.
+
+        Parameters
+        ----------
+        g_theta : (N, P) array_like
+            :math:`\\partial z/\\partial\\Theta`.
+        g_lam : (C,) array_like, optional
+            :math:`\\partial z/\\partial\\lambda` (constrained solves only).
+
+        Returns
+        -------
+        (n_eps,) ndarray
+        """
+        self._require()
+        sysm = self.system
+        n = sysm.N * sysm.P
+        rhs = as_finite_array("g_theta", g_theta, shape=sysm.shape).ravel()
+        if self.constrained:
+            g_lam = np.zeros(sysm.n_forces) if g_lam is None else g_lam
+            g_lam = as_finite_array("g_lam", g_lam, shape=(sysm.n_forces,))
+            rhs = np.concatenate([rhs, g_lam])
+        elif g_lam is not None:
+            raise ValueError("`g_lam` is only defined for a solve under a data constraint")
+        mu = self._lu.solve_transpose(rhs)
+        return -sysm.eps_vjp(self.Theta, self.eps, mu[:n])
 
     def eps_sensitivity(self):
         """:math:`\\partial\\Theta/\\partial\\epsilon` (N, P, n_eps) and, under a data
@@ -253,7 +274,8 @@ def solve_steady(
     tol=1e-10,
     maxiter=50,
     strict=False,
-    structure="auto",
+    solver="auto",
+    structure=None,
 ):
     """Solve the steady system :math:`R(\\Theta; \\epsilon, \\lambda) = 0` by Newton's method.
 
@@ -265,7 +287,8 @@ def solve_steady(
         Given constraint forces (ignored with ``constraint``).
     constraint : (M_obs, v), optional
         Data constraint :math:`\\mathcal M\\,\\Theta\\,\\mathbb E[\\Psi] = v` with
-        ``M_obs`` (C, N) and ``v`` (C,); :math:`\\lambda` becomes an unknown.
+        ``M_obs`` (C, N) (dense or sparse) and ``v`` (C,); :math:`\\lambda` becomes an
+        unknown.
     Theta0 : (N, P) array_like, optional
         Initial guess (zero by default).
     tol : float
@@ -273,70 +296,56 @@ def solve_steady(
     maxiter : int
     strict : bool
         Raise :class:`ConvergenceError` instead of returning ``success=False``.
-    structure : {"auto", "dense"}
-        ``"auto"`` solves a linear system whose stochastic couplings share an eigenbasis
-        as ``P`` decoupled ``N x N`` systems (no dense ``(NP)^2`` matrix; see
-        :meth:`GalerkinSystem.decoupling`); ``"dense"`` always uses the dense Newton
-        block solve.
+    solver : str, SolverOptions or dict
+        Linear solver: ``"auto"`` (default), ``"dense"``, ``"decoupled"``,
+        ``"sparse-direct"``, ``"cg"`` or ``"gmres"`` (see :mod:`ecfm_uq.system.linear`);
+        a :class:`~ecfm_uq.system.SolverOptions` or dict also sets the preconditioner,
+        Krylov tolerance and iteration limits. A linear system is solved by Newton too:
+        one step, plus refinement steps until ``tol`` is met.
+    structure : {"auto", "dense"}, optional
+        Older name for ``solver`` (``"auto"`` or ``"dense"`` only).
 
     Returns
     -------
     SteadySolution
+        ``solver`` and ``linear_iterations`` report what the linear solves did; a Krylov
+        solve that misses its tolerance makes ``success`` False.
     """
     eps = system.check_eps(eps)
     tol = check_positive("tol", tol)
     maxiter = check_int("maxiter", maxiter, minimum=1)
+    if structure is not None:
+        solver = check_choice("structure", structure, ("auto", "dense"))
+    opts = solver_options(solver)
     M_obs, v = _check_constraint(system, constraint)
     N, P = system.shape
     n = N * P
     Theta0 = system.zeros() if Theta0 is None else as_finite_array("Theta0", Theta0, shape=(N, P))
-    if structure not in ("auto", "dense"):
-        raise ValueError(f"unknown `structure` {structure!r}; choose 'auto' or 'dense'")
-    if M_obs is None and structure == "auto" and system.decoupling() is not None:
-        lam = system.check_lam(lam)
-        try:
-            Theta, factor, info = _solve_decoupled(system, eps, lam, tol, maxiter)
-        except np.linalg.LinAlgError as e:
-            Theta, factor, info = system.zeros(), None, NewtonInfo(False, 1, np.inf, str(e))
-        sol = SteadySolution(
-            system,
-            eps,
-            Theta,
-            lam,
-            info.success,
-            info.nit,
-            info.residual_norm,
-            info.message,
-            _lu=factor if info.success else None,
-        )
-        if strict and not sol.success:
-            raise ConvergenceError(
-                f"{system.name}: steady solve failed at eps={eps}: {info.message}"
-            )
-        return sol
+    linear = LinearSolver(system, opts, constrained=M_obs is not None, steady=True)
     if M_obs is None:
         lam = system.check_lam(lam)
 
         def fun(z):
             Th = z.reshape(N, P)
-            return system.residual(Th, eps, lam).ravel(), system.jacobian(Th, eps)
+            return system.residual(Th, eps, lam).ravel(), system.jacobian_operator(Th, eps)
 
-        z, lu, info = newton(fun, Theta0.ravel(), tol, maxiter)
+        z, factor, info = newton(fun, Theta0.ravel(), tol, maxiter, linear_solver=linear)
         Theta, lam_out = z.reshape(N, P), lam
     else:
-        Cth = np.kron(M_obs, system.E1[None, :])
+        Cth = system.constraint_jacobian(M_obs)
         Jl = system.lam_jacobian()
-        C = system.n_forces
 
         def fun(z):
             Th, lm = z[:n].reshape(N, P), z[n:]
             r = np.concatenate([system.residual(Th, eps, lm).ravel(), Cth @ z[:n] - v])
-            J = np.block([[system.jacobian(Th, eps), Jl], [Cth, np.zeros((C, C))]])
-            return r, J
+            return r, _bordered(system.jacobian_operator(Th, eps), Jl, Cth)
 
-        z0 = np.concatenate([Theta0.ravel(), np.zeros(C)])
-        z, lu, info = newton(fun, z0, tol, maxiter)
+        z0 = np.concatenate([Theta0.ravel(), np.zeros(system.n_forces)])
+        z, factor, info = newton(fun, z0, tol, maxiter, linear_solver=linear)
         Theta, lam_out = z[:n].reshape(N, P), z[n:]
+    message = info.message
+    if info.success and linear.name == "decoupled":
+        message = "converged (decoupled direct solve)"
     sol = SteadySolution(
         system,
         eps,
@@ -345,18 +354,29 @@ def solve_steady(
         info.success,
         info.nit,
         info.residual_norm,
-        info.message,
+        message,
         constrained=M_obs is not None,
-        _lu=lu,
+        solver=linear.record.solver,
+        _lu=factor,
         _M_obs=M_obs,
+        _linear=linear,
     )
     if strict and not sol.success:
-        raise ConvergenceError(f"{system.name}: steady Newton failed at eps={eps}: {info.message}")
+        raise ConvergenceError(f"{system.name}: steady Newton failed at eps={eps}: {message}")
     return sol
 
 
 def solve_continuation(
-    system, eps_start, eps_end, *, Theta0=None, max_halvings=6, tol=1e-10, maxiter=50, strict=False
+    system,
+    eps_start,
+    eps_end,
+    *,
+    Theta0=None,
+    max_halvings=6,
+    tol=1e-10,
+    maxiter=50,
+    strict=False,
+    solver="auto",
 ):
     """Solve at ``eps_end`` by Newton continuation along the straight path from ``eps_start``.
 
@@ -376,6 +396,8 @@ def solve_continuation(
     tol, maxiter : Newton settings per step.
     strict : bool
         Raise :class:`ConvergenceError` instead of returning ``success=False``.
+    solver : str, SolverOptions or dict
+        Linear solver, as for :func:`solve_steady`.
 
     Returns
     -------
@@ -393,7 +415,9 @@ def solve_continuation(
         steps = 2**h
         Theta, nit = Theta0, 0
         for t in np.arange(1, steps + 1) / steps:
-            sol = solve_steady(system, e0 + t * (e1 - e0), Theta0=Theta, tol=tol, maxiter=maxiter)
+            sol = solve_steady(
+                system, e0 + t * (e1 - e0), Theta0=Theta, tol=tol, maxiter=maxiter, solver=solver
+            )
             nit += sol.nit
             if not sol.success:
                 sol.message = f"continuation step t={t:.4g} of {steps}: {sol.message}"
@@ -431,6 +455,10 @@ class Trajectory:
         Index of the step whose Newton solve failed.
     nit : (n_steps,) ndarray
         Newton iterations per step.
+    solver : str
+        The linear solver used.
+    linear_iterations : list of int
+        Krylov iterations of every linear solve (empty for direct solvers).
     """
 
     times: np.ndarray
@@ -442,6 +470,161 @@ class Trajectory:
     message: str
     failed_step: int | None
     nit: np.ndarray
+    solver: str = "dense"
+    linear_iterations: list = field(default_factory=list)
+    _adjoint: object = field(default=None, repr=False)
+
+    def adjoint_gradient(self, g_theta, g_lam=None):
+        """Gradient in :math:`\\epsilon` of :math:`z = \\sum_t z_t(\\Theta_t, \\lambda_t)` by the
+        discrete adjoint of backward Euler (needs ``march(..., keep_factors=True)``).
+
+        Backward in time, with :math:`A_t` the (augmented) step Jacobian,
+
+        .. math::
+
+            A_t^T\\mu_t = \\frac{\\partial z}{\\partial(\\Theta_t, \\lambda_t)}
+                + \\begin{bmatrix}(M/\\Delta t)^T\\mu_{t+1,\\Theta}\\\\0\\end{bmatrix},
+            \\qquad
+            \\frac{dz}{d\\epsilon} = -\\sum_t
+                \\Bigl(\\frac{\\partial R_t}{\\partial\\epsilon}\\Bigr)^T\\mu_{t,\\Theta},
+
+        one transposed solve per step with the factors kept from the forward march,
+        whatever the number of parameters (the forward sensitivities of Eq.
+        discrete_sens need ``n_eps`` right-hand sides per step).
+
+        Parameters
+        ----------
+        g_theta : (n_steps + 1, N, P) array_like
+            :math:`\\partial z/\\partial\\Theta_t` (row 0 is ignored: the initial state
+            does not depend on :math:`\\epsilon`).
+        g_lam : (n_steps + 1, C) array_like, optional
+            :math:`\\partial z/\\partial\\lambda_t` (constrained marches).
+
+        Returns
+        -------
+        (n_eps,) ndarray
+        """
+        if self._adjoint is None:
+            raise ValueError("march with keep_factors=True to compute adjoint gradients")
+        if not self.success:
+            raise ConvergenceError(f"adjoint of a failed march: {self.message}")
+        system, eps, factors, mass_T = self._adjoint
+        n_t, N, P = self.Theta.shape
+        n = N * P
+        g_theta = as_finite_array("g_theta", g_theta, shape=(n_t, N, P)).reshape(n_t, n)
+        C = self.lam.shape[1]
+        if C:
+            g_lam = np.zeros((n_t, C)) if g_lam is None else g_lam
+            g_lam = as_finite_array("g_lam", g_lam, shape=(n_t, C))
+        elif g_lam is not None:
+            raise ValueError("`g_lam` is only defined for a march under a data constraint")
+        grad = np.zeros(system.n_eps)
+        carry = np.zeros(n)
+        for t in range(n_t - 1, 0, -1):
+            rhs = g_theta[t] + carry
+            if C:
+                rhs = np.concatenate([rhs, g_lam[t]])
+            mu = factors[t - 1].solve_transpose(rhs)[:n]
+            grad -= system.eps_vjp(self.Theta[t], eps, mu, self.times[t])
+            carry = mass_T(mu)
+        return grad
+
+
+_COMPILED_MAX_N = 128
+
+
+def _compiled_march(
+    linear, system, eps, Theta0, dt, n_steps, t0, M_obs, V, sens, tol, maxiter, keep, guess
+):
+    """March with the compiled kernel when the system qualifies, else ``None``.
+
+    Qualifies: ``P = 1``, the dense solver, at most one quadratic term, ``N`` at most
+    128 (its tensor is kept as a coordinate list of the nonzeros), terms of the library's
+    types. The load and its derivative are evaluated at every step time beforehand.
+    """
+    from . import _kernels
+
+    N, P = system.shape
+    quads = [t for t in system.terms if isinstance(t, QuadraticTerm)]
+    if P != 1 or linear.name != "dense" or len(quads) > 1 or N > _COMPILED_MAX_N:
+        return None
+    lin = [t for t in system.terms if isinstance(t, LinearTerm)]
+    loads = [t for t in system.terms if isinstance(t, LoadTerm)]
+    n_eps = system.n_eps
+    times = t0 + dt * np.arange(n_steps + 1)
+    dense = [t.K.toarray() if t.sparse else t.K for t in lin]
+    Ks = np.array(dense).reshape(len(lin), N, N)
+    # with P = 1 the coupling G = E[g Psi_0 Psi_0] is a scalar factor of the term
+    g00 = np.array([t.G[0, 0] for t in lin])
+    cs = np.array([t.coef.value(eps) for t in lin]) * g00
+    gK = np.array([t.coef.grad(eps) for t in lin], dtype=float).reshape(len(lin), n_eps)
+    gK = gK * g00[:, None]
+    Klin = np.einsum("q,qij->ij", cs, Ks) if lin else np.zeros((N, N))
+    if quads:
+        qi, qj, qk, qv = quads[0].coordinates()
+        cq, gq = quads[0].coef.value(eps), np.asarray(quads[0].coef.grad(eps), dtype=float)
+    else:
+        qi = qj = qk = np.zeros(0, dtype=np.int64)
+        qv, cq, gq = np.zeros(0), 0.0, np.zeros(n_eps)
+    F = np.zeros((n_steps + 1, N))
+    dF = np.zeros((n_steps + 1, N, n_eps))
+    for term in loads:
+        for s, t in enumerate(times):
+            F[s] -= term.apply(np.zeros((N, 1)), eps, t)[:, 0]
+            if sens:
+                dF[s] -= term.eps_jacobian(np.zeros((N, 1)), eps, t)
+    Mdt = system.mass_matrix() / dt
+    if M_obs is None:
+        Cobs, Gam, Vd = np.zeros((0, N)), np.zeros((N, 0)), np.zeros((n_steps + 1, 0))
+    else:
+        Cobs = M_obs.toarray() if sp.issparse(M_obs) else np.asarray(M_obs)
+        Gam = -system.lam_jacobian()
+        Vd = np.asarray(V, dtype=float)
+    C = Cobs.shape[0]
+    if guess is None:
+        start = np.zeros((n_steps + 1, N + C))
+    else:
+        start = np.concatenate([guess.Theta[:, :, 0], guess.lam.reshape(n_steps + 1, C)], 1)
+    try:
+        with np.errstate(all="ignore"):
+            Th, lam, dTh, dlam, nits, failed, rnorm, Js = _kernels.march_p1(
+                Mdt, Klin, Ks, gK, qi, qj, qk, qv, float(cq), gq, F, dF, Cobs, Gam, Vd,
+                np.ascontiguousarray(Theta0[:, 0]), start, guess is not None,
+                tol, maxiter, bool(sens), bool(keep),
+            )  # fmt: skip
+        message = None
+    except np.linalg.LinAlgError:  # a singular step Jacobian inside the kernel
+        failed, rnorm, message = -2, np.inf, "Jacobian is singular"
+    label = "dense (compiled)"
+    if failed != -1:
+        k = (failed if failed >= 0 else 0) + 1
+        msg = (
+            f"{system.name}: Newton failed at step {k} (t={times[k]:.6g}) with "
+            f"||R||={rnorm:.3e}: {message or f'no convergence in {maxiter} iterations'}"
+        )
+        if failed == -2:
+            return Trajectory(
+                times[:1], Theta0[None], np.zeros((1, C)), None, None, False, msg, 1,
+                np.zeros(0, dtype=int), label,
+            )  # fmt: skip
+        return Trajectory(
+            times[:k], Th[:k, :, None], lam[:k], None, None, False, msg, k, nits[:k], label
+        )
+    factors = [DenseFactor(dense_lu(J)) for J in Js] if keep else None
+    return Trajectory(
+        times,
+        Th[:, :, None],
+        lam,
+        dTh[:, :, None, :] if sens else None,
+        dlam if sens and M_obs is not None else None,
+        True,
+        "converged at every step",
+        None,
+        nits,
+        label,
+        [],
+        (system, eps, factors, lambda x: Mdt.T @ x) if keep else None,
+    )
 
 
 def march(
@@ -457,6 +640,9 @@ def march(
     tol=1e-10,
     maxiter=30,
     strict=False,
+    solver="auto",
+    keep_factors=False,
+    guess=None,
 ):
     """Integrate :math:`M\\dot\\Theta + R(\\Theta; \\epsilon, \\lambda, t) = 0` by backward Euler.
 
@@ -480,6 +666,23 @@ def march(
     tol, maxiter : Newton settings per step.
     strict : bool
         Raise :class:`ConvergenceError` on failure instead of returning ``success=False``.
+    solver : str, SolverOptions or dict
+        Linear solver for the step Jacobians :math:`M/\\Delta t + J`, as for
+        :func:`solve_steady` (``"decoupled"`` is for steady solves only).
+    keep_factors : bool
+        Keep every step's factorized Jacobian for :meth:`Trajectory.adjoint_gradient`.
+    guess : Trajectory, optional
+        A trajectory on the same time grid (e.g. at the previous parameters of an
+        optimizer) whose states start each step's Newton iteration instead of the
+        previous step's state (a warm start: fewer Newton iterations, same solution to
+        ``tol``).
+
+    Notes
+    -----
+    Small deterministic systems (``P = 1``, dense solver, at most one quadratic term,
+    ``N <= 128``) are marched by one compiled kernel (:mod:`._kernels`) with the same
+    maths and no Python work per step; ``Trajectory.solver`` then reads
+    ``"dense (compiled)"``.
 
     Returns
     -------
@@ -500,9 +703,43 @@ def march(
     M_obs, V = _check_constraint(system, constraint, n_rows=n_steps + 1)
     constrained = M_obs is not None
     C = system.n_forces if constrained else 0
-    Mdt = system.mass_matrix() / dt
+    if system.M is None:
+        system.mass_matrix()  # raises the "no mass matrix" error
+    linear = LinearSolver(system, solver_options(solver), constrained=constrained, steady=False)
+    if guess is not None:
+        if not isinstance(guess, Trajectory) or guess.Theta.shape != (n_steps + 1, N, P):
+            raise ValueError(
+                f"`guess` must be a Trajectory of shape {(n_steps + 1, N, P)} (a previous "
+                "march on the same grid)"
+            )
+        if constrained and guess.lam.shape != (n_steps + 1, C):
+            raise ValueError("`guess` must come from a march under the same data constraint")
+    args = (system, eps, Theta0, dt, n_steps, t0, M_obs, V, sensitivities, tol, maxiter)
+    traj = _compiled_march(linear, *args, keep_factors, guess)
+    if traj is not None:
+        if strict and not traj.success:
+            raise ConvergenceError(traj.message)
+        return traj
+    if linear.name == "dense":
+        Mdt = system.mass_matrix() / dt
+
+        def mass(X):  # (NP,) or (NP, m)
+            return Mdt @ X
+
+        def mass_T(x):
+            return Mdt.T @ x
+    else:
+
+        def mass(X):
+            Xr = X.reshape(N, P, -1)
+            out = np.stack([system.apply_mass(Xr[:, :, j]) for j in range(Xr.shape[2])], -1)
+            return out.reshape(X.shape) / dt
+
+        def mass_T(x):
+            return system.apply_mass(x.reshape(N, P), transpose=True).ravel() / dt
+
     if constrained:
-        Cth = np.kron(M_obs, system.E1[None, :])
+        Cth = system.constraint_jacobian(M_obs)
         Jl = system.lam_jacobian()
 
     times = t0 + dt * np.arange(n_steps + 1)
@@ -512,6 +749,7 @@ def march(
     dTh = np.zeros((n_steps + 1, n, system.n_eps)) if sensitivities else None
     dlam = np.zeros((n_steps + 1, C, system.n_eps)) if sensitivities and constrained else None
     nits = np.zeros(n_steps, dtype=int)
+    factors = [] if keep_factors else None
 
     for s in range(n_steps):
         t1 = times[s + 1]
@@ -522,20 +760,22 @@ def march(
 
             def fun(z, prev=prev, t1=t1, v1=v1):
                 T1, l1 = z[:n].reshape(N, P), z[n:]
-                r1 = Mdt @ (z[:n] - prev) + system.residual(T1, eps, l1, t1).ravel()
-                J = np.block([[Mdt + system.jacobian(T1, eps, t1), Jl], [Cth, np.zeros((C, C))]])
+                r1 = mass(z[:n] - prev) + system.residual(T1, eps, l1, t1).ravel()
+                J = _bordered(system.jacobian_operator(T1, eps, t1, dt=dt), Jl, Cth)
                 return np.concatenate([r1, Cth @ z[:n] - v1]), J
 
             z0 = np.concatenate([prev, lam[s]])
+            if guess is not None:
+                z0 = np.concatenate([guess.Theta[s + 1].ravel(), guess.lam[s + 1]])
         else:
 
             def fun(z, prev=prev, t1=t1):
                 T1 = z.reshape(N, P)
-                r1 = Mdt @ (z - prev) + system.residual(T1, eps, None, t1).ravel()
-                return r1, Mdt + system.jacobian(T1, eps, t1)
+                r1 = mass(z - prev) + system.residual(T1, eps, None, t1).ravel()
+                return r1, system.jacobian_operator(T1, eps, t1, dt=dt)
 
-            z0 = prev
-        z, lu, info = newton(fun, z0, tol, maxiter)
+            z0 = prev if guess is None else guess.Theta[s + 1].ravel()
+        z, lu, info = newton(fun, z0, tol, maxiter, linear_solver=linear)
         nits[s] = info.nit
         if not info.success:
             msg = (
@@ -555,13 +795,17 @@ def march(
                 msg,
                 s + 1,
                 nits[: s + 1],
+                linear.record.solver,
+                list(linear.record.iterations),
             )
         Th[s + 1] = z[:n].reshape(N, P)
+        if keep_factors:
+            factors.append(lu)
         if constrained:
             lam[s + 1] = z[n:]
         if sensitivities:
             T1 = Th[s + 1]
-            rhs = Mdt @ dTh[s] - system.eps_jacobian(T1, eps, t1)
+            rhs = mass(dTh[s]) - system.eps_jacobian(T1, eps, t1)
             if constrained:
                 rhs = np.vstack([rhs, np.zeros((C, system.n_eps))])
             S = lu.solve(rhs)
@@ -579,4 +823,7 @@ def march(
         "converged at every step",
         None,
         nits,
+        linear.record.solver,
+        list(linear.record.iterations),
+        (system, eps, factors, mass_T) if keep_factors else None,
     )

@@ -21,8 +21,10 @@ from __future__ import annotations
 import numbers
 
 import numpy as np
+import scipy.sparse as sp
 
-from .._validation import as_finite_array, check_int
+from .._validation import as_finite_array, as_operator, check_int, is_sparse
+from .._validation import describe as _describe
 
 
 class Coefficient:
@@ -34,34 +36,82 @@ class Coefficient:
         ``value(eps) -> float``.
     grad : callable
         ``grad(eps) -> (n_eps,)``.
+    indices : sequence of int, optional
+        The parameter indices :math:`m` the coefficient reads; the system checks them
+        against its ``n_eps`` at construction. ``None`` means unknown (a user callable).
+    label : str, optional
+        Shown in error messages, e.g. ``"10**(-eps[0])"``.
+
+    Notes
+    -----
+    Evaluation is guarded: an overflow, NaN or inf in ``value`` or ``grad`` raises
+    :class:`~ecfm_uq.errors.ModelEvaluationError` naming the coefficient and ``eps``,
+    which the solvers report as a failed solve instead of a raw numpy/Python error.
     """
 
-    def __init__(self, value, grad):
-        self.value = value
-        self.grad = grad
+    def __init__(self, value, grad, indices=None, label="coefficient"):
+        if not callable(value):
+            raise TypeError(f"`value` must be callable value(eps), got {_describe(value)}")
+        if not callable(grad):
+            raise TypeError(f"`grad` must be callable grad(eps), got {_describe(grad)}")
+        self._value = value
+        self._grad = grad
+        self.indices = None if indices is None else tuple(int(m) for m in indices)
+        self.label = label
+
+    def value(self, eps):
+        """:math:`c(\\epsilon)` as a finite float (ModelEvaluationError otherwise)."""
+        try:
+            with np.errstate(over="raise", invalid="raise"):
+                c = self._value(eps)
+        except (OverflowError, FloatingPointError, ZeroDivisionError) as e:
+            raise _evaluation_error(self.label, eps, e) from e
+        try:
+            finite = np.all(np.isfinite(c))
+        except TypeError:
+            finite = True  # not numeric: let the caller's arithmetic say so
+        if not finite:
+            raise _evaluation_error(self.label, eps, f"value {c}")
+        return c
+
+    def grad(self, eps):
+        """:math:`\\nabla_\\epsilon c`, shape ``(n_eps,)``, finite (ModelEvaluationError otherwise)."""
+        try:
+            with np.errstate(over="raise", invalid="raise"):
+                g = self._grad(eps)
+        except (OverflowError, FloatingPointError, ZeroDivisionError) as e:
+            raise _evaluation_error(self.label, eps, e) from e
+        if not np.all(np.isfinite(g)):
+            raise _evaluation_error(self.label, eps, "non-finite gradient")
+        return g
 
     @classmethod
     def constant(cls, c):
         """:math:`c(\\epsilon) = c`."""
-        c = float(c)
-        return cls(lambda eps: c, lambda eps: np.zeros(len(eps)))
+        c = _real("c", c)
+        return cls(lambda eps: c, lambda eps: np.zeros(len(eps)), indices=(), label=f"{c:g}")
 
     @classmethod
     def parameter(cls, index, scale=1.0):
         """:math:`c(\\epsilon) = s\\,\\epsilon_m` (e.g. the source scale :math:`\\epsilon_2`)."""
         m = check_int("index", index, minimum=0)
+        scale = _real("scale", scale)
 
         def grad(eps):
             g = np.zeros(len(eps))
             g[m] = scale
             return g
 
-        return cls(lambda eps: scale * float(eps[m]), grad)
+        return cls(
+            lambda eps: scale * float(eps[m]), grad, indices=(m,), label=f"{scale:g}*eps[{m}]"
+        )
 
     @classmethod
     def power10(cls, index, sign=-1.0, scale=1.0):
         """:math:`c(\\epsilon) = s\\,10^{\\pm\\epsilon_m}` (the viscosity :math:`10^{-\\epsilon_1}`)."""
         m = check_int("index", index, minimum=0)
+        sign = _real("sign", sign)
+        scale = _real("scale", scale)
 
         def value(eps):
             return scale * 10.0 ** (sign * float(eps[m]))
@@ -71,7 +121,29 @@ class Coefficient:
             g[m] = np.log(10.0) * sign * value(eps)
             return g
 
-        return cls(value, grad)
+        return cls(value, grad, indices=(m,), label=f"{scale:g}*10**({sign:g}*eps[{m}])")
+
+
+def _real(name, value):
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"`{name}` must be a real number, got {_describe(value)}")
+    value = float(value)
+    if not np.isfinite(value):
+        raise ValueError(f"`{name}` must be finite, got {value}")
+    return value
+
+
+def _evaluation_error(label, eps, cause):
+    from ..errors import ModelEvaluationError
+
+    if isinstance(cause, OverflowError):
+        cause = "overflow"
+    elif isinstance(cause, FloatingPointError | ZeroDivisionError):
+        cause = f"floating-point error: {cause}"
+    return ModelEvaluationError(
+        f"coefficient {label} cannot be evaluated at eps={np.asarray(eps).tolist()} "
+        f"({cause}); keep the parameters in a physical range (e.g. `bounds`)"
+    )
 
 
 def as_coefficient(c):
@@ -80,7 +152,29 @@ def as_coefficient(c):
         return c
     if isinstance(c, numbers.Real) and not isinstance(c, bool):
         return Coefficient.constant(c)
-    raise TypeError(f"`coef` must be a number or a Coefficient, got {type(c).__name__}")
+    raise TypeError(
+        f"`coef` must be a number or a Coefficient, got {_describe(c)}; "
+        "wrap functions of eps as Coefficient(value, grad)"
+    )
+
+
+def right_multiply(X, G, G_sparse=None):
+    """:math:`X G` for ``X`` of shape (N, P), with the sparse copy of ``G`` when given.
+
+    The stochastic couplings of affine random inputs have a few nonzeros a row, so for
+    large ``P`` the product costs ``O(N nnz(G))`` instead of ``O(N P^2)``.
+    """
+    if G_sparse is None:
+        return X @ G
+    return np.asarray(G_sparse.T @ X.T).T
+
+
+def _sparse_coupling(G):
+    """CSR copy of a coupling worth multiplying sparsely, else ``None``."""
+    P = G.shape[0]
+    if P < 10 or np.count_nonzero(G) > 0.25 * P * P:
+        return None
+    return sp.csr_matrix(G)
 
 
 class LinearTerm:
@@ -88,45 +182,91 @@ class LinearTerm:
 
     Parameters
     ----------
-    K : (N, N) array_like
-        Spatial operator.
+    K : (N, N) ndarray or scipy.sparse matrix
+        Spatial operator. A sparse ``K`` (e.g. from scikit-fem) is kept sparse: the
+        residual, the Jacobian action and the solvers never form an ``N x N`` dense array.
     coef : float or Coefficient
         :math:`c(\\epsilon)`.
     G : (P, P) array_like, optional
         :math:`G_{k\\ell} = \\mathbb E[g(\\omega)\\Psi_k\\Psi_\\ell]` (symmetric). ``None``
         means :math:`g = 1`, i.e. :math:`G = \\mathbb E[\\Psi_k\\Psi_\\ell]`, supplied by the
         system.
+
+    Notes
+    -----
+    The term only describes itself (``coef``, ``K``, ``G``); whether its Jacobian
+    :math:`c\\,K \\otimes G^T` is assembled dense, assembled sparse or applied matrix-free
+    is decided by the solver layer (:mod:`.operator`, :mod:`.linear`).
     """
 
     def __init__(self, K, coef=1.0, G=None, name="linear"):
-        self.K = as_finite_array("K", K, ndim=2)
-        if self.K.shape[0] != self.K.shape[1]:
-            raise ValueError(f"`K` must be square, got {self.K.shape}")
+        self.K = as_operator("K", K, square=True)
         self.coef = as_coefficient(coef)
         self.G = None if G is None else as_finite_array("G", G, ndim=2)
         self.name = name
+
+    @property
+    def sparse(self):
+        """True when ``K`` is a ``scipy.sparse`` matrix."""
+        return is_sparse(self.K)
 
     def bind(self, E2):
         """Fill the default stochastic coupling from the system's Gram matrix."""
         if self.G is None:
             self.G = E2
-        self._KG = None
         if self.G.shape != E2.shape:
             raise ValueError(
                 f"term {self.name!r}: `G` has shape {self.G.shape}, expected {E2.shape}"
             )
+        self._G_sparse = _sparse_coupling(self.G)
+        self._kron = {}
+
+    def action(self, X):
+        """:math:`K X G` (without the coefficient) for ``X`` of shape (N, P)."""
+        return right_multiply(np.asarray(self.K @ X), self.G, self._G_sparse)
+
+    def action_transpose(self, Y):
+        """:math:`K^T Y G^T` for ``Y`` of shape (N, P): the transposed Jacobian's action."""
+        GT = None if self._G_sparse is None else self._G_sparse.T.tocsr()
+        return right_multiply(np.asarray(self.K.T @ Y), self.G.T, GT)
+
+    def kron(self, kind):
+        """:math:`K \\otimes G^T` as a dense (``kind="dense"``) or CSR (``"sparse"``) matrix.
+
+        Cached: the operator is fixed, only the coefficient varies with :math:`\\epsilon`.
+        """
+        if kind not in self._kron:
+            if kind == "dense":
+                K = self.K.toarray() if self.sparse else self.K
+                self._kron[kind] = np.kron(K, self.G.T)
+            else:
+                self._kron[kind] = sp.kron(self.K, sp.csr_matrix(self.G.T), format="csr")
+        return self._kron[kind]
+
+    def is_symmetric(self):
+        """Whether :math:`K` and :math:`G` are symmetric (to 1e-12 of their scale)."""
+        if not hasattr(self, "_symmetric"):
+            self._symmetric = _symmetric(self.K) and _symmetric(self.G)
+        return self._symmetric
 
     def apply(self, Theta, eps, t=None):
-        return self.coef.value(eps) * (self.K @ Theta @ self.G)
-
-    def jacobian(self, Theta, eps, t=None):
-        if getattr(self, "_KG", None) is None:
-            self._KG = np.kron(self.K, self.G.T)  # fixed: only the coefficient varies
-        return self.coef.value(eps) * self._KG
+        return self.coef.value(eps) * self.action(Theta)
 
     def eps_jacobian(self, Theta, eps, t=None):
-        base = (self.K @ Theta @ self.G).ravel()
-        return np.outer(base, self.coef.grad(eps))
+        return np.outer(self.action(Theta).ravel(), self.coef.grad(eps))
+
+    def eps_vjp(self, Theta, eps, mu, t=None):
+        """:math:`(\\partial R/\\partial\\epsilon)^T\\mu` without the (NP, n_eps) matrix."""
+        return self.coef.grad(eps) * float(np.vdot(self.action(Theta), mu))
+
+
+def _symmetric(A):
+    if is_sparse(A):
+        D = (A - A.T).tocsr()
+        err = abs(D).max() if D.nnz else 0.0
+    else:
+        err = np.abs(A - A.T).max()
+    return bool(err <= 1e-12 * max(abs(A).max(), 1e-300))
 
 
 class DenseQuadraticForm:
@@ -166,7 +306,16 @@ class QuadraticTerm:
     """
 
     def __init__(self, form, coef=1.0, name="quadratic"):
-        self.form = form if hasattr(form, "matrix") else DenseQuadraticForm(form)
+        if hasattr(form, "matrix"):
+            missing = [a for a in ("apply", "matrix", "size") if not hasattr(form, a)]
+            if missing:
+                raise TypeError(
+                    f"`form` {type(form).__name__} lacks {missing}; pass an (N, N, N) array or "
+                    "an object with apply(X, Y), matrix(x) and size (see DenseQuadraticForm)"
+                )
+            self.form = form
+        else:
+            self.form = DenseQuadraticForm(form)
         self.coef = as_coefficient(coef)
         self.name = name
 
@@ -186,18 +335,59 @@ class QuadraticTerm:
     def apply(self, Theta, eps, t=None):
         return self.coef.value(eps) * self._raw(Theta)
 
-    def jacobian(self, Theta, eps, t=None):
-        N, P = Theta.shape
-        c = self.coef.value(eps)
-        if P == 1:
-            return c * self.form.matrix(Theta[:, 0])
-        S = np.stack([self.form.matrix(Theta[:, k]) for k in range(P)])  # (P, N, N)
-        # J[i, a, j, b] = sum_k E3[a, b, k] S_k[i, j], as one matrix product
-        T = (self._E3.reshape(P * P, P) @ S.reshape(P, N * N)).reshape(P, P, N, N)
-        return c * T.transpose(2, 0, 3, 1).reshape(N * P, N * P)
+    def linear_action(self, Theta, X):
+        """Directional derivative of the projected form at ``Theta`` along ``X`` (no coefficient).
+
+        The Jacobian action :math:`q(X_b, \\Theta_c) + q(\\Theta_b, X_c)` projected with
+        :math:`\\mathbb E[\\Psi_b\\Psi_c\\Psi_\\ell]`, without forming the Jacobian.
+        """
+        if self._P == 1:
+            return self.form.apply(X, Theta) + self.form.apply(Theta, X)
+        bs, cs = self._bs, self._cs
+        return (
+            self.form.apply(X[:, bs], Theta[:, cs]) + self.form.apply(Theta[:, bs], X[:, cs])
+        ) @ self._W
+
+    def coordinates(self):
+        """Nonzeros of the tensor :math:`A_{ijk}` as ``(i, j, k, value)`` arrays (cached).
+
+        Built from the form by contracting unit vectors (``N^2`` columns), so any form
+        with ``apply`` works; entries below 1e-14 of the largest are dropped (a sine
+        basis' triple products vanish unless the wavenumbers add up).
+        """
+        if getattr(self, "_coo", None) is None:
+            n = self.form.size
+            if hasattr(self.form, "A"):
+                A = self.form.A
+            else:
+                eye = np.eye(n)
+                X = np.repeat(eye, n, axis=1)  # column j * n + k is e_j
+                Y = np.tile(eye, (1, n))  # ... and e_k
+                A = self.form.apply(X, Y).reshape(n, n, n)
+            keep = np.abs(A) > 1e-14 * max(np.abs(A).max(), 1e-300)
+            i, j, k = np.nonzero(keep)
+            self._coo = (i.astype(np.int64), j.astype(np.int64), k.astype(np.int64), A[keep])
+        return self._coo
+
+    def matrices(self, Theta):
+        """:math:`S_k = S(\\Theta_{:,k})`, the form's linearization per chaos column, (P, N, N)."""
+        return [self.form.matrix(Theta[:, k]) for k in range(Theta.shape[1])]
 
     def eps_jacobian(self, Theta, eps, t=None):
         return np.outer(self._raw(Theta).ravel(), self.coef.grad(eps))
+
+    def eps_vjp(self, Theta, eps, mu, t=None):
+        """:math:`(\\partial R/\\partial\\epsilon)^T\\mu` without the (NP, n_eps) matrix."""
+        return self.coef.grad(eps) * float(np.vdot(self._raw(Theta), mu))
+
+
+def _as_load_vector(F):
+    """A load vector (N,) from an array or a sparse (N, 1) / (1, N) matrix."""
+    if is_sparse(F):
+        if 1 not in F.shape:
+            raise ValueError(f"`F` must be a vector; got a sparse matrix of shape {F.shape}")
+        F = as_operator("F", F).toarray().ravel()
+    return as_finite_array("F", F, ndim=1)
 
 
 class LoadTerm:
@@ -220,56 +410,118 @@ class LoadTerm:
 
     def __init__(self, F, dF=None, name="load"):
         if not callable(F):
-            raise TypeError("`F` must be callable F(eps, t); use LoadTerm.constant for arrays")
+            raise TypeError(
+                f"`F` must be callable F(eps, t), got {_describe(F)}; "
+                "use LoadTerm.constant(F) for a fixed array"
+            )
+        if dF is not None and not callable(dF):
+            raise TypeError(f"`dF` must be callable dF(eps, t) or None, got {_describe(dF)}")
         self.F = F
         self.dF = dF
         self.name = name
+        self.size = None  # N when known from an array (checked by the system)
+        self.coef = None  # Coefficient of a scaled load (its indices are checked)
+        self.n_eps = None  # columns of B for a linear load
 
     @classmethod
     def constant(cls, F, name="load"):
-        """Fixed load vector."""
-        F = as_finite_array("F", F, ndim=1)
-        return cls(lambda eps, t: F, None, name=name)
+        """Fixed load vector (a ``scipy.sparse`` column or row is accepted too)."""
+        F = _as_load_vector(F)
+        term = cls(lambda eps, t: F, None, name=name)
+        term.size = F.shape[0]
+        return term
 
     @classmethod
     def scaled(cls, F, coef, name="load"):
         """:math:`c(\\epsilon) F(t)`; ``F`` an ``(N,)`` array or a callable ``F(t)``."""
         coef = as_coefficient(coef)
+        size = None
         if callable(F):
             Ft = F
         else:
-            F = as_finite_array("F", F, ndim=1)
+            F = _as_load_vector(F)
+            size = F.shape[0]
             Ft = lambda t: F
-        return cls(
+        term = cls(
             lambda eps, t: coef.value(eps) * Ft(t),
             lambda eps, t: np.outer(Ft(t), coef.grad(eps)),
             name=name,
         )
+        term.size, term.coef = size, coef
+        return term
 
     @classmethod
     def linear(cls, B, name="load"):
         """Load linear in the parameters, :math:`F = B\\,\\epsilon` (Fisher-KPP source)."""
-        B = as_finite_array("B", B, ndim=2)
-        return cls(lambda eps, t: B @ np.asarray(eps, dtype=float), lambda eps, t: B, name=name)
+        B = as_operator("B", B)
+        dB = B.toarray() if is_sparse(B) else B  # (N, n_eps): small
+        term = cls(lambda eps, t: B @ np.asarray(eps, dtype=float), lambda eps, t: dB, name=name)
+        term.size, term.n_eps = B.shape
+        return term
 
     def bind(self, E1):
         self._E1 = E1
+        self._N = self.size
+
+    def check_sizes(self, N, n_eps):
+        """Check the sizes known from arrays against the system's ``N`` and ``n_eps``."""
+        if self.size is not None and self.size != N:
+            raise ValueError(
+                f"load term {self.name!r}: the load has {self.size} entries but the system's "
+                f"state has N={N}; pass an (N,) load matching the operators"
+            )
+        if self.n_eps is not None and self.n_eps != n_eps:
+            raise ValueError(
+                f"load term {self.name!r}: `B` has {self.n_eps} columns but the system has "
+                f"n_eps={n_eps} parameters; pass B of shape (N, n_eps)"
+            )
+        self._N = N
 
     def _chaos(self, v):
-        v = np.asarray(v, dtype=float)
+        try:
+            v = np.asarray(v, dtype=float)
+        except (TypeError, ValueError) as e:
+            raise TypeError(
+                f"load term {self.name!r}: F(eps, t) must return numbers, got {_describe(v)}"
+            ) from e
+        N, P = getattr(self, "_N", None), self._E1.size
+        if N is not None and v.shape not in {(N,), (N, P)}:
+            want = f"({N},) or ({N}, {P})" if P > 1 else f"({N},)"
+            raise ValueError(
+                f"load term {self.name!r}: F(eps, t) returned shape {v.shape}, expected "
+                f"{want} (N={N} state size, P={P} chaos terms); fix the load's size"
+            )
+        if not np.all(np.isfinite(v)):
+            from ..errors import ModelEvaluationError
+
+            raise ModelEvaluationError(f"load term {self.name!r}: F(eps, t) returned NaN or inf")
         return np.outer(v, self._E1) if v.ndim == 1 else v
 
     def apply(self, Theta, eps, t=None):
         return -self._chaos(self.F(eps, t))
-
-    def jacobian(self, Theta, eps, t=None):
-        return None  # no dependence on Theta
 
     def eps_jacobian(self, Theta, eps, t=None):
         N, P = Theta.shape
         if self.dF is None:
             return np.zeros((N * P, len(eps)))
         d = np.asarray(self.dF(eps, t), dtype=float)
+        n_eps = len(eps)
+        if d.shape not in {(N, n_eps), (N, P, n_eps)}:
+            raise ValueError(
+                f"load term {self.name!r}: dF(eps, t) returned shape {d.shape}, expected "
+                f"({N}, {n_eps}) or ({N}, {P}, {n_eps}) (N, [P,] n_eps); fix the load's "
+                "derivative"
+            )
         if d.ndim == 2:
             d = d[:, None, :] * self._E1[None, :, None]
         return -d.reshape(N * P, len(eps))
+
+    def eps_vjp(self, Theta, eps, mu, t=None):
+        """:math:`(\\partial R/\\partial\\epsilon)^T\\mu` without the (NP, n_eps) matrix."""
+        if self.dF is None:
+            return np.zeros(len(eps))
+        d = np.asarray(self.dF(eps, t), dtype=float)
+        mu = np.reshape(mu, Theta.shape)
+        if d.ndim == 2:  # deterministic load: only the E[Psi] projection sees it
+            return -(d.T @ (mu @ self._E1))
+        return -np.einsum("ikm,ik->m", d, mu)

@@ -1,0 +1,41 @@
+"""Small models shared by several test modules (imported through conftest's path entry)."""
+
+import numpy as np
+import scipy.sparse as sp
+
+from ecfm_uq.chaos import ChaosBasis, weighted_gram
+from ecfm_uq.system import Coefficient, GalerkinSystem, LinearTerm, LoadTerm
+
+
+def fd_stiffness(N, weight=np.ones_like):
+    """1-D P1 stiffness with a cell weight (sparse, SPD)."""
+    h = 1.0 / (N + 1)
+    a = weight((np.arange(N + 1) + 0.5) * h) / h
+    return sp.diags([-a[1:-1], a[:-1] + a[1:], -a[1:-1]], [-1, 0, 1], format="csr")
+
+
+def diffusion(N=20, dim=2, order=2, sparse=True, sigma=0.3, n_forces=3):
+    """-(10^eps0 + sum_k sigma_k sin(k pi x)(w_k - 1/2)) u'' = eps1, with forces and mass."""
+    basis = ChaosBasis(order, dim)
+    conv = (lambda K: K) if sparse else (lambda K: K.toarray())
+    terms = [
+        LinearTerm(conv(fd_stiffness(N)), Coefficient.power10(0, sign=1.0), name="mean"),
+    ]
+    for k in range(dim):
+        K = fd_stiffness(N, lambda x, k=k: sigma / (k + 1) * np.sin((k + 1) * np.pi * x))
+        G = weighted_gram(basis, lambda w, k=k: (w[:, k] if w.ndim == 2 else w) - 0.5)
+        terms.append(LinearTerm(conv(K), G=G, name=f"mode{k}"))
+    terms.append(LoadTerm.scaled(np.full(N, 1.0 / (N + 1)), Coefficient.parameter(1)))
+    idx = np.linspace(2, N - 3, n_forces).astype(int)
+    Gamma = np.eye(N)[:, idx]
+    M = sp.identity(N, format="csr") / (N + 1)
+    return (
+        GalerkinSystem(
+            terms,
+            2,
+            basis=basis,
+            Gamma=sp.csr_matrix(Gamma) if sparse else Gamma,
+            M=M if sparse else M.toarray(),
+        ),
+        np.eye(N)[idx],
+    )
