@@ -28,6 +28,14 @@ class InverseResult:
     loss_history : (nit + 1,) ndarray
     extra : dict
         Formulation-specific outputs (state, forces, diagnostics).
+    eps_cov : (n_eps, n_eps) ndarray or None
+        Delta-method covariance of ``eps`` (:mod:`ecfm_uq.inverse.uncertainty`);
+        None where not computed (see ``uncertainty_message``).
+    eps_stderr : (n_eps,) ndarray or None
+    eps_ci95 : (n_eps, 2) ndarray or None
+    noise_model : str
+        ``"known"`` (sigma given), ``"estimated"`` (s^2 = ||r||^2/(C - n_eps)) or ``"none"``.
+    uncertainty_message : str
     """
 
     eps: np.ndarray
@@ -39,6 +47,11 @@ class InverseResult:
     eps_history: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     loss_history: np.ndarray = field(default_factory=lambda: np.zeros(0))
     extra: dict = field(default_factory=dict)
+    eps_cov: np.ndarray | None = None
+    eps_stderr: np.ndarray | None = None
+    eps_ci95: np.ndarray | None = None
+    noise_model: str = "none"
+    uncertainty_message: str = ""
 
     def __repr__(self):
         return (

@@ -97,6 +97,7 @@ def fit_steady(
     solve_options=None,
     options=None,
     gradient="auto",
+    sigma=None,
 ):
     """Fit :math:`\\epsilon` of a steady system to data by the standard or ECFM formulation.
 
@@ -124,6 +125,10 @@ def fit_steady(
     gradient : {"auto", "forward", "adjoint"}
         Forward sensitivities or one adjoint solve per evaluation
         (:func:`~ecfm_uq.inverse.gradients.choose_gradient`).
+    sigma : float, optional
+        Known sensor noise standard deviation. Without it the noise variance is
+        estimated from the standard residual at the estimate,
+        s^2 = ||r||^2 / (C - n_eps) (``noise_model="estimated"``).
 
     Returns
     -------
@@ -212,11 +217,13 @@ def fit_steady(
             msg += f" (stopped at the round-off limit; relative optimality {rel_opt:.1e})"
     if failures:
         msg += f" ({len(failures)} inner solves failed; first: {failures[0]})"
+    unc = _uncertainty(system, M_obs, v, np.asarray(res.x), objective, solve_kw, sigma)
     lam = sol.lam if formulation == "ecfm" else np.zeros(0)
     verdict = consistency_verdict(system, M_obs, v, res.x, lam, bounds, solve_options=solve_options)
     if not verdict["consistent"]:
         msg += f" [{verdict['message']}]"
     return InverseResult(
+        **unc,
         eps=np.asarray(res.x),
         loss=z,
         success=success,
@@ -255,3 +262,33 @@ def _failed_fit(res, formulation, hist_eps, hist_loss, error):
         loss_history=np.array(hist_loss),
         extra={"verdict": {"consistent": False, "message": str(error)}},
     )
+
+
+def _uncertainty(system, M_obs, v, eps, objective, solve_kw, sigma):
+    """Delta-method covariance of the fitted eps (implicit differentiation of grad z = 0)."""
+    from .uncertainty import confidence_intervals, implicit_covariance, residual_variance
+
+    try:
+        if sigma is not None:
+            if not (np.isfinite(sigma) and sigma > 0):
+                raise ValueError(f"`sigma` must be a positive finite number, got {sigma}")
+            s2, model, dof = float(sigma) ** 2, "known", None
+        else:
+            solve_options = {k: w for k, w in solve_kw.items() if k != "gradient"}
+            sol = solve_steady(system, eps, strict=True, **solve_options)
+            r = M_obs @ system.mean(sol.Theta) - v
+            # project out the model's tangent space: the least-squares residual of the
+            # linearized model, so the ECFM estimate's own misfit does not inflate s^2
+            dTheta, _ = sol.eps_sensitivity()
+            J = M_obs @ np.einsum("ikm,k->im", dTheta, system.E1)
+            r = r - J @ np.linalg.lstsq(J, r, rcond=None)[0]
+            s2, model, dof = residual_variance(r, eps.size), "estimated", r.size - eps.size
+        cov, _ = implicit_covariance(
+            lambda e, w: objective(system, M_obs, w, e, **solve_kw)[1], eps, v, s2
+        )
+        se, ci = confidence_intervals(eps, cov, dof=dof)
+        return dict(eps_cov=cov, eps_stderr=se, eps_ci95=ci, noise_model=model)
+    except (ConvergenceError, ValueError) as e:
+        if sigma is not None and "sigma" in str(e):
+            raise
+        return dict(uncertainty_message=f"uncertainty not computed: {e}")

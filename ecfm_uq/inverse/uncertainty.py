@@ -1,0 +1,183 @@
+"""Uncertainty of an estimate by implicit differentiation and the delta method.
+
+An estimate eps_hat(v) is defined by an optimality condition g(eps, v) = 0 (the
+standard least-squares gradient, the ECFM conditions, the pseudo-likelihood
+conditions). Implicit differentiation gives
+
+.. math::
+
+    \\frac{d\\hat\\varepsilon}{dv} = -\\Big(\\frac{\\partial g}{\\partial\\varepsilon}\\Big)^{-1}
+    \\frac{\\partial g}{\\partial v},
+    \\qquad
+    \\operatorname{Cov}\\hat\\varepsilon \\approx \\frac{d\\hat\\varepsilon}{dv}\\,
+    \\Sigma_v\\,\\frac{d\\hat\\varepsilon}{dv}^T .
+
+For the standard Gaussian formulation of a linear model (g = J^T (J eps - v)) this is
+the Gauss-Newton / Laplace covariance sigma^2 (J^T J)^{-1}; for a nonlinear model the
+two differ: dg/deps is then the full Hessian J^T J + sum_c r_c d2(M_obs theta)_c/deps2,
+while Gauss-Newton drops the residual-curvature term.
+
+Status: this module is the single code path; wiring it into every fit is not done yet.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import stats
+
+
+def _matrix(name, a, shape=None):
+    a = np.asarray(a, dtype=float)
+    if a.ndim != 2:
+        raise ValueError(f"`{name}` must be a 2-D array, got shape {a.shape}; pass a matrix")
+    if shape is not None and a.shape != shape:
+        raise ValueError(f"`{name}` must have shape {shape}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"`{name}` has non-finite entries; check the fit converged")
+    return a
+
+
+def estimate_jacobian(dg_deps, dg_dv):
+    """Implicit derivative d eps_hat/dv of an estimate defined by g(eps, v) = 0.
+
+    Parameters
+    ----------
+    dg_deps : (n_eps, n_eps) ndarray
+        Derivative of the optimality condition with respect to eps at the estimate.
+    dg_dv : (n_eps, C) ndarray
+        Derivative of the optimality condition with respect to the data.
+
+    Returns
+    -------
+    (n_eps, C) ndarray
+        ``-(dg/deps)^{-1} dg/dv``.
+    """
+    A = _matrix("dg_deps", dg_deps)
+    if A.shape[0] != A.shape[1]:
+        raise ValueError(f"`dg_deps` must be square, got {A.shape}")
+    B = _matrix("dg_dv", dg_dv)
+    if B.shape[0] != A.shape[0]:
+        raise ValueError(f"`dg_dv` must have {A.shape[0]} rows (n_eps), got {B.shape[0]}")
+    try:
+        return -np.linalg.solve(A, B)
+    except np.linalg.LinAlgError as e:
+        raise ValueError(
+            "`dg_deps` is singular: the estimate is not locally identifiable from the data"
+        ) from e
+
+
+def delta_method_covariance(deps_dv, Sigma_v):
+    """Delta-method covariance ``(d eps_hat/dv) Sigma_v (d eps_hat/dv)^T``.
+
+    Parameters
+    ----------
+    deps_dv : (n_eps, C) ndarray
+    Sigma_v : float or (C,) or (C, C) ndarray
+        Data covariance: a variance sigma^2, per-sensor variances, or a full matrix.
+
+    Returns
+    -------
+    (n_eps, n_eps) ndarray
+    """
+    D = _matrix("deps_dv", deps_dv)
+    C = D.shape[1]
+    S = np.asarray(Sigma_v, dtype=float)
+    if not np.all(np.isfinite(S)):
+        raise ValueError("`Sigma_v` has non-finite entries")
+    if S.ndim == 0:
+        if S <= 0:
+            raise ValueError(f"`Sigma_v` must be a positive variance, got {float(S)}")
+        cov = float(S) * D @ D.T
+    elif S.ndim == 1:
+        if S.shape != (C,) or np.any(S <= 0):
+            raise ValueError(f"`Sigma_v` as variances must be ({C},) and positive")
+        cov = (D * S) @ D.T
+    else:
+        S = _matrix("Sigma_v", S, (C, C))
+        cov = D @ S @ D.T
+    return 0.5 * (cov + cov.T)
+
+
+def gauss_newton_covariance(J, sigma2):
+    """Gauss-Newton / Laplace covariance ``sigma^2 (J^T J)^{-1}``.
+
+    Parameters
+    ----------
+    J : (C, n_eps) ndarray
+        Sensitivity of the predicted measurements to eps.
+    sigma2 : float
+        Noise variance.
+    """
+    J = _matrix("J", J)
+    if not sigma2 > 0:
+        raise ValueError(f"`sigma2` must be positive, got {sigma2}")
+    return sigma2 * np.linalg.inv(J.T @ J)
+
+
+def residual_variance(r, n_eps):
+    """Residual estimate s^2 = ||r||^2 / (C - n_eps) of the noise variance."""
+    r = np.asarray(r, dtype=float).ravel()
+    if r.size <= n_eps:
+        raise ValueError(f"need more data ({r.size}) than parameters ({n_eps}) to estimate sigma")
+    return float(r @ r) / (r.size - n_eps)
+
+
+def confidence_intervals(eps, eps_cov, level=0.95, dof=None):
+    """Standard errors and ``level`` intervals: normal quantile, or Student-t with
+    ``dof`` degrees of freedom when sigma was estimated from the residual (C - n_eps).
+
+    Returns
+    -------
+    stderr : (n_eps,) ndarray
+    intervals : (n_eps, 2) ndarray
+    """
+    if not 0 < level < 1:
+        raise ValueError(f"`level` must lie in (0, 1), got {level}")
+    eps = np.asarray(eps, dtype=float).ravel()
+    cov = _matrix("eps_cov", eps_cov, (eps.size, eps.size))
+    se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    q = 0.5 + level / 2
+    z = stats.norm.ppf(q) if dof is None else stats.t.ppf(q, dof)
+    return se, np.column_stack([eps - z * se, eps + z * se])
+
+
+def implicit_covariance(grad, eps, v, Sigma_v, rel_step=1e-6):
+    """Delta-method covariance of an estimate defined by ``grad(eps, v) = 0``.
+
+    Second derivatives are central finite differences of the analytic gradient
+    ``grad`` (exact ones are not available for the ECFM conditions); the step is
+    ``rel_step * max(|x|, 1)`` per coordinate.
+
+    Parameters
+    ----------
+    grad : callable ``(eps (n_eps,), v (C,)) -> (n_eps,)``
+    eps : (n_eps,) ndarray
+        The estimate.
+    v : (C,) ndarray
+        The data it was fitted to.
+    Sigma_v : float or (C,) or (C, C)
+        Data covariance.
+
+    Returns
+    -------
+    eps_cov : (n_eps, n_eps) ndarray
+    deps_dv : (n_eps, C) ndarray
+    """
+    eps = np.asarray(eps, dtype=float)
+    v = np.asarray(v, dtype=float)
+
+    def fd(f, x):
+        cols = []
+        for k in range(x.size):
+            h = rel_step * max(abs(x[k]), 1.0)
+            xp, xm = x.copy(), x.copy()
+            xp[k] += h
+            xm[k] -= h
+            cols.append((f(xp) - f(xm)) / (2 * h))
+        return np.column_stack(cols)
+
+    dg_deps = fd(lambda e: grad(e, v), eps)
+    dg_deps = 0.5 * (dg_deps + dg_deps.T)
+    dg_dv = fd(lambda w: grad(eps, w), v)
+    D = estimate_jacobian(dg_deps, dg_dv)
+    return delta_method_covariance(D, Sigma_v), D
