@@ -42,9 +42,15 @@ def as_inputs(inputs, dim=None):
     if inputs is None or isinstance(inputs, UniformInputs):
         out = inputs
     elif type(inputs).__module__.startswith("chaospy"):
-        out = UniformInputs.from_chaospy(inputs)
+        try:
+            out = UniformInputs.from_chaospy(inputs)
+        except TypeError as e:
+            raise TypeError(str(e).replace("`dist`", "`inputs`")) from e
     else:
-        out = UniformInputs(inputs)
+        try:
+            out = UniformInputs(inputs)
+        except ValueError as e:
+            raise ValueError(f"`inputs`: {e}") from e
     if out is not None and dim is not None and out.dim != dim:
         raise ValueError(f"`inputs` has {out.dim} variables but the basis has dim={dim}")
     return out
