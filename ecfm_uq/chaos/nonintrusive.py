@@ -12,7 +12,15 @@ One entry point, :func:`fit_pce`, dispatches on ``method`` to
   samples (Latin hypercube, scrambled Sobol', Halton or plain random from
   ``scipy.stats.qmc``), with the closed-form leave-one-out error;
 * ``"lars"``: sparse regression by least-angle regression with a hybrid OLS refit and
-  the corrected leave-one-out error choosing the basis (Blatman & Sudret 2011).
+  the corrected leave-one-out error choosing the basis (Blatman & Sudret 2011);
+* ``"omp"``: the same with orthogonal matching pursuit as the path (greedy: the column
+  most correlated with the residual enters, then OLS), which finds exactly sparse
+  expansions from fewer runs (Ishigami: 1e-8 index errors from 100 runs).
+
+Both sparse methods raise the candidate degree one by one (the candidate set is the
+total-degree, or hyperbolic ``q_norm``, basis of that degree), run the path on it,
+refit every nested active set by OLS and score it with the corrected leave-one-out
+error; they stop after ``early_stop`` degrees without improvement.
 
 All return the same :class:`~ecfm_uq.chaos.PolynomialChaosExpansion` as the stochastic
 Galerkin solver, with ``.diagnostics`` saying what was done. Model evaluations go through
@@ -39,9 +47,13 @@ from .quadrature import gauss_legendre, tensor_gauss_legendre
 
 __all__ = ["fit_pce", "sample_design", "smolyak_rule"]
 
-METHODS = ("quadrature", "smolyak", "lstsq", "lars")
+METHODS = ("quadrature", "smolyak", "lstsq", "lars", "omp")
 DESIGNS = ("lhs", "sobol", "halton", "random")
 RULES = ("gauss", "clenshaw-curtis")
+# Sparse regression: largest candidate basis per model run, and the highest degree tried
+# (the degree loop stops earlier when the corrected LOO error stops improving).
+_CANDIDATES_PER_RUN = 10
+_MAX_DEGREE = 30
 
 
 # --------------------------------------------------------------------------------------
@@ -355,23 +367,41 @@ def _fit_lstsq(model, inputs, order, index_set, data, ev):
     return pce, n
 
 
-def _lars_select(Psi, y, candidates, n):
-    """Hybrid LARS on the candidate columns: (columns, coefficients, corrected LOO)."""
+def _path_order(X, y, max_steps, solver):
+    """Order in which the columns of ``X`` enter a LARS or OMP path (nested active sets)."""
     from sklearn.exceptions import ConvergenceWarning
-    from sklearn.linear_model import lars_path
+    from sklearn.linear_model import lars_path, orthogonal_mp
 
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        if solver == "lars":
+            _, active, _ = lars_path(X, y, method="lar", max_iter=max_steps, return_path=False)
+            return list(active)[:max_steps]
+        path = orthogonal_mp(X, y, n_nonzero_coefs=max_steps, return_path=True)
+    path = path.reshape(X.shape[1], -1)
+    # OMP only adds: the first nonzero step of each column gives its entry order
+    nz = path != 0
+    first = np.where(nz.any(axis=1), np.argmax(nz, axis=1), path.shape[1])
+    entered = np.flatnonzero(first < path.shape[1])
+    return entered[np.argsort(first[entered], kind="stable")].tolist()
+
+
+def _sparse_select(Psi, y, candidates, n, solver):
+    """Hybrid LARS/OMP on the candidate columns: (columns, coefficients, corrected LOO).
+
+    The path is computed on centred, unit-norm candidate columns (the constant term is
+    always kept); every nested active set along it is then refitted by OLS, and the one
+    with the smallest corrected leave-one-out error wins (Blatman & Sudret 2011).
+    """
     X = Psi[:, candidates]
     Xc = X - X.mean(axis=0)
     scale = np.linalg.norm(Xc, axis=0)
     scale[scale == 0] = 1.0
-    yc = y - y.mean()
-    max_steps = min(len(candidates), n - 2)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        _, active, _ = lars_path(
-            Xc / scale, yc, method="lar", max_iter=max_steps, return_path=False
-        )
-    cols = [0] + [candidates[j] for j in active[:max_steps]]
+    # beyond n / 2 terms the LOO correction factor exceeds 2: such fits never win
+    max_steps = min(len(candidates), max(n // 2, 2))
+    active = _path_order(Xc / scale, y - y.mean(), max_steps, solver)
+    cols = [0] + [int(candidates[j]) for j in active]
     Q, R = sla.qr(Psi[:, cols], mode="economic")
     d = np.abs(np.diag(R))
     # stop at the first column that is numerically dependent on the earlier ones
@@ -384,20 +414,20 @@ def _lars_select(Psi, y, candidates, n):
     return cols[:k], coef, float(corrected[k - 1])
 
 
-def _fit_lars(model, inputs, order, index_set, data, ev, q_norm, early_stop):
+def _fit_sparse(model, inputs, order, index_set, data, ev, q_norm, early_stop, solver):
     dim = inputs.dim
     if index_set not in (None, "total"):
         raise ValueError(
-            "`index_set` must be 'total' for method='lars' (candidate sets are graded)"
+            f"`index_set` must be 'total' for method={solver!r} (candidate sets are graded)"
         )
     omega, x, y, name = data(None)
     n = len(omega)
     if n < 4:
         raise ValueError(f"too few regression samples: `{name}` gives {n} points; pass at least 4")
     if order is None:
-        # candidate degrees while the candidate set stays below 2 n terms
+        # candidate degrees while the candidate set stays below _CANDIDATES_PER_RUN * n
         order = 1
-        while math.comb(order + 1 + dim, dim) <= max(2 * n, dim + 1) and order < 30:
+        while math.comb(order + 1 + dim, dim) <= _CANDIDATES_PER_RUN * n and order < _MAX_DEGREE:
             order += 1
     order = check_int("order", order, minimum=1)
     if y is None:
@@ -414,7 +444,7 @@ def _fit_lars(model, inputs, order, index_set, data, ev, q_norm, early_stop):
         worse = 0
         for p in range(1, order + 1):
             candidates = np.flatnonzero((qn <= p + 1e-12) & (qn > 0))
-            cols, coef, err = _lars_select(Psi, yf[:, j], candidates, n)
+            cols, coef, err = _sparse_select(Psi, yf[:, j], candidates, n, solver)
             if best is None or err < best[2]:
                 best = (cols, coef, err, p)
                 worse = 0
@@ -477,15 +507,17 @@ def fit_pce(
     inputs : UniformInputs, (dim, 2) bounds or chaospy distribution
         Independent uniform inputs :math:`x_k \\sim \\mathcal U(a_k, b_k)`; a chaospy
         joint distribution must be made of ``chaospy.Uniform`` s.
-    method : {"lars", "lstsq", "quadrature", "smolyak"}
+    method : {"lars", "omp", "lstsq", "quadrature", "smolyak"}
         See the module docstring. Default ``"lars"``.
     order : int, optional
         ``"quadrature"``: degree per variable (default 3); ``"smolyak"``: the level
         :math:`\\ell` (total degree :math:`\\ell` for ``rule="gauss"``; default 3);
-        ``"lstsq"``: total degree (default 3); ``"lars"``: the largest candidate degree
-        (default: the largest whose basis has at most ``2 n`` terms).
+        ``"lstsq"``: total degree (default 3); ``"lars"``, ``"omp"``: the largest
+        candidate degree (default: the largest whose basis has at most ``10 n`` terms,
+        at most 30).
     n_samples : int, optional
-        Regression design size (default ``2 P`` for ``"lstsq"``, 100 for ``"lars"``).
+        Regression design size (default ``2 P`` for ``"lstsq"``, 100 for the sparse
+        methods).
     samples : (n, dim) array_like, optional
         Regression points on the inputs' ranges instead of a generated design.
     evaluations : (n, *output_shape) array_like, optional
@@ -500,10 +532,10 @@ def fit_pce(
         1-D rules of the Smolyak grid: Gauss-Legendre (not nested) or Clenshaw-Curtis
         (nested).
     q_norm : float
-        Hyperbolic truncation of the LARS candidates, :math:`\\|\\alpha\\|_q \\le p`
+        Hyperbolic truncation of the sparse-regression candidates, :math:`\\|\\alpha\\|_q \\le p`
         (1 = total degree; smaller keeps fewer interactions).
     early_stop : int
-        LARS: stop raising the degree after this many degrees without improvement.
+        Sparse methods: stop raising the degree after this many degrees without improvement.
     executor : object with ``map``, optional
         As in :func:`ecfm_uq.mc.monte_carlo`: a ``ThreadPoolExecutor``,
         ``ProcessPoolExecutor`` or ``dask.distributed.Client``.
@@ -519,7 +551,7 @@ def fit_pce(
     PolynomialChaosExpansion
         With ``diagnostics``: ``method``, ``n_evaluations``, ``wall_time``, and
         ``loo_error`` / ``corrected_loo_error`` (regression; relative to the output
-        variance, per output component), ``degree`` and ``n_terms`` (LARS).
+        variance, per output component), ``degree`` and ``n_terms`` (sparse methods).
 
     Raises
     ------
@@ -579,8 +611,8 @@ def fit_pce(
         if isinstance(q_norm, bool) or not 0 < float(q_norm) <= 1:
             raise ValueError(f"`q_norm` must lie in (0, 1], got {q_norm!r}")
         early_stop = check_int("early_stop", early_stop, minimum=1)
-        pce, n_eval = _fit_lars(
-            model, inputs, order, index_set, data, ev, float(q_norm), early_stop
+        pce, n_eval = _fit_sparse(
+            model, inputs, order, index_set, data, ev, float(q_norm), early_stop, method
         )
     pce.diagnostics.update(
         method=method,
