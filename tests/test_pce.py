@@ -358,6 +358,20 @@ def test_vector_outputs_and_given_evaluations():
     np.testing.assert_allclose(lars.total(), np.column_stack([POLY_T, POLY_T]), atol=1e-10)
 
 
+@pytest.mark.parametrize("method", ["lars", "omp", "lstsq"])
+def test_constant_output_component_is_fitted_and_reported(method):
+    model = lambda x: np.array([x[0] ** 2 + x[1], 2.0])
+    pce = fit_pce(model, [(0, 1), (0, 1)], method, order=2, n_samples=20, seed=0)
+    np.testing.assert_allclose(pce.mean, [1 / 3 + 1 / 2, 2.0], rtol=1e-12)
+    np.testing.assert_allclose(pce.variance[1], 0.0, atol=1e-24)
+    T = pce.total(zero_variance=0.0)
+    np.testing.assert_allclose(T[:, 1], 0.0)
+    # Var(x0^2) = 1/5 - 1/9 = 4/45, Var(x1) = 1/12
+    np.testing.assert_allclose(T[:, 0], np.array([16, 15]) / 31, atol=1e-10)
+    with pytest.raises(ValueError, match=r"component \(1,\)"):
+        pce.first_order()
+
+
 def test_thread_executor_gives_the_same_expansion():
     ref = fit_pce(ishigami, [(-PI, PI)] * 3, "lstsq", order=4, n_samples=80, seed=3)
     with ThreadPoolExecutor(2) as pool:
@@ -495,3 +509,5 @@ def test_unknown_method_design_and_subset():
         pce.sobol([2])
     with pytest.raises(TypeError, match="model"):
         fit_pce("not a model", POLY_BOUNDS, "quadrature")
+    with pytest.raises(ValueError, match="samples.*regression"):
+        fit_pce(poly_model, POLY_BOUNDS, "quadrature", samples=np.full((9, 2), 0.5))

@@ -440,6 +440,13 @@ def _fit_sparse(model, inputs, order, index_set, data, ev, q_norm, early_stop, s
     coeffs = np.zeros((basis.size, yf.shape[1]))
     chosen_deg, errors, n_terms = [], [], []
     for j in range(yf.shape[1]):
+        if np.all(yf[:, j] == yf[0, j]):
+            # a constant output component: the mean term alone, exactly
+            coeffs[0, j] = yf[0, j]
+            chosen_deg.append(0)
+            errors.append(0.0)
+            n_terms.append(1)
+            continue
         best = None
         worse = 0
         for p in range(1, order + 1):
@@ -457,7 +464,7 @@ def _fit_sparse(model, inputs, order, index_set, data, ev, q_norm, early_stop, s
         chosen_deg.append(p)
         errors.append(err)
         n_terms.append(len(cols))
-    top = max(chosen_deg)
+    top = max(max(chosen_deg), 1)
     basis_out = ChaosBasis(top, dim)
     c = coeffs[: basis_out.size].reshape((basis_out.size, *y.shape[1:]))
     pce = PolynomialChaosExpansion(basis_out, c, inputs)
@@ -578,8 +585,12 @@ def fit_pce(
     workers = check_int("workers", workers, minimum=1)
     if model is None and evaluations is None:
         raise TypeError("`model` must be callable (or pass `samples` and `evaluations`)")
-    if evaluations is not None and method in ("quadrature", "smolyak"):
-        raise ValueError(f"`evaluations` are for regression; method={method!r} picks its nodes")
+    for name, value in (("samples", samples), ("evaluations", evaluations)):
+        if value is not None and method in ("quadrature", "smolyak"):
+            raise ValueError(
+                f"`{name}` are for regression methods; method={method!r} picks its own "
+                "nodes (use method='lstsq', 'lars' or 'omp' with given samples)"
+            )
     if evaluations is not None and samples is None:
         raise ValueError("`evaluations` need the `samples` they were computed at")
 
