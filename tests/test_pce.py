@@ -381,6 +381,26 @@ def test_thread_executor_gives_the_same_expansion():
     np.testing.assert_array_equal(par.coefficients, ref.coefficients)
 
 
+def test_process_pool_gives_the_same_expansion_and_needs_a_picklable_model():
+    ref = fit_pce(ishigami, [(-PI, PI)] * 3, "quadrature", order=3)
+    par = fit_pce(ishigami, [(-PI, PI)] * 3, "quadrature", order=3, workers=2)
+    np.testing.assert_array_equal(par.coefficients, ref.coefficients)
+    with pytest.raises(TypeError, match="`model` must be picklable"):
+        fit_pce(lambda x: x[0], [(0, 1)], "quadrature", order=2, workers=2)
+
+
+def test_docstring_examples():
+    import doctest
+
+    import ecfm_uq.chaos.inputs
+    import ecfm_uq.chaos.nonintrusive
+    import ecfm_uq.chaos.pce
+
+    for module in (ecfm_uq.chaos.pce, ecfm_uq.chaos.nonintrusive, ecfm_uq.chaos.inputs):
+        result = doctest.testmod(module, extraglobs={"np": np, "ChaosBasis": ChaosBasis})
+        assert result.attempted > 0 and result.failed == 0, module.__name__
+
+
 def test_chaospy_distribution_as_inputs():
     dist = chaospy.J(*[chaospy.Uniform(a, b) for a, b in POLY_BOUNDS])
     pce = fit_pce(poly_model, dist, "quadrature", order=2)
