@@ -401,6 +401,23 @@ def test_docstring_examples():
         assert result.attempted > 0 and result.failed == 0, module.__name__
 
 
+class _Counter:
+    def __init__(self):
+        self.n = 0
+
+    def update(self, k):
+        self.n += k
+
+
+def test_progress_bar_counts_the_model_runs(capsys):
+    fit_pce(poly_model, POLY_BOUNDS, "lstsq", order=2, n_samples=12, seed=0, progress=True)
+    assert "fit_pce (regression)" in capsys.readouterr().err
+    bar = _Counter()
+    with ThreadPoolExecutor(2) as pool:
+        fit_pce(poly_model, POLY_BOUNDS, "quadrature", order=3, executor=pool, progress=bar)
+    assert bar.n == 16
+
+
 def test_chaospy_distribution_as_inputs():
     dist = chaospy.J(*[chaospy.Uniform(a, b) for a, b in POLY_BOUNDS])
     pce = fit_pce(poly_model, dist, "quadrature", order=2)

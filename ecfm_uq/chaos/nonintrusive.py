@@ -186,11 +186,13 @@ def _evaluate(model, x, executor, workers, progress, label):
 
     if not callable(model):
         raise TypeError(f"`model` must be callable model(x) -> array, got {type(model).__name__}")
-    bar = None
-    if progress:
+    bar, own_bar = None, False
+    if callable(getattr(progress, "update", None)):
+        bar = progress  # the caller's bar (e.g. a tqdm), updated but not closed here
+    elif progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=len(x), desc=f"fit_pce ({label})", leave=False)
+        bar, own_bar = tqdm(total=len(x), desc=f"fit_pce ({label})", leave=False), True
     try:
         return monte_carlo(
             model,
@@ -213,7 +215,7 @@ def _evaluate(model, x, executor, workers, progress, label):
     except TypeError as e:
         raise TypeError(str(e).replace("`fn`", "`model`")) from e
     finally:
-        if bar is not None:
+        if own_bar:
             bar.close()
 
 
@@ -550,8 +552,9 @@ def fit_pce(
         Processes of a pool created here when no ``executor`` is given (1: in-process).
     seed : None, int or Generator
         Seeds the generated design.
-    progress : bool
-        Show a tqdm progress bar over the model evaluations.
+    progress : bool or object with ``update(n)``
+        ``True``: show a tqdm progress bar over the model evaluations; or the caller's
+        own bar (e.g. a ``tqdm``), advanced by the number of finished runs.
 
     Returns
     -------
