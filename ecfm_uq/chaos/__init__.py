@@ -12,9 +12,15 @@ gauss_legendre       Gauss-Legendre nodes and probability weights on [0, 1]
 expectation_tensor   E[Psi_k], E[Psi_i Psi_j], E[Psi_i Psi_j Psi_k] (dense or sparse)
 weighted_gram        E[g(omega) Psi_k Psi_l]
 SparseTensor3        coordinate-form third-order tensor with contractions
+PolynomialChaosExpansion  a PCE as an object: moments, Sobol indices, sampling, chaospy export
+UniformInputs        independent uniform inputs on their own ranges, mapped to the germ
+fit_pce              non-intrusive PCE of a black-box model (quadrature, Smolyak, OLS, LARS)
 """
 
 from .basis import ChaosBasis
+from .inputs import UniformInputs
+from .nonintrusive import fit_pce, sample_design, smolyak_rule
+from .pce import PolynomialChaosExpansion
 from .quadrature import gauss_legendre
 from .tensors import (
     SparseTensor3,
@@ -26,6 +32,11 @@ from .tensors import (
 
 __all__ = [
     "ChaosBasis",
+    "PolynomialChaosExpansion",
+    "UniformInputs",
+    "fit_pce",
+    "sample_design",
+    "smolyak_rule",
     "SparseTensor3",
     "common_eigenbasis",
     "expectation_tensor",

@@ -177,6 +177,31 @@ class SteadySolution:
     def linear_iterations(self):
         return [] if self._linear is None else list(self._linear.record.iterations)
 
+    def pce(self, observe=None, inputs=None):
+        """The solution as a :class:`~ecfm_uq.chaos.PolynomialChaosExpansion`.
+
+        Parameters
+        ----------
+        observe : (C, N) array_like or scipy.sparse matrix, optional
+            Observation operator (e.g. the sensor matrix :math:`\\mathcal M`): the PCE
+            is then of the C observations instead of the N states.
+        inputs : UniformInputs, bounds or chaospy distribution, optional
+            What the germ stands for, for evaluation on the inputs' own ranges.
+
+        Returns
+        -------
+        PolynomialChaosExpansion
+            Coefficients ``Theta.T`` (P, N), or ``(observe @ Theta).T`` (P, C): mean,
+            variance, Sobol indices and densities of the Galerkin solution.
+        """
+        from ..chaos import PolynomialChaosExpansion
+
+        if not self.success:
+            raise ConvergenceError(f"a PCE of a failed solve: {self.message}")
+        return PolynomialChaosExpansion.from_galerkin(
+            self.system, self.Theta, inputs=inputs, observe=observe
+        )
+
     def _require(self):
         if not self.success:
             raise ConvergenceError(f"sensitivities of a failed solve: {self.message}")

@@ -1,0 +1,636 @@
+"""Non-intrusive polynomial chaos: a PCE of a black-box model from its evaluations.
+
+One entry point, :func:`fit_pce`, dispatches on ``method`` to
+
+* ``"quadrature"``: pseudo-spectral projection on a tensor Gauss-Legendre rule,
+  :math:`c_k = \\sum_q w_q\\, y(x_q)\\,\\Psi_k(\\omega_q) / \\mathbb E[\\Psi_k^2]`;
+* ``"smolyak"``: the Smolyak combination of tensor pseudo-spectral projections
+  (Conrad & Marzouk 2013), on non-nested Gauss-Legendre rules (``rule="gauss"``, linear
+  growth: exact for total degree ``order``) or nested Clenshaw-Curtis rules
+  (``rule="clenshaw-curtis"``, doubling growth, shared nodes evaluated once);
+* ``"lstsq"``: ordinary least squares on a total-degree basis at given or generated
+  samples (Latin hypercube, scrambled Sobol', Halton or plain random from
+  ``scipy.stats.qmc``), with the closed-form leave-one-out error;
+* ``"lars"``: sparse regression by least-angle regression with a hybrid OLS refit and
+  the corrected leave-one-out error choosing the basis (Blatman & Sudret 2011);
+* ``"omp"``: the same with orthogonal matching pursuit as the path (greedy: the column
+  most correlated with the residual enters, then OLS), which finds exactly sparse
+  expansions from fewer runs (Ishigami: 1e-8 index errors from 100 runs).
+
+Both sparse methods raise the candidate degree one by one (the candidate set is the
+total-degree, or hyperbolic ``q_norm``, basis of that degree), run the path on it,
+refit every nested active set by OLS and score it with the corrected leave-one-out
+error; they stop after ``early_stop`` degrees without improvement.
+
+All return the same :class:`~ecfm_uq.chaos.PolynomialChaosExpansion` as the stochastic
+Galerkin solver, with ``.diagnostics`` saying what was done. Model evaluations go through
+:func:`ecfm_uq.mc.monte_carlo` (threads, processes or a ``dask.distributed`` client),
+with a progress bar on request.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import re
+import time
+import warnings
+
+import numpy as np
+import scipy.linalg as sla
+
+from .._validation import as_finite_array, check_choice, check_int
+from ._kernels import legendre_table
+from .basis import ChaosBasis
+from .pce import PolynomialChaosExpansion, _project, as_inputs
+from .quadrature import gauss_legendre, tensor_gauss_legendre
+
+__all__ = ["fit_pce", "sample_design", "smolyak_rule"]
+
+METHODS = ("quadrature", "smolyak", "lstsq", "lars", "omp")
+DESIGNS = ("lhs", "sobol", "halton", "random")
+RULES = ("gauss", "clenshaw-curtis")
+# Sparse regression: largest candidate basis per model run, and the highest degree tried
+# (the degree loop stops earlier when the corrected LOO error stops improving).
+_CANDIDATES_PER_RUN = 10
+_MAX_DEGREE = 30
+
+
+# --------------------------------------------------------------------------------------
+# designs and rules
+# --------------------------------------------------------------------------------------
+def sample_design(n, dim, design="lhs", seed=None):
+    """``n`` germ points in [0, 1]^dim from a space-filling or random design.
+
+    Parameters
+    ----------
+    n, dim : int
+    design : {"lhs", "sobol", "halton", "random"}
+        ``"lhs"``: ``scipy.stats.qmc.LatinHypercube``; ``"sobol"``: scrambled
+        ``qmc.Sobol`` (balanced when ``n`` is a power of 2); ``"halton"``: scrambled
+        ``qmc.Halton``; ``"random"``: independent uniforms.
+    seed : None, int or numpy.random.Generator
+
+    Returns
+    -------
+    (n, dim) ndarray
+    """
+    from scipy.stats import qmc
+
+    n = check_int("n_samples", n, minimum=1)
+    dim = check_int("dim", dim, minimum=1)
+    design = check_choice("design", design, DESIGNS)
+    rng = np.random.default_rng(seed)
+    if design == "random":
+        return rng.random((n, dim))
+    if design == "lhs":
+        return qmc.LatinHypercube(dim, rng=rng).random(n)
+    if design == "halton":
+        return qmc.Halton(dim, rng=rng).random(n)
+    with warnings.catch_warnings():
+        # the balance warning for n not a power of 2: the points are still valid
+        warnings.simplefilter("ignore", UserWarning)
+        return qmc.Sobol(dim, rng=rng).random(n)
+
+
+def _clenshaw_curtis(n):
+    """Clenshaw-Curtis nodes on [0, 1] and probability weights (exact to degree n - 1)."""
+    if n == 1:
+        return np.array([0.5]), np.array([1.0])
+    x = 0.5 * (1.0 - np.cos(np.pi * np.arange(n) / (n - 1)))
+    # weights from the moment equations E[L_m] = delta_m0 in the orthonormal Legendre basis
+    V = legendre_table(np.ascontiguousarray(x), n - 1)
+    e0 = np.zeros(n)
+    e0[0] = 1.0
+    w = np.linalg.solve(V.T, e0)
+    return x, w
+
+
+def _rule_1d(rule, level):
+    """1-D rule of a Smolyak level (1-based) and the degree its projection is exact for."""
+    if rule == "gauss":
+        x, w = gauss_legendre(level)
+        return x, w, level - 1
+    n = 1 if level == 1 else 2 ** (level - 1) + 1
+    x, w = _clenshaw_curtis(n)
+    return x, w, (n - 1) // 2
+
+
+def _smolyak_levels(level, dim):
+    """Multi-levels l (1-based) of the Smolyak formula and their combination coefficients.
+
+    .. math:: A(q, d) = \\sum_{q - d + 1 \\le |l| \\le q} (-1)^{q - |l|}
+              \\binom{d - 1}{q - |l|} \\bigotimes_i U^{l_i}, \\qquad q = \\ell + d.
+    """
+    q = level + dim
+    out = []
+    for l in itertools.product(range(1, level + 2), repeat=dim):
+        s = sum(l)
+        if q - dim + 1 <= s <= q:
+            out.append((l, (-1) ** (q - s) * math.comb(dim - 1, q - s)))
+    return out
+
+
+def smolyak_rule(level, dim, rule="gauss"):
+    """Distinct nodes of a Smolyak sparse grid and the tensor rules that make it.
+
+    Parameters
+    ----------
+    level : int
+        Smolyak level :math:`\\ell \\ge 0` (``level = 0`` is the one-point rule).
+    dim : int
+    rule : {"gauss", "clenshaw-curtis"}
+        1-D rules: Gauss-Legendre with ``l`` points at level ``l`` (not nested; only the
+        midpoint is shared) or Clenshaw-Curtis with :math:`2^{l-1} + 1` points (nested).
+
+    Returns
+    -------
+    nodes : (n, dim) ndarray
+        Distinct germ nodes (a shared node appears once: it is evaluated once).
+    parts : list of (coef, levels, index, weights, degrees)
+        One tensor rule per multi-level: combination coefficient, levels, positions of
+        its nodes in ``nodes``, its tensor weights and its 1-D exact degrees.
+    """
+    level = check_int("order", level, minimum=0)
+    dim = check_int("dim", dim, minimum=1)
+    rule = check_choice("rule", rule, RULES)
+    rules = {l: _rule_1d(rule, l) for l in range(1, level + 2)}
+    keys = {}
+    all_nodes = []
+    parts = []
+    for l, coef in _smolyak_levels(level, dim):
+        if coef == 0:
+            continue
+        grids = np.meshgrid(*[rules[li][0] for li in l], indexing="ij")
+        pts = np.stack([g.ravel() for g in grids], axis=1)
+        w = np.ones(1)
+        for li in l:
+            w = np.outer(w, rules[li][1]).ravel()
+        idx = np.empty(len(pts), dtype=np.int64)
+        for j, p in enumerate(np.round(pts, 13)):
+            key = tuple(p.tolist())
+            if key not in keys:
+                keys[key] = len(all_nodes)
+                all_nodes.append(pts[j])
+            idx[j] = keys[key]
+        parts.append((coef, l, idx, w, tuple(rules[li][2] for li in l)))
+    return np.array(all_nodes).reshape(-1, dim), parts
+
+
+# --------------------------------------------------------------------------------------
+# model evaluations through the executor path
+# --------------------------------------------------------------------------------------
+def _evaluate(model, x, executor, workers, progress, label):
+    """``model`` at each row of ``x`` through :func:`ecfm_uq.mc.monte_carlo`."""
+    from ..mc import monte_carlo
+
+    if not callable(model):
+        raise TypeError(f"`model` must be callable model(x) -> array, got {type(model).__name__}")
+    bar, own_bar = None, False
+    if callable(getattr(progress, "update", None)):
+        bar = progress  # the caller's bar (e.g. a tqdm), updated but not closed here
+    elif progress:
+        from tqdm.auto import tqdm
+
+        bar, own_bar = tqdm(total=len(x), desc=f"fit_pce ({label})", leave=False), True
+    try:
+        return monte_carlo(
+            model,
+            x,
+            executor,
+            workers=workers,
+            callback=None if bar is None else bar.update,
+        )
+    except ValueError as e:
+        msg = str(e)
+        m = re.search(r"for sample (\d+)", msg)
+        if m:
+            i = int(m.group(1))
+            point = np.array2string(x[i], precision=6)
+            raise ValueError(
+                f"`model` returned NaN or inf at {label} point {i} (x={point}); check the "
+                "model there (a PCE cannot be fitted to non-finite outputs)"
+            ) from e
+        raise ValueError(msg.replace("`fn`", "`model`")) from e
+    except TypeError as e:
+        raise TypeError(str(e).replace("`fn`", "`model`")) from e
+    finally:
+        if own_bar:
+            bar.close()
+
+
+# --------------------------------------------------------------------------------------
+# leave-one-out errors
+# --------------------------------------------------------------------------------------
+def _loo_nested(Q, R, y):
+    """Corrected LOO errors of the OLS fits on the first k = 1..s columns, all at once.
+
+    With :math:`X = QR` (economic), the fit on the first k columns uses :math:`Q_k`, so the
+    hat diagonals and residuals of all nested fits are cumulative sums:
+    :math:`h^{(k)}_i = \\sum_{j<k} Q_{ij}^2`, :math:`r^{(k)} = y - \\sum_{j<k} Q_j (Q_j^T y)`.
+    The LOO residual is :math:`r_i / (1 - h_i)` (no refits), normalised by the sample
+    variance, and multiplied by Chapelle's correction (Blatman & Sudret 2011)
+
+    .. math:: T(k, n) = \\frac{n}{n - k}\\Bigl(1 + \\operatorname{tr}(C^{-1})/n\\Bigr),
+              \\qquad C = X_k^T X_k / n,\\quad \\operatorname{tr}(C^{-1})/n = \\|R_k^{-1}\\|_F^2.
+
+    Returns
+    -------
+    loo, corrected : (s,) ndarray
+    """
+    n, s = Q.shape
+    z = Q.T @ y
+    fitted = np.cumsum(Q * z[None, :], axis=1)
+    h = np.cumsum(Q**2, axis=1)
+    resid = y[:, None] - fitted
+    one_h = 1.0 - h
+    with np.errstate(divide="ignore", invalid="ignore"):
+        e = np.where(one_h > 1e-10, resid / one_h, np.inf)
+    var = np.var(y) if np.var(y) > 0 else 1.0
+    loo = np.mean(e**2, axis=0) / var
+    Rinv = sla.solve_triangular(R, np.eye(s))
+    trace = np.cumsum(np.sum(np.triu(Rinv) ** 2, axis=0))
+    k = np.arange(1, s + 1)
+    with np.errstate(divide="ignore"):
+        T = np.where(k < n, n / np.maximum(n - k, 1) * (1.0 + trace), np.inf)
+    return loo, loo * T
+
+
+# --------------------------------------------------------------------------------------
+# methods
+# --------------------------------------------------------------------------------------
+def _fit_quadrature(model, inputs, order, n_points, index_set, ev):
+    dim = inputs.dim
+    order = check_int("order", 3 if order is None else order, minimum=0)
+    n_points = order + 1 if n_points is None else check_int("n_points", n_points, minimum=1)
+    basis = ChaosBasis(order, dim, index_set=index_set or "tensor")
+    nodes, w = tensor_gauss_legendre(n_points, dim)
+    y = ev(inputs.from_germ(nodes), "Gauss")
+    pce = PolynomialChaosExpansion(basis, _project(basis, nodes, w, y), inputs)
+    pce.diagnostics.update(n_points=n_points, rule="tensor Gauss-Legendre")
+    return pce, len(nodes)
+
+
+def _fit_smolyak(model, inputs, order, rule, ev):
+    dim = inputs.dim
+    level = check_int("order", 3 if order is None else order, minimum=0)
+    rule = check_choice("rule", rule, RULES)
+    nodes, parts = smolyak_rule(level, dim, rule)
+    y = ev(inputs.from_germ(nodes), "sparse-grid")
+    out_shape = y.shape[1:]
+    # the union of the tensor sets, inside the smallest total-degree basis holding it
+    max_total = max(sum(deg) for _, _, _, _, deg in parts)
+    basis = ChaosBasis(max_total, dim, index_set="total")
+    lookup = {tuple(a): k for k, a in enumerate(basis.indices.tolist())}
+    c = np.zeros((basis.size, int(np.prod(out_shape, dtype=int))))
+    yf = y.reshape(len(nodes), -1)
+    for coef, _, idx, w, deg in parts:
+        tb = ChaosBasis(max(deg), dim, index_set="tensor")
+        keep = np.all(tb.indices <= np.array(deg), axis=1)
+        Psi = tb.evaluate(nodes[idx])[:, keep]
+        ck = (Psi * w[:, None]).T @ yf[idx]
+        rows = [lookup[tuple(a)] for a in tb.indices[keep].tolist()]
+        c[rows] += coef * ck
+    c = c.reshape((basis.size, *out_shape))
+    pce = PolynomialChaosExpansion(basis, c, inputs)
+    pce.diagnostics.update(
+        rule=f"Smolyak level {level} on {rule} ({'nested' if rule != 'gauss' else 'not nested'})",
+        tensor_rules=len(parts),
+    )
+    return pce, len(nodes)
+
+
+def _regression_data(model, inputs, n_samples, samples, evaluations, design, seed, P, ev):
+    """Germ points and outputs for regression (given or generated and evaluated)."""
+    dim = inputs.dim
+    if samples is not None:
+        x = as_finite_array("samples", samples)
+        if x.ndim == 1 and dim == 1:
+            x = x[:, None]
+        if x.ndim != 2 or x.shape[1] != dim:
+            raise ValueError(f"`samples` must have shape (n, {dim}), got {x.shape}")
+        omega = inputs.to_germ(x)
+        name = "samples"
+    else:
+        n = 2 * P if n_samples is None else check_int("n_samples", n_samples, minimum=1)
+        omega = sample_design(n, dim, design, seed)
+        x = inputs.from_germ(omega)
+        name = "n_samples"
+    if evaluations is not None:
+        y = as_finite_array("evaluations", evaluations)
+        if y.ndim == 0 or y.shape[0] != len(x):
+            raise ValueError(
+                f"`evaluations` must have shape (n, *output_shape) with n = {len(x)} rows, "
+                f"one per sample, got {y.shape}"
+            )
+    else:
+        y = None
+    return omega, x, y, name
+
+
+def _fit_lstsq(model, inputs, order, index_set, data, ev):
+    dim = inputs.dim
+    order = check_int("order", 3 if order is None else order, minimum=0)
+    basis = ChaosBasis(order, dim, index_set=index_set or "total")
+    P = basis.size
+    omega, x, y, name = data(P)
+    n = len(omega)
+    if n <= P:
+        raise ValueError(
+            f"too few regression samples: `{name}` gives {n} points for P = {P} basis terms "
+            f"(order {order}, dim {dim}); least squares needs more than P (about 2P = {2 * P} "
+            "is the usual choice), or lower `order`"
+        )
+    if y is None:
+        y = ev(x, "regression")
+    Psi = basis.evaluate(omega)
+    Q, R = sla.qr(Psi, mode="economic")
+    if np.min(np.abs(np.diag(R))) < 1e-12 * np.max(np.abs(np.diag(R))):
+        raise ValueError(
+            f"the design matrix at `{name}` is rank-deficient for order {order}; use more "
+            "or better spread samples (design='lhs' or 'sobol')"
+        )
+    yf = y.reshape(n, -1)
+    z = Q.T @ yf
+    c = sla.solve_triangular(R, z)
+    resid = yf - Q @ z
+    h = np.sum(Q**2, axis=1)
+    var = np.var(yf, axis=0)
+    var = np.where(var > 0, var, 1.0)
+    loo = np.mean((resid / (1.0 - h)[:, None]) ** 2, axis=0) / var
+    trace = np.sum(sla.solve_triangular(R, np.eye(P)) ** 2)
+    corr = n / (n - P) * (1.0 + trace)
+    pce = PolynomialChaosExpansion(basis, c.reshape((P, *y.shape[1:])), inputs)
+    pce.diagnostics.update(
+        design=None if name == "samples" else data.design,
+        loo_error=loo.reshape(y.shape[1:]),
+        corrected_loo_error=(loo * corr).reshape(y.shape[1:]),
+    )
+    return pce, n
+
+
+def _path_order(X, y, max_steps, solver):
+    """Order in which the columns of ``X`` enter a LARS or OMP path (nested active sets)."""
+    from sklearn.exceptions import ConvergenceWarning
+    from sklearn.linear_model import lars_path, orthogonal_mp
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        if solver == "lars":
+            _, active, _ = lars_path(X, y, method="lar", max_iter=max_steps, return_path=False)
+            return list(active)[:max_steps]
+        path = orthogonal_mp(X, y, n_nonzero_coefs=max_steps, return_path=True)
+    path = path.reshape(X.shape[1], -1)
+    # OMP only adds: the first nonzero step of each column gives its entry order
+    nz = path != 0
+    first = np.where(nz.any(axis=1), np.argmax(nz, axis=1), path.shape[1])
+    entered = np.flatnonzero(first < path.shape[1])
+    return entered[np.argsort(first[entered], kind="stable")].tolist()
+
+
+def _sparse_select(Psi, y, candidates, n, solver):
+    """Hybrid LARS/OMP on the candidate columns: (columns, coefficients, corrected LOO).
+
+    The path is computed on centred, unit-norm candidate columns (the constant term is
+    always kept); every nested active set along it is then refitted by OLS, and the one
+    with the smallest corrected leave-one-out error wins (Blatman & Sudret 2011).
+    """
+    X = Psi[:, candidates]
+    Xc = X - X.mean(axis=0)
+    scale = np.linalg.norm(Xc, axis=0)
+    scale[scale == 0] = 1.0
+    # beyond n / 2 terms the LOO correction factor exceeds 2: such fits never win
+    max_steps = min(len(candidates), max(n // 2, 2))
+    active = _path_order(Xc / scale, y - y.mean(), max_steps, solver)
+    cols = [0] + [int(candidates[j]) for j in active]
+    Q, R = sla.qr(Psi[:, cols], mode="economic")
+    d = np.abs(np.diag(R))
+    # stop at the first column that is numerically dependent on the earlier ones
+    bad = np.flatnonzero(d < 1e-10 * d[0])
+    s = int(bad[0]) if bad.size else len(cols)
+    Q, R, cols = Q[:, :s], R[:s, :s], cols[:s]
+    _, corrected = _loo_nested(Q, R, y)
+    k = int(np.argmin(corrected)) + 1
+    coef = sla.solve_triangular(R[:k, :k], Q[:, :k].T @ y)
+    return cols[:k], coef, float(corrected[k - 1])
+
+
+def _fit_sparse(model, inputs, order, index_set, data, ev, q_norm, early_stop, solver):
+    dim = inputs.dim
+    if index_set not in (None, "total"):
+        raise ValueError(
+            f"`index_set` must be 'total' for method={solver!r} (candidate sets are graded)"
+        )
+    omega, x, y, name = data(None)
+    n = len(omega)
+    if n < 4:
+        raise ValueError(f"too few regression samples: `{name}` gives {n} points; pass at least 4")
+    if order is None:
+        # candidate degrees while the candidate set stays below _CANDIDATES_PER_RUN * n
+        order = 1
+        while math.comb(order + 1 + dim, dim) <= _CANDIDATES_PER_RUN * n and order < _MAX_DEGREE:
+            order += 1
+    order = check_int("order", order, minimum=1)
+    if y is None:
+        y = ev(x, "regression")
+    yf = y.reshape(n, -1)
+    basis = ChaosBasis(order, dim)
+    Psi = basis.evaluate(omega)
+    alpha = np.asarray(basis.indices, dtype=float)
+    qn = (np.sum(alpha**q_norm, axis=1)) ** (1.0 / q_norm)
+    coeffs = np.zeros((basis.size, yf.shape[1]))
+    chosen_deg, errors, n_terms = [], [], []
+    for j in range(yf.shape[1]):
+        if np.all(yf[:, j] == yf[0, j]):
+            # a constant output component: the mean term alone, exactly
+            coeffs[0, j] = yf[0, j]
+            chosen_deg.append(0)
+            errors.append(0.0)
+            n_terms.append(1)
+            continue
+        best = None
+        worse = 0
+        for p in range(1, order + 1):
+            candidates = np.flatnonzero((qn <= p + 1e-12) & (qn > 0))
+            cols, coef, err = _sparse_select(Psi, yf[:, j], candidates, n, solver)
+            if best is None or err < best[2]:
+                best = (cols, coef, err, p)
+                worse = 0
+            else:
+                worse += 1
+                if worse >= early_stop:
+                    break
+        cols, coef, err, p = best
+        coeffs[cols, j] = coef
+        chosen_deg.append(p)
+        errors.append(err)
+        n_terms.append(len(cols))
+    top = max(max(chosen_deg), 1)
+    basis_out = ChaosBasis(top, dim)
+    c = coeffs[: basis_out.size].reshape((basis_out.size, *y.shape[1:]))
+    pce = PolynomialChaosExpansion(basis_out, c, inputs)
+    shape = y.shape[1:]
+    pce.diagnostics.update(
+        design=None if name == "samples" else data.design,
+        degree=np.array(chosen_deg).reshape(shape),
+        n_terms=np.array(n_terms).reshape(shape),
+        corrected_loo_error=np.array(errors).reshape(shape),
+        q_norm=q_norm,
+    )
+    return pce, n
+
+
+# --------------------------------------------------------------------------------------
+# public entry point
+# --------------------------------------------------------------------------------------
+def fit_pce(
+    model,
+    inputs,
+    method="lars",
+    order=None,
+    *,
+    n_samples=None,
+    samples=None,
+    evaluations=None,
+    design="lhs",
+    index_set=None,
+    n_points=None,
+    rule="gauss",
+    q_norm=1.0,
+    early_stop=2,
+    executor=None,
+    workers=1,
+    seed=None,
+    progress=False,
+):
+    """A polynomial chaos expansion of a black-box model from its evaluations.
+
+    Parameters
+    ----------
+    model : callable
+        ``model(x) -> array_like`` of a fixed shape (scalar, vector or field), ``x`` a
+        (dim,) point on the inputs' own ranges. It must be picklable to run in worker
+        processes (a module-level function or ``functools.partial`` of one). May be
+        ``None`` when ``evaluations`` are given.
+    inputs : UniformInputs, (dim, 2) bounds or chaospy distribution
+        Independent uniform inputs :math:`x_k \\sim \\mathcal U(a_k, b_k)`; a chaospy
+        joint distribution must be made of ``chaospy.Uniform`` s.
+    method : {"lars", "omp", "lstsq", "quadrature", "smolyak"}
+        See the module docstring. Default ``"lars"``.
+    order : int, optional
+        ``"quadrature"``: degree per variable (default 3); ``"smolyak"``: the level
+        :math:`\\ell` (total degree :math:`\\ell` for ``rule="gauss"``; default 3);
+        ``"lstsq"``: total degree (default 3); ``"lars"``, ``"omp"``: the largest
+        candidate degree (default: the largest whose basis has at most ``10 n`` terms,
+        at most 30).
+    n_samples : int, optional
+        Regression design size (default ``2 P`` for ``"lstsq"``, 100 for the sparse
+        methods).
+    samples : (n, dim) array_like, optional
+        Regression points on the inputs' ranges instead of a generated design.
+    evaluations : (n, *output_shape) array_like, optional
+        Model outputs at ``samples`` (then the model is not called).
+    design : {"lhs", "sobol", "halton", "random"}
+        Generated regression design (``scipy.stats.qmc``). Default Latin hypercube.
+    index_set : {"total", "tensor"}, optional
+        Basis truncation (default ``"tensor"`` for quadrature, ``"total"`` else).
+    n_points : int, optional
+        Gauss points per variable for ``"quadrature"`` (default ``order + 1``).
+    rule : {"gauss", "clenshaw-curtis"}
+        1-D rules of the Smolyak grid: Gauss-Legendre (not nested) or Clenshaw-Curtis
+        (nested).
+    q_norm : float
+        Hyperbolic truncation of the sparse-regression candidates, :math:`\\|\\alpha\\|_q \\le p`
+        (1 = total degree; smaller keeps fewer interactions).
+    early_stop : int
+        Sparse methods: stop raising the degree after this many degrees without improvement.
+    executor : object with ``map``, optional
+        As in :func:`ecfm_uq.mc.monte_carlo`: a ``ThreadPoolExecutor``,
+        ``ProcessPoolExecutor`` or ``dask.distributed.Client``.
+    workers : int
+        Processes of a pool created here when no ``executor`` is given (1: in-process).
+    seed : None, int or Generator
+        Seeds the generated design.
+    progress : bool or object with ``update(n)``
+        ``True``: show a tqdm progress bar over the model evaluations; or the caller's
+        own bar (e.g. a ``tqdm``), advanced by the number of finished runs.
+
+    Returns
+    -------
+    PolynomialChaosExpansion
+        With ``diagnostics``: ``method``, ``n_evaluations``, ``wall_time``, and
+        ``loo_error`` / ``corrected_loo_error`` (regression; relative to the output
+        variance, per output component), ``degree`` and ``n_terms`` (sparse methods).
+
+    Raises
+    ------
+    ValueError
+        Unknown method or design, too few regression samples for the basis (naming
+        ``n_samples`` or ``samples``), a model output that is NaN or inf (naming the
+        point), outputs of different shapes, ``evaluations`` not matching ``samples``.
+    TypeError
+        ``model`` not callable; a non-uniform chaospy distribution.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> f = lambda x: x[0] + x[1] ** 2
+    >>> pce = fit_pce(f, [(0, 1), (-1, 1)], method="quadrature", order=2)
+    >>> round(float(pce.mean), 6), pce.first_order().round(6).tolist()
+    (0.833333, [0.483871, 0.516129])
+    """
+    t0 = time.perf_counter()
+    method = check_choice("method", method, METHODS)
+    inputs = as_inputs(inputs)
+    if inputs is None:
+        raise TypeError("`inputs` must be given: bounds (dim, 2), UniformInputs or chaospy.J")
+    workers = check_int("workers", workers, minimum=1)
+    if model is None and evaluations is None:
+        raise TypeError("`model` must be callable (or pass `samples` and `evaluations`)")
+    for name, value in (("samples", samples), ("evaluations", evaluations)):
+        if value is not None and method in ("quadrature", "smolyak"):
+            raise ValueError(
+                f"`{name}` are for regression methods; method={method!r} picks its own "
+                "nodes (use method='lstsq', 'lars' or 'omp' with given samples)"
+            )
+    if evaluations is not None and samples is None:
+        raise ValueError("`evaluations` need the `samples` they were computed at")
+
+    def ev(x, label):
+        return _evaluate(model, x, executor, workers, progress, label)
+
+    def data(P):
+        n_default = 100 if P is None else 2 * P
+        return _regression_data(
+            model,
+            inputs,
+            n_default if n_samples is None else n_samples,
+            samples,
+            evaluations,
+            design,
+            seed,
+            P,
+            ev,
+        )
+
+    data.design = check_choice("design", design, DESIGNS)
+    if method == "quadrature":
+        pce, n_eval = _fit_quadrature(model, inputs, order, n_points, index_set, ev)
+    elif method == "smolyak":
+        pce, n_eval = _fit_smolyak(model, inputs, order, rule, ev)
+    elif method == "lstsq":
+        pce, n_eval = _fit_lstsq(model, inputs, order, index_set, data, ev)
+    else:
+        if isinstance(q_norm, bool) or not 0 < float(q_norm) <= 1:
+            raise ValueError(f"`q_norm` must lie in (0, 1], got {q_norm!r}")
+        early_stop = check_int("early_stop", early_stop, minimum=1)
+        pce, n_eval = _fit_sparse(
+            model, inputs, order, index_set, data, ev, float(q_norm), early_stop, method
+        )
+    pce.diagnostics.update(
+        method=method,
+        n_evaluations=n_eval,
+        wall_time=time.perf_counter() - t0,
+    )
+    return pce
