@@ -111,3 +111,54 @@ def test_steady_coverage_with_known_sigma_is_nominal(formulation):
     r = steady_coverage(system, M_obs, true, 0.01, 200, 0, formulation, known_sigma=True)
     assert r["n_failed"] == 0
     assert 0.92 <= r["coverage"] <= 0.98, r
+
+
+# -- pseudo-likelihood estimates from replicated data (the beam) -----------------------
+@pytest.fixture(scope="module")
+def beam_data():
+    from ecfm_uq.problems.beam import BeamModel
+
+    model = BeamModel()
+    v = model.sample_data(1.0, 25, rng=np.random.default_rng(4))
+    return model, v, [(0.0, 0.99 * model.beta_min)]
+
+
+@pytest.mark.parametrize("formulation", ["standard", "inner-outer"])
+def test_likelihood_estimate_derivative_equals_refit_finite_differences(beam_data, formulation):
+    from ecfm_uq.inverse import fit_pseudo_likelihood
+
+    model, v, bounds = beam_data
+
+    def fit(data):  # refits tight enough that a difference quotient resolves 1e-5
+        return fit_pseudo_likelihood(
+            model.system,
+            model.M_obs,
+            data,
+            [1.0],
+            formulation,
+            bounds=bounds,
+            gtol=1e-14,
+            likelihood_options={"solve_options": {"tol": 1e-13}},
+        )
+
+    res = fit(v)
+    assert res.success and res.noise_model == "replicates"
+    D = res.extra["deps_dv"]
+    assert D.shape == (1, 5, 25)
+    h = 1e-2  # data are O(10): truncation error ~1e-8 relative, refit noise below it
+    for i, j in [(0, 0), (2, 7), (4, 24)]:  # a few replicates, three sensors
+        e = np.zeros_like(v)
+        e[i, j] = h
+        refit = (fit(v + e).eps[0] - fit(v - e).eps[0]) / (2 * h)
+        np.testing.assert_allclose(D[0, i, j], refit, rtol=1e-5, atol=1e-7 * np.abs(D).max())
+    assert res.eps_ci95[0, 0] < res.eps[0] < res.eps_ci95[0, 1]
+
+
+def test_penalty_form_says_why_it_has_no_uncertainty(beam_data):
+    from ecfm_uq.inverse import fit_pseudo_likelihood
+
+    model, v, bounds = beam_data
+    res = fit_pseudo_likelihood(
+        model.system, model.M_obs, v, [0.5], "penalty", lam0=np.full(5, 1e-3), bounds=bounds
+    )
+    assert res.eps_cov is None and "no minimizer" in res.uncertainty_message

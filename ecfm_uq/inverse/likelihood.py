@@ -965,7 +965,13 @@ def fit_pseudo_likelihood(
         ``method`` is ``"likelihood-<formulation>"``; ``loss`` is the objective
         minimized; ``extra`` holds ``lam``, ``force_norm`` :math:`\\|\\lambda\\|_2`,
         ``neg_log_likelihood`` :math:`\\Lambda`, ``mu``, ``var``, ``Theta``,
-        ``n_solves`` and formulation diagnostics (inner Hessian eigenvalue, SLSQP status).
+        ``n_solves`` and formulation diagnostics (inner Hessian eigenvalue, SLSQP status),
+        and ``deps_dv`` (n_eps, C, D), the implicit derivative of the estimate in each
+        replicate (``None`` where the uncertainty was not computed). ``eps_cov``,
+        ``eps_stderr`` and ``eps_ci95`` are the delta-method uncertainty from the
+        replicates (``noise_model="replicates"``, see ``_replicate_uncertainty``) for the
+        standard and inner-outer estimates; the penalty form has none (its objective has
+        no minimizer), which ``uncertainty_message`` says.
 
     Notes
     -----
@@ -1017,8 +1023,11 @@ def fit_pseudo_likelihood(
         n_solves=like.n_solves,
         n_failures=len(tr.failures),
     )
+    eps_hat = np.asarray(x[: system.n_eps], dtype=float)
+    unc = _replicate_uncertainty(like, formulation, eps_hat, lam, ok)
+    extra["deps_dv"] = unc.pop("deps_dv", None)
     return InverseResult(
-        eps=np.asarray(x[: system.n_eps], dtype=float),
+        eps=eps_hat,
         loss=float(loss),
         success=ok,
         message=msg,
@@ -1027,7 +1036,81 @@ def fit_pseudo_likelihood(
         eps_history=np.array(tr.eps).reshape(-1, system.n_eps),
         loss_history=np.array(tr.loss),
         extra=extra,
+        **unc,
     )
+
+
+def _with_statistics(like, stats):
+    """A copy of ``like`` whose data are the statistics ``stats = [vbar, ss / D]``.
+
+    The pseudo-likelihood sees the replicates only through the per-sensor mean and second
+    central moment, so the estimate is a function of these 2C numbers.
+    """
+    import copy
+
+    other = copy.copy(like)
+    C = like.C
+    other.vbar = np.asarray(stats[:C], dtype=float)
+    other.ss = like.D * np.asarray(stats[C:], dtype=float)
+    return other
+
+
+def _replicate_uncertainty(like, formulation, eps, lam, ok):
+    """Delta-method covariance of a pseudo-likelihood estimate from its replicates.
+
+    The estimate solves ``g(eps, s) = 0`` with ``s = [vbar, m2]`` (per-sensor mean and
+    second central moment of the D replicates): the standard estimate's ``g`` is
+    :math:`\\partial\\Lambda(\\epsilon, 0)/\\partial\\epsilon`, the inner-outer one's
+    :math:`(\\partial\\lambda^*/\\partial\\epsilon)^T\\lambda^*`. The covariance of ``s`` is
+    the empirical one of the replicates' influence
+    :math:`u_j = [v_j - \\bar v,\\; (v_j - \\bar v)^2 - m_2]`,
+    :math:`\\Sigma_s = \\sum_j u_j u_j^T / D^2` (the sample covariance of replicated data,
+    carried to the statistics), and :func:`~ecfm_uq.inverse.uncertainty.implicit_covariance`
+    does the rest: the one code path of every fit.
+    """
+    from .uncertainty import confidence_intervals, implicit_covariance
+
+    if formulation == "penalty":
+        return {
+            "uncertainty_message": "not computed for the penalty form: its objective has no "
+            "minimizer (see fit_pseudo_likelihood Notes), so no optimality condition defines "
+            "the estimate"
+        }
+    if not ok:
+        return {"uncertainty_message": "not computed: the fit did not succeed"}
+    v, D = like.v, like.D
+    vbar, m2 = like.vbar, like.ss / D
+    U = np.vstack([v - vbar[:, None], (v - vbar[:, None]) ** 2 - m2[:, None]])  # (2C, D)
+    Sigma_s = U @ U.T / D**2
+    stats = np.concatenate([vbar, m2])
+
+    if formulation == "standard":
+
+        def grad(e, s):
+            return _with_statistics(like, s).evaluate(e, None, order=1).grad_eps
+    else:
+
+        def grad(e, s):
+            fs = optimal_forces(_with_statistics(like, s), e, lam, tol=1e-15)
+            if not fs.success or fs.dlam_deps is None:
+                raise ConvergenceError(f"inner forces at eps={e}: {fs.message}")
+            return fs.dlam_deps.T @ fs.lam
+
+    try:
+        cov, deps_ds = implicit_covariance(grad, eps, stats, Sigma_s)
+    except (ConvergenceError, ValueError) as e:
+        return {"uncertainty_message": f"uncertainty not computed: {e}"}
+    se, ci = confidence_intervals(eps, cov)
+    C = like.C
+    # chain rule to the raw replicates: d vbar_i/dv_ij = 1/D, d m2_i/dv_ij = 2(v_ij - vbar_i)/D
+    deps_dv = deps_ds[:, :C, None] / D + deps_ds[:, C:, None] * 2.0 * (v - vbar[:, None])[None] / D
+    return {
+        "eps_cov": cov,
+        "eps_stderr": se,
+        "eps_ci95": ci,
+        "noise_model": "replicates",
+        "deps_dv": deps_dv,
+    }
 
 
 # --------------------------------------------------------------------------------------
