@@ -54,3 +54,20 @@ def test_pce_page_examples_run_and_match_closed_forms():
     np.testing.assert_allclose(ns["beam"].first_order(), 1.0, rtol=1e-12)
     # chaospy interop: x0 + x1^2 + x0 x1 has T = (20, 36) / 51 (see tests/test_pce.py)
     np.testing.assert_allclose(ns["chaospy"].Sens_t(ns["poly"], ns["dist"]), [20 / 51, 36 / 51])
+
+
+def test_uncertainty_page_example_gives_honest_looking_intervals():
+    text = (DOCS / "uncertainty.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
+    assert len(blocks) == 1
+    ns = {}
+    exec(compile(blocks[0], "uncertainty.md", "exec"), ns)
+    std, res = ns["std"], ns["res"]
+    assert std.success and res.success and res.noise_model == "known"
+    assert std.extra["verdict"]["consistent"] and not res.extra["verdict"]["consistent"]
+    assert np.all(res.eps_stderr > 4 * std.eps_stderr)
+    np.testing.assert_allclose(res.eps_stderr, np.sqrt(np.diag(res.eps_cov)), rtol=1e-12)
+    half = 1.959963984540054 * res.eps_stderr  # normal 97.5 % quantile
+    np.testing.assert_allclose(res.eps_ci95[:, 1] - res.eps, half, rtol=1e-12)
+    # the truth (1.0, -0.5) lies inside both intervals for this seed
+    assert np.all((res.eps_ci95[:, 0] < [1.0, -0.5]) & ([1.0, -0.5] < res.eps_ci95[:, 1]))

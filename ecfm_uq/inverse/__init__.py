@@ -11,6 +11,7 @@ pseudo-likelihood forces    :func:`fit_pseudo_likelihood`                   Eq. 
 ==========================  ==============================================  ===========
 """
 
+from .coverage import replicate_coverage, steady_coverage
 from .diagnostics import condition_number, fd_hessian, loss_surface, taylor_remainders
 from .dynamic import DynamicInverseProblem
 from .likelihood import (
@@ -49,8 +50,10 @@ __all__ = [
     "negative_log_pseudo_likelihood",
     "noise_bounds",
     "optimal_forces",
+    "replicate_coverage",
     "sample_moments",
     "sensor_moments",
     "standard_objective",
+    "steady_coverage",
     "taylor_remainders",
 ]

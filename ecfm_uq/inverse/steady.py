@@ -219,7 +219,9 @@ def fit_steady(
         msg += f" ({len(failures)} inner solves failed; first: {failures[0]})"
     unc = _uncertainty(system, M_obs, v, np.asarray(res.x), objective, solve_kw, sigma)
     lam = sol.lam if formulation == "ecfm" else np.zeros(0)
-    verdict = consistency_verdict(system, M_obs, v, res.x, lam, bounds, solve_options=solve_options)
+    verdict = consistency_verdict(
+        system, M_obs, v, res.x, lam, bounds, sigma=sigma, solve_options=solve_options
+    )
     if not verdict["consistent"]:
         msg += f" [{verdict['message']}]"
     return InverseResult(
