@@ -54,6 +54,7 @@ For nonlinear systems they are central differences of the analytic gradient.
 
 from __future__ import annotations
 
+import copy
 import numbers
 import warnings
 from dataclasses import dataclass
@@ -76,6 +77,7 @@ __all__ = [
     "fit_pseudo_likelihood",
     "negative_log_pseudo_likelihood",
     "optimal_forces",
+    "replicate_statistics",
     "sensor_moments",
 ]
 
@@ -1017,8 +1019,13 @@ def fit_pseudo_likelihood(
         n_solves=like.n_solves,
         n_failures=len(tr.failures),
     )
+    eps_hat = np.asarray(x[: system.n_eps], dtype=float)
+    extra["verdict"] = moment_verdict(p.mu, p.var, like.v)
+    if not extra["verdict"]["consistent"]:
+        msg += f" [{extra['verdict']['message']}]"
     return InverseResult(
-        eps=np.asarray(x[: system.n_eps], dtype=float),
+        **_likelihood_uncertainty(like, formulation, eps_hat, lam),
+        eps=eps_hat,
         loss=float(loss),
         success=ok,
         message=msg,
@@ -1028,6 +1035,150 @@ def fit_pseudo_likelihood(
         loss_history=np.array(tr.loss),
         extra=extra,
     )
+
+
+# --------------------------------------------------------------------------------------
+# uncertainty of the estimates (issue 13): delta method on the replicate statistics
+# --------------------------------------------------------------------------------------
+def replicate_statistics(v):
+    """The statistics the pseudo-likelihood sees, and their sample covariance.
+
+    :math:`\\Lambda` depends on the data only through the sensor means
+    :math:`\\bar v_i` and the centred second moments :math:`m_i = \\frac1D\\sum_j
+    (v_{ij} - \\bar v_i)^2`. Both are (asymptotically) means over the replicates of
+    :math:`y_j = (v_{\\cdot j},\\ (v_{\\cdot j} - \\bar v)^2)`, whose covariance is
+    estimated by the sample covariance of the :math:`y_j` divided by D (the sensors of one
+    replicate may be correlated; replicates are independent).
+
+    Parameters
+    ----------
+    v : (C, D) array_like
+        Replicated data, ``D >= 2``.
+
+    Returns
+    -------
+    w : (2C,) ndarray
+        ``(vbar, m)``.
+    Sigma_w : (2C, 2C) ndarray
+        Sample covariance of ``w``.
+    """
+    v = as_finite_array("v", v, ndim=2)
+    if v.shape[1] < 2:
+        raise ValueError(
+            f"`v` needs at least 2 replicates per sensor for a sample covariance, got "
+            f"D={v.shape[1]}"
+        )
+    D = v.shape[1]
+    vbar = v.mean(axis=1)
+    dev = v - vbar[:, None]
+    y = np.vstack([v, dev**2])  # (2C, D): one column per replicate
+    return np.concatenate([vbar, (dev**2).mean(axis=1)]), np.atleast_2d(np.cov(y, ddof=1)) / D
+
+
+def _at_statistics(like, w):
+    """A copy of ``like`` whose data statistics are ``w = (vbar, m)`` (see
+    :func:`replicate_statistics`); the estimate as a function of the data."""
+    new = copy.copy(like)
+    new.vbar = np.asarray(w[: like.C], dtype=float)
+    new.ss = like.D * np.asarray(w[like.C :], dtype=float)
+    return new
+
+
+#: Newton-decrement tolerance of the inner solves inside the uncertainty's finite
+#: differences: their step is 1e-6, so the forces must be exact to far below that (with the
+#: fits' 1e-15 the covariance is off by ~1e-5 relative; quadratic convergence makes the
+#: extra digits one more Newton step)
+_UNCERTAINTY_INNER_TOL = 1e-24
+
+
+def _likelihood_uncertainty(like, formulation, eps, lam):
+    """``InverseResult`` uncertainty fields of a pseudo-likelihood estimate.
+
+    The optimality condition is differentiated implicitly
+    (:func:`~ecfm_uq.inverse.uncertainty.implicit_covariance`) in the replicate statistics
+    ``w``, with their sample covariance (:func:`replicate_statistics`): a sandwich
+    covariance, valid although the Gaussian pseudo-likelihood is not the data's
+    distribution. Student-t intervals with D - 1 degrees of freedom (the covariance is
+    estimated from D replicates).
+    """
+    from .uncertainty import confidence_intervals, implicit_covariance
+
+    if formulation == "penalty":
+        return {
+            "uncertainty_message": "uncertainty not computed: the penalty objective has no "
+            "minimizer (it is unbounded below as lam -> 0), so no optimality condition "
+            "defines the estimate; use formulation='inner-outer' or 'standard'"
+        }
+    if formulation == "standard":
+
+        def grad(e, w):
+            return _at_statistics(like, w).evaluate(e, None, order=1).grad_eps
+
+    else:
+
+        def grad(e, w):
+            fs = optimal_forces(_at_statistics(like, w), e, lam, tol=_UNCERTAINTY_INNER_TOL)
+            if not fs.success:
+                raise ConvergenceError(f"inner solve at eps={e}: {fs.message}")
+            return fs.dlam_deps.T @ fs.lam
+
+    w, Sigma_w = replicate_statistics(like.v)
+    try:
+        cov, deps_dw = implicit_covariance(grad, eps, w, Sigma_w, rel_step=1e-4, stencil=4)
+        se, ci = confidence_intervals(eps, cov, dof=like.D - 1)
+    except (ConvergenceError, ValueError) as e:
+        return {"uncertainty_message": f"uncertainty not computed: {e}"}
+    return {
+        "eps_cov": cov,
+        "eps_stderr": se,
+        "eps_ci95": ci,
+        "noise_model": "replicates",
+        "eps_jacobian": deps_dw,
+    }
+
+
+def moment_verdict(mu, var, v, alpha=0.01):
+    """Whether the fitted model's sensor means agree with the replicated data.
+
+    z-scores :math:`z_i = (\\bar v_i - \\mu_i)/\\sqrt{\\sigma_i^2/D}` of the sample means
+    against the model's moments (Eq. stats), tested at family-wise level ``alpha`` with
+    the Bonferroni quantile :math:`z_{1-\\alpha/(2C)}` (valid however the sensors of a
+    replicate are correlated).
+
+    Parameters
+    ----------
+    mu, var : (C,) array_like
+        Model mean and variance at the sensors.
+    v : (C, D) array_like
+        Replicated data.
+    alpha : float
+
+    Returns
+    -------
+    dict
+        ``z`` (C,), ``z_limit``, ``peak_sensor_index``, ``consistent``, ``message``.
+    """
+    from scipy import stats
+
+    mu = as_finite_array("mu", mu, ndim=1)
+    var = as_finite_array("var", var, shape=mu.shape)
+    v = _check_data(v, mu.size)
+    if not 0 < alpha < 1:
+        raise ValueError(f"`alpha` must lie in (0, 1), got {alpha}")
+    C, D = v.shape
+    z = (v.mean(axis=1) - mu) / np.sqrt(var / D)
+    limit = float(stats.norm.ppf(1 - alpha / (2 * C)))
+    peak = int(np.argmax(np.abs(z)))
+    ok = bool(np.abs(z[peak]) <= limit)
+    verdict = "model and data are consistent" if ok else "NOT consistent"
+    return {
+        "z": z,
+        "z_limit": limit,
+        "peak_sensor_index": peak,
+        "consistent": ok,
+        "message": f"{verdict}: largest |z| of the sensor means {abs(z[peak]):.3g} at sensor "
+        f"{peak} ({'<=' if ok else '>'} {limit:.3g}, family-wise level {alpha:g})",
+    }
 
 
 # --------------------------------------------------------------------------------------
