@@ -16,7 +16,7 @@ from pathlib import Path
 
 from ._common import write_json
 
-STUDY_NAMES = ("burgers", "kpp", "beam", "mc", "boundary", "geometry")
+STUDY_NAMES = ("burgers", "kpp", "beam", "mc", "boundary", "geometry", "coverage")
 
 __all__ = [
     "STUDY_NAMES",
