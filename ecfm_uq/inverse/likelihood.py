@@ -922,6 +922,7 @@ def fit_pseudo_likelihood(
     gtol=1e-8,
     maxiter=200,
     likelihood_options=None,
+    inner_tol=1e-15,
 ):
     """Estimate :math:`\\epsilon` of a stochastic model from replicated data.
 
@@ -960,10 +961,17 @@ def fit_pseudo_likelihood(
     likelihood_options : dict, optional
         Passed to :class:`PseudoLikelihood` (``var_rtol``, ``hessian``, ``fd_step``,
         ``solve_options``).
+    inner_tol : float
+        Newton-decrement tolerance of the inner force solve (``"inner-outer"``).
 
     Returns
     -------
     InverseResult
+        With ``eps_cov``, ``eps_stderr``, ``eps_ci95`` (``noise_model="replicates"``):
+        the implicit derivative of the estimate's optimality condition in the replicate
+        statistics (:func:`replicate_statistics`) propagated through their sample
+        covariance, Student-t intervals with D - 1 dof (not for ``"penalty"``, which no
+        optimality condition defines); ``extra["verdict"]`` (:func:`moment_verdict`).
         ``method`` is ``"likelihood-<formulation>"``; ``loss`` is the objective
         minimized; ``extra`` holds ``lam``, ``force_norm`` :math:`\\|\\lambda\\|_2`,
         ``neg_log_likelihood`` :math:`\\Lambda`, ``mu``, ``var``, ``Theta``,
@@ -998,8 +1006,17 @@ def fit_pseudo_likelihood(
     gtol = check_positive("gtol", gtol)
     maxiter = check_int("maxiter", maxiter, minimum=1)
     trust_radius = check_positive("trust_radius", trust_radius)
+    inner_tol = check_positive("inner_tol", inner_tol)
     res, x, loss, p, ok, tr, extra = _FITTERS[formulation](
-        like, eps0, bounds, gtol, maxiter, lam0=lam0, penalty=penalty, trust_radius=trust_radius
+        like,
+        eps0,
+        bounds,
+        gtol,
+        maxiter,
+        lam0=lam0,
+        penalty=penalty,
+        trust_radius=trust_radius,
+        inner_tol=inner_tol,
     )
     lam = extra.pop("lam")
     msg = str(res.message)

@@ -283,11 +283,11 @@ def _uncertainty(system, M_obs, v, eps, objective, solve_kw, sigma):
             J = M_obs @ np.einsum("ikm,k->im", dTheta, system.E1)
             r = r - J @ np.linalg.lstsq(J, r, rcond=None)[0]
             s2, model, dof = residual_variance(r, eps.size), "estimated", r.size - eps.size
-        cov, _ = implicit_covariance(
+        cov, D = implicit_covariance(
             lambda e, w: objective(system, M_obs, w, e, **solve_kw)[1], eps, v, s2
         )
         se, ci = confidence_intervals(eps, cov, dof=dof)
-        return dict(eps_cov=cov, eps_stderr=se, eps_ci95=ci, noise_model=model)
+        return dict(eps_cov=cov, eps_stderr=se, eps_ci95=ci, noise_model=model, eps_jacobian=D)
     except (ConvergenceError, ValueError) as e:
         if sigma is not None and "sigma" in str(e):
             raise
