@@ -236,3 +236,66 @@ def test_replicate_statistics_covariance_is_the_sample_covariance():
     np.testing.assert_allclose(w[3:], v.var(axis=1))
     # the mean block is the textbook Cov(vbar) = S / D
     np.testing.assert_allclose(S[:3, :3], np.cov(v) / 400, rtol=1e-12)
+
+
+# --------------------------------------------------------------------------------------
+# bad input
+# --------------------------------------------------------------------------------------
+@pytest.mark.parametrize("sigma", [0.0, -0.01, float("nan")])
+def test_fit_steady_refuses_nonpositive_sigma_before_fitting(sigma, monkeypatch):
+    import ecfm_uq.inverse.steady as steady
+
+    system, M_obs, v0, _, _ = _heat_case()
+
+    def no_solve(*a, **k):
+        raise AssertionError("a solve ran before sigma was checked")
+
+    monkeypatch.setattr(steady, "solve_steady", no_solve)
+    with pytest.raises(ValueError, match="sigma"):
+        steady.fit_steady(system, M_obs, v0, [1.0, 1.0], "standard", sigma=sigma)
+
+
+def test_fewer_sensors_than_parameters_is_refused():
+    from ecfm_uq.inverse import fit_steady
+
+    system, M_obs, v0, _, _ = _heat_case()
+    with pytest.raises(ValueError, match="fewer sensors than parameters"):
+        fit_steady(system, M_obs[:1], v0[:1], [1.0, 1.0], "standard")
+
+
+def _ratio_case():
+    """Conductivity eps[0] and source eps[1]: theta = (eps[1]/eps[0]) K^-1 F, so only
+    the ratio is identifiable; the free direction at (2, 1) is (2, 1)/sqrt(5)."""
+    from ecfm_uq.spectral import SineBasis, load, sensor_matrix, stiffness
+    from ecfm_uq.system import Coefficient, GalerkinSystem, LinearTerm, LoadTerm, solve_steady
+
+    B = SineBasis(8)
+    F = load(B, np.ones_like)[:, None]
+    system = GalerkinSystem(
+        [
+            LinearTerm(stiffness(B), Coefficient.parameter(0)),
+            LoadTerm(
+                lambda eps, t=None: eps[1] * F[:, 0], lambda eps, t=None: np.hstack([0 * F, F])
+            ),
+        ],
+        2,
+    )
+    M_obs = sensor_matrix(B, np.linspace(0.1, 0.9, 5))
+    v = M_obs @ solve_steady(system, [2.0, 1.0]).Theta[:, 0]
+    return system, M_obs, v
+
+
+def test_non_identifiable_combination_is_named_not_nan():
+    from ecfm_uq.errors import NonIdentifiableError
+    from ecfm_uq.inverse import fit_steady
+    from ecfm_uq.inverse.uncertainty import check_identifiable, gauss_newton_covariance
+
+    system, M_obs, v = _ratio_case()
+    res = fit_steady(system, M_obs, v, [2.0, 1.0], "standard", sigma=0.01)
+    assert res.eps_cov is None and res.eps_ci95 is None
+    # the null vector (2, 1)/sqrt(5) = (0.894, 0.447), named in the message
+    assert "0.894*eps[0] + 0.447*eps[1]" in res.uncertainty_message, res.uncertainty_message
+    with pytest.raises(NonIdentifiableError, match=r"0\.707\*eps\[0\] - 0\.707\*eps\[1\]"):
+        check_identifiable([[1.0, 1.0], [1.0, 1.0]])
+    with pytest.raises(NonIdentifiableError, match=r"parameter combination 1\*eps\[2\]"):
+        gauss_newton_covariance(np.eye(4)[:, :3] * [1.0, 2.0, 0.0], 1.0)

@@ -79,8 +79,9 @@ def parameter_combination(u, names=None, tol=1e-3):
     u = np.asarray(u, dtype=float).ravel()
     if names is None:
         names = [f"eps[{k}]" for k in range(u.size)]
-    k0 = int(np.argmax(np.abs(u)))
-    u = u * np.sign(u[k0])  # largest component positive: a stable sign
+    # a stable sign: the first of the (near-)largest components positive
+    k0 = int(np.flatnonzero(np.abs(u) >= (1 - 1e-6) * np.abs(u).max())[0])
+    u = u * np.sign(u[k0])
     parts = []
     for k in np.flatnonzero(np.abs(u) >= tol * np.abs(u).max()):
         c = u[k]
