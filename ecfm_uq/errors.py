@@ -28,3 +28,17 @@ class ModelEvaluationError(ConvergenceError):
     Solvers turn it into a reported failure (``success=False``); inverse fits treat it like
     a failed inner solve. The message names the term and the parameters.
     """
+
+
+class NonIdentifiableError(ValueError):
+    """The data do not determine a combination of the parameters.
+
+    Raised where an estimate's information matrix (the derivative of its optimality
+    condition in :math:`\\epsilon`) is singular: the message names the combination of
+    parameters (the null vector) that the data leave free, instead of returning a NaN
+    or astronomically large covariance. ``null_vector`` holds it, unit length.
+    """
+
+    def __init__(self, message, null_vector=None):
+        super().__init__(message)
+        self.null_vector = null_vector

@@ -1,44 +1,75 @@
-"""The coverage study (reduced to 12 data sets): keys, ranges, the figure, the summary
-rows, and the CLI's refusal of bad options. The 200-set coverage itself is checked in
-tests/test_uncertainty.py (steady, known sigma) and by ``reproduce coverage``."""
+"""The `coverage` study (issue 13) with R = 40 data sets: are the reported intervals
+honest? Checked against the binomial law of honest intervals, not a snapshot."""
 
 import json
 
+import numpy as np
 import pytest
+from scipy import stats
 
 from ecfm_uq.cli import main
-from ecfm_uq.studies import load_study
+from ecfm_uq.studies import coverage as study
 
 
 @pytest.fixture(scope="module")
 def result(tmp_path_factory):
-    out = tmp_path_factory.mktemp("cov")
-    assert main(["reproduce", "coverage", "--out", str(out), "--n-datasets", "12", "--quiet"]) == 0
-    return json.loads((out / "coverage" / "result.json").read_text()), out
+    out = tmp_path_factory.mktemp("coverage")
+    assert main(["reproduce", "coverage", "--out", str(out), "--quiet", "--n-datasets", "40"]) == 0
+    with open(out / "coverage" / "result.json") as fh:
+        res = json.load(fh)
+    res["_dir"] = out / "coverage"
+    return res
 
 
-def test_result_has_the_contracted_keys(result):
-    r, out = result
-    assert r["n_datasets"] == 12
+def test_result_keys_of_the_contract(result):
+    assert result["n_datasets"] == 40
     for model in ("steady", "beam"):
         for form in ("standard", "ecfm"):
-            entry = r[model][form]
-            assert 0.0 <= entry["coverage"] <= 1.0
-            assert entry["mean_width"] > 0 and entry["n_failed"] == 0
-    # ECFM's intervals are the wider ones on both models (it fits the noise with forces)
-    assert r["steady"]["ecfm"]["mean_width"] > r["steady"]["standard"]["mean_width"]
-    assert r["beam"]["ecfm"]["mean_width"] > r["beam"]["standard"]["mean_width"]
-    assert (out / "coverage" / "coverage.png").stat().st_size > 0
-
-
-def test_summary_rows(result):
-    rows = load_study("coverage").summary_rows(result[0])
-    assert len(rows) == 6
+            blk = result[model][form]
+            assert 0.0 <= blk["coverage"] <= 1.0
+            assert blk["mean_width"] > 0
+            assert blk["n_failed"] == 0
+    assert (result["_dir"] / "coverage.png").stat().st_size > 0
+    rows = study.summary_rows(result)
     assert all(set(r) == {"quantity", "paper", "ours", "holds"} for r in rows)
 
 
-@pytest.mark.parametrize("argv", [["--n-datasets", "1"], ["--sigma", "0"], ["--sigma", "nan"]])
-def test_bad_options_are_refused(tmp_path, capsys, argv):
-    assert main(["reproduce", "coverage", "--out", str(tmp_path), *argv]) != 0
-    err = capsys.readouterr().err
-    assert "--n-datasets" in err or "--sigma" in err
+@pytest.mark.parametrize("model", ["steady", "beam"])
+@pytest.mark.parametrize("form", ["standard", "ecfm"])
+def test_coverage_is_what_honest_intervals_give(result, model, form):
+    blk = result[model][form]
+    n = blk["n_intervals"]
+    # honest 95 % intervals: the number of hits is (for one parameter exactly)
+    # Binomial(n, 0.95); a 99.9 % range of it
+    lo, hi = stats.binom.ppf([0.0005, 0.9995], n, 0.95) / n
+    assert lo <= blk["coverage"] <= hi, blk
+
+
+@pytest.mark.parametrize("form", ["standard", "ecfm"])
+def test_beam_standard_errors_match_the_spread_of_the_estimates(result, form):
+    blk = result["beam"][form]
+    # sd of 40 estimates is known to ~ +-11 % (1/sqrt(2 * 39)); allow 3 of those
+    assert 0.67 < blk["mean_stderr"] / blk["estimate_std"] < 1.5, blk
+
+
+def test_ecfm_intervals_say_the_ecfm_load_is_less_certain(result):
+    # the beam seed study: the ECFM load scatters ~10x more than the standard one; the
+    # single-fit intervals must say so
+    b = result["beam"]
+    assert b["ecfm"]["mean_width"] > 4 * b["standard"]["mean_width"]
+    assert b["ecfm"]["estimate_std"] > 4 * b["standard"]["estimate_std"]
+
+
+def test_bad_options_are_refused(tmp_path, capsys):
+    for opt, val in (("--n-datasets", "0"), ("--sigma", "0"), ("--replicates", "2")):
+        assert main(["reproduce", "coverage", "--out", str(tmp_path), opt, val]) != 0
+        assert opt in capsys.readouterr().err
+
+
+def test_binomial_band_against_scipy():
+    from ecfm_uq.inverse.coverage import binomial_band
+
+    lo, hi = binomial_band(200)
+    k = np.arange(201)
+    p = stats.binom.pmf(k, 200, 0.95)
+    assert p[(k >= lo * 200) & (k <= hi * 200)].sum() >= 0.95

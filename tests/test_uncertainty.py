@@ -113,52 +113,189 @@ def test_steady_coverage_with_known_sigma_is_nominal(formulation):
     assert 0.92 <= r["coverage"] <= 0.98, r
 
 
-# -- pseudo-likelihood estimates from replicated data (the beam) -----------------------
-@pytest.fixture(scope="module")
-def beam_data():
+# --------------------------------------------------------------------------------------
+# the other fits: the same implicit path, checked against refits at perturbed data
+# --------------------------------------------------------------------------------------
+def _fd4(fit, v, h):
+    """Fourth-order central differences of eps_hat(v), column by column."""
+    cols = []
+    for i in range(v.size):
+        e = np.zeros_like(v)
+        e.flat[i] = h
+
+        def f(t, e=e):
+            return fit(v + t * e)
+
+        cols.append((8 * (f(1) - f(-1)) - (f(2) - f(-2))) / (12 * h))
+    return np.column_stack(cols)
+
+
+def _misspecified_linear():
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_inverse_noisy import SIGMA, _linear_1d
+
+    from ecfm_uq.spectral import SineBasis, gram
+
+    system, K, _, M_obs = _linear_1d()
+    true_F = gram(SineBasis(8), SineBasis(5)) @ np.array([1.0, -0.5, 0.3, 0.0, 30.0])
+    v0 = M_obs @ np.linalg.solve(K, true_F)
+    return system, M_obs, v0 + SIGMA * np.random.default_rng(11).standard_normal(v0.size), SIGMA
+
+
+def test_standard_slsqp_covariance_equals_refit_jacobian():
+    from ecfm_uq.inverse import fit_standard_slsqp
+
+    system, M_obs, v, sigma = _misspecified_linear()
+    res = fit_standard_slsqp(system, M_obs, v, sigma=sigma)
+    assert res.noise_model == "known" and "verdict" in res.extra
+
+    def fit(w):
+        return fit_standard_slsqp(system, M_obs, w, eps0=res.eps, ftol=1e-16).eps
+
+    # the model is linear in eps, so eps_hat(v) is linear: a unit step has no truncation
+    D = np.column_stack([(fit(v + e) - fit(v - e)) / 2 for e in np.eye(v.size)])
+    cov_fd = sigma**2 * D @ D.T
+    assert np.abs(res.eps_cov - cov_fd).max() <= 1e-5 * np.abs(cov_fd).max()
+
+
+def test_noisy_ecfm_covariance_equals_refit_jacobian():
+    from ecfm_uq.inverse import fit_noisy_ecfm
+
+    system, M_obs, v, sigma = _misspecified_linear()
+    res = fit_noisy_ecfm(system, M_obs, v, sigma)
+    assert res.success and res.eps_cov is not None, res.uncertainty_message
+    # the data enter through the active moment bounds (here the lower mean bound and the
+    # upper variance bound); the refits stay on the same active set
+    assert np.sum(np.abs(res.extra["inequality"]) < 1e-8) == 2
+
+    def fit(w):
+        return fit_noisy_ecfm(
+            system, M_obs, w, sigma, eps0=res.eps, theta0=res.extra["theta"], ftol=1e-16
+        ).eps
+
+    D = _fd4(fit, v, 3e-2)  # SLSQP resolves eps to ~1e-9: a large step, O(h^4) stencil
+    cov_fd = sigma**2 * D @ D.T
+    assert np.abs(res.eps_cov - cov_fd).max() <= 1e-5 * np.abs(cov_fd).max()
+
+
+def _beam_data():
     from ecfm_uq.problems.beam import BeamModel
 
-    model = BeamModel()
-    v = model.sample_data(1.0, 25, rng=np.random.default_rng(4))
-    return model, v, [(0.0, 0.99 * model.beta_min)]
+    m = BeamModel(n_basis=6, order=5)
+    return m, m.sample_data(1.0, 25, rng=0), [(0.0, 0.99 * m.beta_min)]
+
+
+def _with_statistics(v, i, dmean, dm):
+    """Data whose sensor-i mean moves by dmean and centred second moment by dm (the
+    other statistics unchanged)."""
+    out = v.copy()
+    dev = v[i] - v[i].mean()
+    m = np.mean(dev**2)
+    out[i] = v[i].mean() + dmean + dev * np.sqrt((m + dm) / m)
+    return out
 
 
 @pytest.mark.parametrize("formulation", ["standard", "inner-outer"])
-def test_likelihood_estimate_derivative_equals_refit_finite_differences(beam_data, formulation):
+def test_pseudo_likelihood_covariance_equals_refit_jacobian(formulation):
     from ecfm_uq.inverse import fit_pseudo_likelihood
+    from ecfm_uq.inverse.likelihood import replicate_statistics
 
-    model, v, bounds = beam_data
+    m, v, bounds = _beam_data()
+    res = fit_pseudo_likelihood(m.system, m.M_obs, v, [0.5], formulation, bounds=bounds)
+    assert res.success and res.noise_model == "replicates", res.uncertainty_message
+    w, Sigma_w = replicate_statistics(v)
+    C = v.shape[0]
+    # refit at data with one statistic moved (4-point stencil); a tight inner solve so
+    # the refits resolve the estimate far below the step
+    cols = []
+    for k in range(2 * C):
+        h = 5e-4 * max(abs(w[k]), 1.0)
 
-    def fit(data):  # refits tight enough that a difference quotient resolves 1e-5
-        return fit_pseudo_likelihood(
-            model.system,
-            model.M_obs,
-            data,
-            [1.0],
-            formulation,
-            bounds=bounds,
-            gtol=1e-14,
-            likelihood_options={"solve_options": {"tol": 1e-13}},
-        )
+        def f(t, k=k, h=h):
+            a = (t * h, 0.0) if k < C else (0.0, t * h)
+            data = _with_statistics(v, k % C, *a)
+            return fit_pseudo_likelihood(
+                m.system, m.M_obs, data, res.eps, formulation, gtol=1e-13, inner_tol=1e-24
+            ).eps
 
-    res = fit(v)
-    assert res.success and res.noise_model == "replicates"
-    D = res.extra["deps_dv"]
-    assert D.shape == (1, 5, 25)
-    h = 1e-2  # data are O(10): truncation error ~1e-8 relative, refit noise below it
-    for i, j in [(0, 0), (2, 7), (4, 24)]:  # a few replicates, three sensors
-        e = np.zeros_like(v)
-        e[i, j] = h
-        refit = (fit(v + e).eps[0] - fit(v - e).eps[0]) / (2 * h)
-        np.testing.assert_allclose(D[0, i, j], refit, rtol=1e-5, atol=1e-7 * np.abs(D).max())
-    assert res.eps_ci95[0, 0] < res.eps[0] < res.eps_ci95[0, 1]
+        cols.append((8 * (f(1) - f(-1)) - (f(2) - f(-2))) / (12 * h))
+    D = np.column_stack(cols)
+    np.testing.assert_allclose(res.eps_cov, D @ Sigma_w @ D.T, rtol=1e-5)
 
 
-def test_penalty_form_says_why_it_has_no_uncertainty(beam_data):
-    from ecfm_uq.inverse import fit_pseudo_likelihood
+def test_replicate_statistics_covariance_is_the_sample_covariance():
+    from ecfm_uq.inverse.likelihood import replicate_statistics
 
-    model, v, bounds = beam_data
-    res = fit_pseudo_likelihood(
-        model.system, model.M_obs, v, [0.5], "penalty", lam0=np.full(5, 1e-3), bounds=bounds
+    rng = np.random.default_rng(4)
+    v = rng.normal(size=(3, 400))
+    w, S = replicate_statistics(v)
+    np.testing.assert_allclose(w[:3], v.mean(axis=1))
+    np.testing.assert_allclose(w[3:], v.var(axis=1))
+    # the mean block is the textbook Cov(vbar) = S / D
+    np.testing.assert_allclose(S[:3, :3], np.cov(v) / 400, rtol=1e-12)
+
+
+# --------------------------------------------------------------------------------------
+# bad input
+# --------------------------------------------------------------------------------------
+@pytest.mark.parametrize("sigma", [0.0, -0.01, float("nan")])
+def test_fit_steady_refuses_nonpositive_sigma_before_fitting(sigma, monkeypatch):
+    import ecfm_uq.inverse.steady as steady
+
+    system, M_obs, v0, _, _ = _heat_case()
+
+    def no_solve(*a, **k):
+        raise AssertionError("a solve ran before sigma was checked")
+
+    monkeypatch.setattr(steady, "solve_steady", no_solve)
+    with pytest.raises(ValueError, match="sigma"):
+        steady.fit_steady(system, M_obs, v0, [1.0, 1.0], "standard", sigma=sigma)
+
+
+def test_fewer_sensors_than_parameters_is_refused():
+    from ecfm_uq.inverse import fit_steady
+
+    system, M_obs, v0, _, _ = _heat_case()
+    with pytest.raises(ValueError, match="fewer sensors than parameters"):
+        fit_steady(system, M_obs[:1], v0[:1], [1.0, 1.0], "standard")
+
+
+def _ratio_case():
+    """Conductivity eps[0] and source eps[1]: theta = (eps[1]/eps[0]) K^-1 F, so only
+    the ratio is identifiable; the free direction at (2, 1) is (2, 1)/sqrt(5)."""
+    from ecfm_uq.spectral import SineBasis, load, sensor_matrix, stiffness
+    from ecfm_uq.system import Coefficient, GalerkinSystem, LinearTerm, LoadTerm, solve_steady
+
+    B = SineBasis(8)
+    F = load(B, np.ones_like)[:, None]
+    system = GalerkinSystem(
+        [
+            LinearTerm(stiffness(B), Coefficient.parameter(0)),
+            LoadTerm(
+                lambda eps, t=None: eps[1] * F[:, 0], lambda eps, t=None: np.hstack([0 * F, F])
+            ),
+        ],
+        2,
     )
-    assert res.eps_cov is None and "no minimizer" in res.uncertainty_message
+    M_obs = sensor_matrix(B, np.linspace(0.1, 0.9, 5))
+    v = M_obs @ solve_steady(system, [2.0, 1.0]).Theta[:, 0]
+    return system, M_obs, v
+
+
+def test_non_identifiable_combination_is_named_not_nan():
+    from ecfm_uq.errors import NonIdentifiableError
+    from ecfm_uq.inverse import fit_steady
+    from ecfm_uq.inverse.uncertainty import check_identifiable, gauss_newton_covariance
+
+    system, M_obs, v = _ratio_case()
+    res = fit_steady(system, M_obs, v, [2.0, 1.0], "standard", sigma=0.01)
+    assert res.eps_cov is None and res.eps_ci95 is None
+    # the null vector (2, 1)/sqrt(5) = (0.894, 0.447), named in the message
+    assert "0.894*eps[0] + 0.447*eps[1]" in res.uncertainty_message, res.uncertainty_message
+    with pytest.raises(NonIdentifiableError, match=r"0\.707\*eps\[0\] - 0\.707\*eps\[1\]"):
+        check_identifiable([[1.0, 1.0], [1.0, 1.0]])
+    with pytest.raises(NonIdentifiableError, match=r"parameter combination 1\*eps\[2\]"):
+        gauss_newton_covariance(np.eye(4)[:, :3] * [1.0, 2.0, 0.0], 1.0)

@@ -11,7 +11,7 @@ pseudo-likelihood forces    :func:`fit_pseudo_likelihood`                   Eq. 
 ==========================  ==============================================  ===========
 """
 
-from .coverage import replicate_coverage, steady_coverage
+from .coverage import likelihood_coverage, steady_coverage
 from .diagnostics import condition_number, fd_hessian, loss_surface, taylor_remainders
 from .dynamic import DynamicInverseProblem
 from .likelihood import (
@@ -50,7 +50,7 @@ __all__ = [
     "negative_log_pseudo_likelihood",
     "noise_bounds",
     "optimal_forces",
-    "replicate_coverage",
+    "likelihood_coverage",
     "sample_moments",
     "sensor_moments",
     "standard_objective",

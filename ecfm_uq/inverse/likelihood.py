@@ -54,6 +54,7 @@ For nonlinear systems they are central differences of the analytic gradient.
 
 from __future__ import annotations
 
+import copy
 import numbers
 import warnings
 from dataclasses import dataclass
@@ -76,6 +77,7 @@ __all__ = [
     "fit_pseudo_likelihood",
     "negative_log_pseudo_likelihood",
     "optimal_forces",
+    "replicate_statistics",
     "sensor_moments",
 ]
 
@@ -920,6 +922,7 @@ def fit_pseudo_likelihood(
     gtol=1e-8,
     maxiter=200,
     likelihood_options=None,
+    inner_tol=1e-15,
 ):
     """Estimate :math:`\\epsilon` of a stochastic model from replicated data.
 
@@ -958,20 +961,21 @@ def fit_pseudo_likelihood(
     likelihood_options : dict, optional
         Passed to :class:`PseudoLikelihood` (``var_rtol``, ``hessian``, ``fd_step``,
         ``solve_options``).
+    inner_tol : float
+        Newton-decrement tolerance of the inner force solve (``"inner-outer"``).
 
     Returns
     -------
     InverseResult
+        With ``eps_cov``, ``eps_stderr``, ``eps_ci95`` (``noise_model="replicates"``):
+        the implicit derivative of the estimate's optimality condition in the replicate
+        statistics (:func:`replicate_statistics`) propagated through their sample
+        covariance, Student-t intervals with D - 1 dof (not for ``"penalty"``, which no
+        optimality condition defines); ``extra["verdict"]`` (:func:`moment_verdict`).
         ``method`` is ``"likelihood-<formulation>"``; ``loss`` is the objective
         minimized; ``extra`` holds ``lam``, ``force_norm`` :math:`\\|\\lambda\\|_2`,
         ``neg_log_likelihood`` :math:`\\Lambda`, ``mu``, ``var``, ``Theta``,
-        ``n_solves`` and formulation diagnostics (inner Hessian eigenvalue, SLSQP status),
-        and ``deps_dv`` (n_eps, C, D), the implicit derivative of the estimate in each
-        replicate (``None`` where the uncertainty was not computed). ``eps_cov``,
-        ``eps_stderr`` and ``eps_ci95`` are the delta-method uncertainty from the
-        replicates (``noise_model="replicates"``, see ``_replicate_uncertainty``) for the
-        standard and inner-outer estimates; the penalty form has none (its objective has
-        no minimizer), which ``uncertainty_message`` says.
+        ``n_solves`` and formulation diagnostics (inner Hessian eigenvalue, SLSQP status).
 
     Notes
     -----
@@ -1002,8 +1006,17 @@ def fit_pseudo_likelihood(
     gtol = check_positive("gtol", gtol)
     maxiter = check_int("maxiter", maxiter, minimum=1)
     trust_radius = check_positive("trust_radius", trust_radius)
+    inner_tol = check_positive("inner_tol", inner_tol)
     res, x, loss, p, ok, tr, extra = _FITTERS[formulation](
-        like, eps0, bounds, gtol, maxiter, lam0=lam0, penalty=penalty, trust_radius=trust_radius
+        like,
+        eps0,
+        bounds,
+        gtol,
+        maxiter,
+        lam0=lam0,
+        penalty=penalty,
+        trust_radius=trust_radius,
+        inner_tol=inner_tol,
     )
     lam = extra.pop("lam")
     msg = str(res.message)
@@ -1024,9 +1037,11 @@ def fit_pseudo_likelihood(
         n_failures=len(tr.failures),
     )
     eps_hat = np.asarray(x[: system.n_eps], dtype=float)
-    unc = _replicate_uncertainty(like, formulation, eps_hat, lam, ok)
-    extra["deps_dv"] = unc.pop("deps_dv", None)
+    extra["verdict"] = moment_verdict(p.mu, p.var, like.v)
+    if not extra["verdict"]["consistent"]:
+        msg += f" [{extra['verdict']['message']}]"
     return InverseResult(
+        **_likelihood_uncertainty(like, formulation, eps_hat, lam),
         eps=eps_hat,
         loss=float(loss),
         success=ok,
@@ -1036,80 +1051,150 @@ def fit_pseudo_likelihood(
         eps_history=np.array(tr.eps).reshape(-1, system.n_eps),
         loss_history=np.array(tr.loss),
         extra=extra,
-        **unc,
     )
 
 
-def _with_statistics(like, stats):
-    """A copy of ``like`` whose data are the statistics ``stats = [vbar, ss / D]``.
+# --------------------------------------------------------------------------------------
+# uncertainty of the estimates (issue 13): delta method on the replicate statistics
+# --------------------------------------------------------------------------------------
+def replicate_statistics(v):
+    """The statistics the pseudo-likelihood sees, and their sample covariance.
 
-    The pseudo-likelihood sees the replicates only through the per-sensor mean and second
-    central moment, so the estimate is a function of these 2C numbers.
+    :math:`\\Lambda` depends on the data only through the sensor means
+    :math:`\\bar v_i` and the centred second moments :math:`m_i = \\frac1D\\sum_j
+    (v_{ij} - \\bar v_i)^2`. Both are (asymptotically) means over the replicates of
+    :math:`y_j = (v_{\\cdot j},\\ (v_{\\cdot j} - \\bar v)^2)`, whose covariance is
+    estimated by the sample covariance of the :math:`y_j` divided by D (the sensors of one
+    replicate may be correlated; replicates are independent).
+
+    Parameters
+    ----------
+    v : (C, D) array_like
+        Replicated data, ``D >= 2``.
+
+    Returns
+    -------
+    w : (2C,) ndarray
+        ``(vbar, m)``.
+    Sigma_w : (2C, 2C) ndarray
+        Sample covariance of ``w``.
     """
-    import copy
+    v = as_finite_array("v", v, ndim=2)
+    if v.shape[1] < 2:
+        raise ValueError(
+            f"`v` needs at least 2 replicates per sensor for a sample covariance, got "
+            f"D={v.shape[1]}"
+        )
+    D = v.shape[1]
+    vbar = v.mean(axis=1)
+    dev = v - vbar[:, None]
+    y = np.vstack([v, dev**2])  # (2C, D): one column per replicate
+    return np.concatenate([vbar, (dev**2).mean(axis=1)]), np.atleast_2d(np.cov(y, ddof=1)) / D
 
-    other = copy.copy(like)
-    C = like.C
-    other.vbar = np.asarray(stats[:C], dtype=float)
-    other.ss = like.D * np.asarray(stats[C:], dtype=float)
-    return other
+
+def _at_statistics(like, w):
+    """A copy of ``like`` whose data statistics are ``w = (vbar, m)`` (see
+    :func:`replicate_statistics`); the estimate as a function of the data."""
+    new = copy.copy(like)
+    new.vbar = np.asarray(w[: like.C], dtype=float)
+    new.ss = like.D * np.asarray(w[like.C :], dtype=float)
+    return new
 
 
-def _replicate_uncertainty(like, formulation, eps, lam, ok):
-    """Delta-method covariance of a pseudo-likelihood estimate from its replicates.
+#: Newton-decrement tolerance of the inner solves inside the uncertainty's finite
+#: differences: their step is 1e-6, so the forces must be exact to far below that (with the
+#: fits' 1e-15 the covariance is off by ~1e-5 relative; quadratic convergence makes the
+#: extra digits one more Newton step)
+_UNCERTAINTY_INNER_TOL = 1e-24
 
-    The estimate solves ``g(eps, s) = 0`` with ``s = [vbar, m2]`` (per-sensor mean and
-    second central moment of the D replicates): the standard estimate's ``g`` is
-    :math:`\\partial\\Lambda(\\epsilon, 0)/\\partial\\epsilon`, the inner-outer one's
-    :math:`(\\partial\\lambda^*/\\partial\\epsilon)^T\\lambda^*`. The covariance of ``s`` is
-    the empirical one of the replicates' influence
-    :math:`u_j = [v_j - \\bar v,\\; (v_j - \\bar v)^2 - m_2]`,
-    :math:`\\Sigma_s = \\sum_j u_j u_j^T / D^2` (the sample covariance of replicated data,
-    carried to the statistics), and :func:`~ecfm_uq.inverse.uncertainty.implicit_covariance`
-    does the rest: the one code path of every fit.
+
+def _likelihood_uncertainty(like, formulation, eps, lam):
+    """``InverseResult`` uncertainty fields of a pseudo-likelihood estimate.
+
+    The optimality condition is differentiated implicitly
+    (:func:`~ecfm_uq.inverse.uncertainty.implicit_covariance`) in the replicate statistics
+    ``w``, with their sample covariance (:func:`replicate_statistics`): a sandwich
+    covariance, valid although the Gaussian pseudo-likelihood is not the data's
+    distribution. Student-t intervals with D - 1 degrees of freedom (the covariance is
+    estimated from D replicates).
     """
     from .uncertainty import confidence_intervals, implicit_covariance
 
     if formulation == "penalty":
         return {
-            "uncertainty_message": "not computed for the penalty form: its objective has no "
-            "minimizer (see fit_pseudo_likelihood Notes), so no optimality condition defines "
-            "the estimate"
+            "uncertainty_message": "uncertainty not computed: the penalty objective has no "
+            "minimizer (it is unbounded below as lam -> 0), so no optimality condition "
+            "defines the estimate; use formulation='inner-outer' or 'standard'"
         }
-    if not ok:
-        return {"uncertainty_message": "not computed: the fit did not succeed"}
-    v, D = like.v, like.D
-    vbar, m2 = like.vbar, like.ss / D
-    U = np.vstack([v - vbar[:, None], (v - vbar[:, None]) ** 2 - m2[:, None]])  # (2C, D)
-    Sigma_s = U @ U.T / D**2
-    stats = np.concatenate([vbar, m2])
-
     if formulation == "standard":
 
-        def grad(e, s):
-            return _with_statistics(like, s).evaluate(e, None, order=1).grad_eps
+        def grad(e, w):
+            return _at_statistics(like, w).evaluate(e, None, order=1).grad_eps
+
     else:
 
-        def grad(e, s):
-            fs = optimal_forces(_with_statistics(like, s), e, lam, tol=1e-15)
-            if not fs.success or fs.dlam_deps is None:
-                raise ConvergenceError(f"inner forces at eps={e}: {fs.message}")
+        def grad(e, w):
+            fs = optimal_forces(_at_statistics(like, w), e, lam, tol=_UNCERTAINTY_INNER_TOL)
+            if not fs.success:
+                raise ConvergenceError(f"inner solve at eps={e}: {fs.message}")
             return fs.dlam_deps.T @ fs.lam
 
+    w, Sigma_w = replicate_statistics(like.v)
     try:
-        cov, deps_ds = implicit_covariance(grad, eps, stats, Sigma_s)
+        cov, deps_dw = implicit_covariance(grad, eps, w, Sigma_w, rel_step=1e-4, stencil=4)
+        se, ci = confidence_intervals(eps, cov, dof=like.D - 1)
     except (ConvergenceError, ValueError) as e:
         return {"uncertainty_message": f"uncertainty not computed: {e}"}
-    se, ci = confidence_intervals(eps, cov)
-    C = like.C
-    # chain rule to the raw replicates: d vbar_i/dv_ij = 1/D, d m2_i/dv_ij = 2(v_ij - vbar_i)/D
-    deps_dv = deps_ds[:, :C, None] / D + deps_ds[:, C:, None] * 2.0 * (v - vbar[:, None])[None] / D
     return {
         "eps_cov": cov,
         "eps_stderr": se,
         "eps_ci95": ci,
         "noise_model": "replicates",
-        "deps_dv": deps_dv,
+        "eps_jacobian": deps_dw,
+    }
+
+
+def moment_verdict(mu, var, v, alpha=0.01):
+    """Whether the fitted model's sensor means agree with the replicated data.
+
+    z-scores :math:`z_i = (\\bar v_i - \\mu_i)/\\sqrt{\\sigma_i^2/D}` of the sample means
+    against the model's moments (Eq. stats), tested at family-wise level ``alpha`` with
+    the Bonferroni quantile :math:`z_{1-\\alpha/(2C)}` (valid however the sensors of a
+    replicate are correlated).
+
+    Parameters
+    ----------
+    mu, var : (C,) array_like
+        Model mean and variance at the sensors.
+    v : (C, D) array_like
+        Replicated data.
+    alpha : float
+
+    Returns
+    -------
+    dict
+        ``z`` (C,), ``z_limit``, ``peak_sensor_index``, ``consistent``, ``message``.
+    """
+    from scipy import stats
+
+    mu = as_finite_array("mu", mu, ndim=1)
+    var = as_finite_array("var", var, shape=mu.shape)
+    v = _check_data(v, mu.size)
+    if not 0 < alpha < 1:
+        raise ValueError(f"`alpha` must lie in (0, 1), got {alpha}")
+    C, D = v.shape
+    z = (v.mean(axis=1) - mu) / np.sqrt(var / D)
+    limit = float(stats.norm.ppf(1 - alpha / (2 * C)))
+    peak = int(np.argmax(np.abs(z)))
+    ok = bool(np.abs(z[peak]) <= limit)
+    verdict = "model and data are consistent" if ok else "NOT consistent"
+    return {
+        "z": z,
+        "z_limit": limit,
+        "peak_sensor_index": peak,
+        "consistent": ok,
+        "message": f"{verdict}: largest |z| of the sensor means {abs(z[peak]):.3g} at sensor "
+        f"{peak} ({'<=' if ok else '>'} {limit:.3g}, family-wise level {alpha:g})",
     }
 
 

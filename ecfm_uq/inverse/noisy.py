@@ -300,6 +300,7 @@ def _solve(problem, z0, note, gradients, maxiter, ftol, method_name):
         "gradients": gradients,
         "wall_time_s": wall,
         "n_variables": problem.size,
+        "z": z,
     }
     finite = np.all(np.isfinite(z))
     success = bool(res.success) and bool(finite)
@@ -330,6 +331,7 @@ def fit_standard_slsqp(
     maxiter=500,
     ftol=1e-12,
     solve_options=None,
+    sigma=None,
 ):
     """Standard inverse problem, Eq. (kpp_inv), all at once with SLSQP.
 
@@ -356,18 +358,44 @@ def fit_standard_slsqp(
         SLSQP's precision goal on the objective (also its feasibility tolerance).
     solve_options : dict, optional
         Passed to :func:`~ecfm_uq.system.solve_steady` for the starting state.
+    sigma : float, optional
+        Known noise standard deviation, for ``eps_cov`` (otherwise estimated from the
+        residual) and the consistency verdict ``extra["verdict"]``.
 
     Returns
     -------
     InverseResult
-        ``method="standard-slsqp"``; ``success``, ``message``, ``nit`` are SLSQP's.
+        With ``eps_cov``, ``eps_stderr``, ``eps_ci95`` from the implicit derivative of
+        :math:`\\nabla z^{INV}(\\epsilon) = 0` (the same path as
+        :func:`~ecfm_uq.inverse.fit_steady`). ``method="standard-slsqp"``; ``success``, ``message``, ``nit`` are SLSQP's.
         ``extra``: ``theta``, ``discrepancy``, ``mean_discrepancy``, ``var_discrepancy``,
         ``residual_norm`` (:math:`\\|R\\|_2` at the end), ``nfev``, ``njev``, ``start``.
     """
     maxiter, ftol = _check_options(gradients, maxiter, ftol)
+    if sigma is not None:
+        sigma = check_positive("sigma", sigma)
     problem = ConstrainedInverse(system, M_obs, v, "standard")
     z0, note = _start(problem, eps0, theta0, None, solve_options)
-    return _solve(problem, z0, note, gradients, maxiter, ftol, "standard-slsqp")
+    res = _solve(problem, z0, note, gradients, maxiter, ftol, "standard-slsqp")
+    if res.success:
+        # the all-at-once optimum is the reduced one: same optimality condition
+        # grad z^INV(eps) = 0, hence the same covariance code path as fit_steady
+        from .steady import _uncertainty, standard_objective
+
+        for k, val in _uncertainty(
+            system,
+            problem.M_obs,
+            problem.v,
+            res.eps,
+            standard_objective,
+            dict(solve_options or {}),
+            sigma,
+        ).items():
+            setattr(res, k, val)
+    else:
+        res.uncertainty_message = "uncertainty not computed: the fit did not succeed"
+    _attach_verdict(res, problem, sigma)
+    return res
 
 
 def fit_noisy_ecfm(
@@ -412,6 +440,10 @@ def fit_noisy_ecfm(
     Returns
     -------
     InverseResult
+        With ``eps_cov``, ``eps_stderr``, ``eps_ci95`` from the implicit derivative of the
+        KKT conditions in the data (the active moment bounds; if none is active the data
+        do not determine eps and ``uncertainty_message`` says so), and
+        ``extra["verdict"]`` (z / chi-squared bounds of the discrepancy).
         ``method="noisy-ecfm"``; ``extra`` as in :func:`fit_standard_slsqp` plus ``lam``
         (C,), ``inequality`` (the four scaled constraint values, >= 0 when feasible) and
         ``bounds``.
@@ -421,7 +453,86 @@ def fit_noisy_ecfm(
         raise TypeError(f"`sigma` must be a positive real number, got {sigma!r}")
     problem = ConstrainedInverse(system, M_obs, v, "noisy-ecfm", sigma=sigma, alpha=alpha)
     z0, note = _start(problem, eps0, theta0, lam0, solve_options)
-    return _solve(problem, z0, note, gradients, maxiter, ftol, "noisy-ecfm")
+    res = _solve(problem, z0, note, gradients, maxiter, ftol, "noisy-ecfm")
+    if res.success:
+        for k, val in _kkt_uncertainty(problem, res.extra["z"], sigma).items():
+            setattr(res, k, val)
+    else:
+        res.uncertainty_message = "uncertainty not computed: the fit did not succeed"
+    _attach_verdict(res, problem, sigma)
+    return res
+
+
+#: a scaled moment inequality within this of zero is active at the optimum
+ACTIVE_TOL = 1e-6
+
+
+def _attach_verdict(res, problem, sigma):
+    """chi-squared / z verdict of the discrepancy when the noise is modelled."""
+    if sigma is None:
+        return
+    from .noise import consistency_test
+
+    test = consistency_test(res.extra["discrepancy"], sigma)
+    res.extra["verdict"] = {
+        "consistent": bool(test.consistent),
+        "message": ("model and data are consistent" if test.consistent else "NOT consistent")
+        + f": discrepancy mean {test.mean:.3g}, variance {test.var:.3g} against the "
+        f"{100 * (1 - test.bounds['alpha']):g} % bounds for sigma = {sigma:g}",
+    }
+
+
+def _kkt_uncertainty(problem, z, sigma):
+    """Delta-method covariance of the noisy-ECFM estimate by implicit differentiation of
+    its KKT conditions (the active moment bounds are the only place the data enter).
+
+    With :math:`L = f - y^T h - \\mu^T c_A` the KKT map
+    :math:`F = (\\nabla_z L, -h, -c_A)` is stationary in :math:`x = (z, y, \\mu)`;
+    :math:`dx/dv = -(\\partial F/\\partial x)^{-1}\\partial F/\\partial v` and the eps
+    block of the covariance is reported (Sigma_v = sigma^2 I).
+    """
+    from ..errors import NonIdentifiableError
+    from .uncertainty import confidence_intervals, implicit_covariance
+
+    n = problem.size
+    active = np.flatnonzero(problem.inequality(z) <= ACTIVE_TOL)
+    A = np.vstack([problem.equality_jac(z), problem.inequality_jac(z)[active]])
+    mult = np.linalg.lstsq(A.T, problem.objective_grad(z), rcond=None)[0]
+    x0 = np.concatenate([z, mult])
+    kw = {"sigma": sigma, "alpha": problem.bounds["alpha"]}
+
+    def kkt(x, w):
+        p = ConstrainedInverse(problem.system, problem.M_obs, w, problem.formulation, **kw)
+        zz, y, mu = x[:n], x[n : n + problem.N], x[n + problem.N :]
+        Jh = p.equality_jac(zz)
+        Jc = p.inequality_jac(zz)[active]
+        return np.concatenate(
+            [
+                p.objective_grad(zz) - Jh.T @ y - Jc.T @ mu,
+                -p.equality(zz),
+                -p.inequality(zz)[active],
+            ]
+        )
+
+    try:
+        cov_x, D = implicit_covariance(kkt, x0, problem.v, float(sigma) ** 2)
+    except NonIdentifiableError as e:
+        return {
+            "uncertainty_message": "uncertainty not computed: the estimate is not determined "
+            f"by the data at this optimum ({active.size} active moment bounds): {e}"
+        }
+    except ValueError as e:
+        return {"uncertainty_message": f"uncertainty not computed: {e}"}
+    sl = slice(problem.N, problem.N + problem.n_eps)
+    cov = cov_x[sl, sl]
+    se, ci = confidence_intervals(z[sl], cov)
+    return {
+        "eps_cov": cov,
+        "eps_stderr": se,
+        "eps_ci95": ci,
+        "noise_model": "known",
+        "eps_jacobian": D[sl],
+    }
 
 
 __all__ = ["ConstrainedInverse", "fit_noisy_ecfm", "fit_standard_slsqp"]

@@ -34,8 +34,14 @@ class InverseResult:
     eps_stderr : (n_eps,) ndarray or None
     eps_ci95 : (n_eps, 2) ndarray or None
     noise_model : str
-        ``"known"`` (sigma given), ``"estimated"`` (s^2 = ||r||^2/(C - n_eps)) or ``"none"``.
+        ``"known"`` (sigma given), ``"estimated"`` (s^2 = ||r||^2/(C - n_eps)),
+        ``"replicates"`` (sample covariance of replicated data) or ``"none"``.
     uncertainty_message : str
+        Why the uncertainty fields are None, if they are.
+    eps_jacobian : (n_eps, n_data) ndarray or None
+        :math:`d\\hat\\epsilon/dv`, the implicit derivative of the estimate in the data it
+        was computed from (for :func:`~ecfm_uq.inverse.fit_pseudo_likelihood` the replicate
+        statistics of :func:`~ecfm_uq.inverse.likelihood.replicate_statistics`).
     """
 
     eps: np.ndarray
@@ -52,6 +58,7 @@ class InverseResult:
     eps_ci95: np.ndarray | None = None
     noise_model: str = "none"
     uncertainty_message: str = ""
+    eps_jacobian: np.ndarray | None = None
 
     def __repr__(self):
         return (

@@ -145,7 +145,11 @@ def fit_steady(
     Raises
     ------
     ValueError, TypeError
-        For malformed data, ``eps0``, ``method``, ``gtol``, ``maxiter`` or ``bounds``.
+        For malformed data, ``eps0``, ``method``, ``gtol``, ``maxiter``, ``bounds`` or
+        ``sigma`` (<= 0), or fewer measurements than parameters; all before any solve.
+        A singular information matrix (a parameter combination the data do not
+        determine) is not raised: ``eps_cov`` is None and ``uncertainty_message`` names
+        the combination.
     ConvergenceError
         When the model cannot be solved at ``eps0``.
     """
@@ -156,6 +160,13 @@ def fit_steady(
     M_obs, v = _data(system, M_obs, v)
     eps0 = system.check_eps(eps0)
     method, gtol, maxiter, bounds = _check_fit_options(system, method, gtol, maxiter, bounds)
+    sigma = _check_sigma(sigma)
+    if v.size < system.n_eps:
+        raise ValueError(
+            f"`v` has {v.size} measurements for {system.n_eps} parameters: fewer sensors "
+            "than parameters cannot determine eps; add sensors (rows of `M_obs`) or fix "
+            "parameters"
+        )
     objective = _OBJECTIVES[formulation]
     solve_kw = dict(solve_options or {})
     solve_kw["gradient"] = choose_gradient(gradient, system.n_eps)
@@ -251,6 +262,16 @@ def _check_fit_options(system, method, gtol, maxiter, bounds):
     return method, gtol, maxiter, bounds
 
 
+def _check_sigma(sigma):
+    """``sigma`` is None or a positive finite noise standard deviation (checked up front)."""
+    if sigma is None:
+        return None
+    try:
+        return check_positive("sigma", sigma)
+    except (TypeError, ValueError) as e:
+        raise type(e)(f"{e}; `sigma` is the known sensor noise standard deviation") from e
+
+
 def _failed_fit(res, formulation, hist_eps, hist_loss, error):
     """A reported failure: the model cannot be solved at the optimizer's last point."""
     return InverseResult(
@@ -272,8 +293,6 @@ def _uncertainty(system, M_obs, v, eps, objective, solve_kw, sigma):
 
     try:
         if sigma is not None:
-            if not (np.isfinite(sigma) and sigma > 0):
-                raise ValueError(f"`sigma` must be a positive finite number, got {sigma}")
             s2, model, dof = float(sigma) ** 2, "known", None
         else:
             solve_options = {k: w for k, w in solve_kw.items() if k != "gradient"}
@@ -285,12 +304,10 @@ def _uncertainty(system, M_obs, v, eps, objective, solve_kw, sigma):
             J = M_obs @ np.einsum("ikm,k->im", dTheta, system.E1)
             r = r - J @ np.linalg.lstsq(J, r, rcond=None)[0]
             s2, model, dof = residual_variance(r, eps.size), "estimated", r.size - eps.size
-        cov, _ = implicit_covariance(
+        cov, D = implicit_covariance(
             lambda e, w: objective(system, M_obs, w, e, **solve_kw)[1], eps, v, s2
         )
         se, ci = confidence_intervals(eps, cov, dof=dof)
-        return dict(eps_cov=cov, eps_stderr=se, eps_ci95=ci, noise_model=model)
+        return dict(eps_cov=cov, eps_stderr=se, eps_ci95=ci, noise_model=model, eps_jacobian=D)
     except (ConvergenceError, ValueError) as e:
-        if sigma is not None and "sigma" in str(e):
-            raise
         return dict(uncertainty_message=f"uncertainty not computed: {e}")

@@ -17,14 +17,23 @@ the Gauss-Newton / Laplace covariance sigma^2 (J^T J)^{-1}; for a nonlinear mode
 two differ: dg/deps is then the full Hessian J^T J + sum_c r_c d2(M_obs theta)_c/deps2,
 while Gauss-Newton drops the residual-curvature term.
 
-Used by :func:`~ecfm_uq.inverse.fit_steady` (known or residual-estimated sigma) and
-:func:`~ecfm_uq.inverse.fit_pseudo_likelihood` (replicated data).
+The steady, noisy SLSQP and pseudo-likelihood fits (:func:`~ecfm_uq.inverse.fit_steady`,
+:func:`~ecfm_uq.inverse.fit_standard_slsqp`, :func:`~ecfm_uq.inverse.fit_noisy_ecfm`,
+:func:`~ecfm_uq.inverse.fit_pseudo_likelihood`) compute their ``eps_cov`` through
+:func:`implicit_covariance`; only the optimality condition and the data covariance
+differ. The dynamic (Adam) fits do not carry one yet.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from scipy import stats
+
+from ..errors import NonIdentifiableError
+
+#: an information matrix whose smallest/largest singular value is below this is singular
+#: (its finite-difference entries carry ~1e-10 relative round-off)
+IDENTIFIABILITY_RCOND = 1e-9
 
 
 def _matrix(name, a, shape=None):
@@ -59,12 +68,61 @@ def estimate_jacobian(dg_deps, dg_dv):
     B = _matrix("dg_dv", dg_dv)
     if B.shape[0] != A.shape[0]:
         raise ValueError(f"`dg_dv` must have {A.shape[0]} rows (n_eps), got {B.shape[0]}")
-    try:
-        return -np.linalg.solve(A, B)
-    except np.linalg.LinAlgError as e:
-        raise ValueError(
-            "`dg_deps` is singular: the estimate is not locally identifiable from the data"
-        ) from e
+    check_identifiable(A)
+    return -np.linalg.solve(A, B)
+
+
+def parameter_combination(u, names=None, tol=1e-3):
+    """``"0.707*eps[0] - 0.707*eps[1]"``: a direction in parameter space as text.
+
+    Components smaller than ``tol`` times the largest are left out.
+    """
+    u = np.asarray(u, dtype=float).ravel()
+    if names is None:
+        names = [f"eps[{k}]" for k in range(u.size)]
+    # a stable sign: the first of the (near-)largest components positive
+    k0 = int(np.flatnonzero(np.abs(u) >= (1 - 1e-6) * np.abs(u).max())[0])
+    u = u * np.sign(u[k0])
+    parts = []
+    for k in np.flatnonzero(np.abs(u) >= tol * np.abs(u).max()):
+        c = u[k]
+        sign = "-" if c < 0 else "+"
+        parts.append(f"{sign} {abs(c):.3g}*{names[k]}")
+    text = " ".join(parts)
+    return text[2:] if text.startswith("+ ") else text
+
+
+def check_identifiable(info, rcond=IDENTIFIABILITY_RCOND, names=None):
+    """Raise :class:`~ecfm_uq.errors.NonIdentifiableError` if ``info`` is singular.
+
+    Parameters
+    ----------
+    info : (n_eps, n_eps) ndarray
+        Information matrix: the derivative of an estimate's optimality condition in eps
+        (for least squares the Hessian of the misfit, ``J^T J`` in the linear case).
+    rcond : float
+        Singular when ``s_min <= rcond * s_max`` (or every entry is zero).
+    names : list of str, optional
+        Parameter names for the message (default ``eps[k]``).
+
+    Raises
+    ------
+    NonIdentifiableError
+        Naming the combination of parameters (the right singular vector of the smallest
+        singular value) the data do not determine.
+    """
+    A = _matrix("info", info)
+    _, s, Vt = np.linalg.svd(A)
+    if s[0] > 0 and s[-1] > rcond * s[0]:
+        return
+    ratio = s[-1] / s[0] if s[0] > 0 else 0.0
+    u = Vt[-1]
+    raise NonIdentifiableError(
+        f"the information matrix is singular (smallest/largest singular value {ratio:.1e}): "
+        f"the data do not determine the parameter combination {parameter_combination(u, names)}; "
+        "fix one of these parameters, reparametrize, or add sensors that see it",
+        null_vector=u,
+    )
 
 
 def delta_method_covariance(deps_dv, Sigma_v):
@@ -112,6 +170,7 @@ def gauss_newton_covariance(J, sigma2):
     J = _matrix("J", J)
     if not sigma2 > 0:
         raise ValueError(f"`sigma2` must be positive, got {sigma2}")
+    check_identifiable(J.T @ J)
     return sigma2 * np.linalg.inv(J.T @ J)
 
 
@@ -142,15 +201,15 @@ def confidence_intervals(eps, eps_cov, level=0.95, dof=None):
     return se, np.column_stack([eps - z * se, eps + z * se])
 
 
-def implicit_covariance(grad, eps, v, Sigma_v, rel_step=1e-5):
+def implicit_covariance(grad, eps, v, Sigma_v, rel_step=1e-6, stencil=2):
     """Delta-method covariance of an estimate defined by ``grad(eps, v) = 0``.
 
     Second derivatives are central finite differences of the analytic gradient
     ``grad`` (exact ones are not available for the ECFM conditions); the step is
-    ``rel_step * max(|x|, 1)`` per coordinate. The default 1e-5 balances truncation
-    (h^2) against the gradient's own noise (inner Newton solves, ~1e-12 relative):
-    on the beam's inner-outer estimate the derivative is stable to 1e-7 for steps
-    1e-4..1e-5 and drifts by 6e-6 at 1e-6.
+    ``rel_step * max(|x|, 1)`` per coordinate. ``stencil=4`` uses the fourth-order
+    central difference (twice the evaluations): for a gradient that is itself the
+    output of an iterative solve, a larger step with O(h^4) truncation keeps its
+    solver noise out of the covariance.
 
     Parameters
     ----------
@@ -161,12 +220,18 @@ def implicit_covariance(grad, eps, v, Sigma_v, rel_step=1e-5):
         The data it was fitted to.
     Sigma_v : float or (C,) or (C, C)
         Data covariance.
+    rel_step : float
+    stencil : {2, 4}
 
     Returns
     -------
     eps_cov : (n_eps, n_eps) ndarray
     deps_dv : (n_eps, C) ndarray
     """
+    if stencil not in (2, 4):
+        raise ValueError(
+            f"`stencil` must be 2 or 4 (points of the central difference), got {stencil!r}"
+        )
     eps = np.asarray(eps, dtype=float)
     v = np.asarray(v, dtype=float)
 
@@ -174,10 +239,17 @@ def implicit_covariance(grad, eps, v, Sigma_v, rel_step=1e-5):
         cols = []
         for k in range(x.size):
             h = rel_step * max(abs(x[k]), 1.0)
-            xp, xm = x.copy(), x.copy()
-            xp[k] += h
-            xm[k] -= h
-            cols.append((f(xp) - f(xm)) / (2 * h))
+
+            def at(t, k=k, h=h):
+                xt = x.copy()
+                xt[k] += t * h
+                return f(xt)
+
+            d1 = at(1.0) - at(-1.0)
+            if stencil == 2:
+                cols.append(d1 / (2 * h))
+            else:
+                cols.append((8 * d1 - (at(2.0) - at(-2.0))) / (12 * h))
         return np.column_stack(cols)
 
     dg_deps = fd(lambda e: grad(e, v), eps)

@@ -1,0 +1,67 @@
+"""Figures shared by the library and the ``ecfm-uq`` studies (matplotlib, Agg backend)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._validation import as_finite_array
+
+__all__ = ["pair_plot"]
+
+
+def pair_plot(samples, names=None, truth=None, laplace=None, bins=40):
+    """Pair plot of posterior samples: histograms on the diagonal, scatter below.
+
+    Parameters
+    ----------
+    samples : (n_samples, n_eps) array_like
+    names : list of str, optional
+        Axis labels (default ``eps[k]``).
+    truth : (n_eps,) array_like, optional
+        Marked by lines.
+    laplace : tuple ``(mean (n_eps,), cov (n_eps, n_eps))``, optional
+        Gaussian approximation drawn over the histograms and as 2-sd ellipses.
+    bins : int
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from .studies._common import pyplot
+
+    plt = pyplot()
+    X = as_finite_array("samples", samples, ndim=2)
+    n = X.shape[1]
+    names = [f"eps[{k}]" for k in range(n)] if names is None else list(names)
+    fig, axes = plt.subplots(n, n, figsize=(2.6 * n + 0.6, 2.6 * n + 0.6), squeeze=False)
+    t = np.linspace(0, 2 * np.pi, 200)
+    for i in range(n):
+        for j in range(n):
+            a = axes[i, j]
+            if j > i:
+                a.axis("off")
+                continue
+            if i == j:
+                a.hist(X[:, i], bins=bins, density=True, color="C0", alpha=0.6)
+                if laplace is not None:
+                    m, C = laplace
+                    s = np.sqrt(C[i, i])
+                    x = np.linspace(X[:, i].min(), X[:, i].max(), 200)
+                    a.plot(x, np.exp(-0.5 * ((x - m[i]) / s) ** 2) / (s * np.sqrt(2 * np.pi)), "k-")
+                a.set_yticks([])
+            else:
+                a.plot(X[:, j], X[:, i], ".", ms=1, alpha=0.2, color="C0")
+                if laplace is not None:
+                    m, C = laplace
+                    w, V = np.linalg.eigh(np.asarray(C)[np.ix_([j, i], [j, i])])
+                    ell = V @ (2 * np.sqrt(np.maximum(w, 0))[:, None] * [np.cos(t), np.sin(t)])
+                    a.plot(m[j] + ell[0], m[i] + ell[1], "k-", lw=1)
+                if truth is not None:
+                    a.axhline(truth[i], color="C3", lw=0.8)
+            if truth is not None:
+                a.axvline(truth[j], color="C3", lw=0.8)
+            if i == n - 1:
+                a.set_xlabel(names[j])
+            if j == 0 and i > 0:
+                a.set_ylabel(names[i])
+    return fig
