@@ -282,6 +282,8 @@ class DynamicInverseProblem:
         betas=(0.9, 0.999),
         eps_hat=1e-8,
         callback=None,
+        sigma=None,
+        uncertainty=True,
     ):
         """Minimize one objective with Adam (the paper's optimizer for Section 3.1).
 
@@ -292,14 +294,23 @@ class DynamicInverseProblem:
         formulation : {"standard", "ecfm"}
         lr, epochs, betas, eps_hat, callback
             See :func:`ecfm_uq.inverse.optimizers.adam`.
+        sigma : float, optional
+            Known noise standard deviation of the data (else estimated from the residual).
+        uncertainty : bool
+            Attach the delta-method uncertainty (:meth:`uncertainty`); it costs
+            ``2 (n_eps + n_steps C)`` gradient evaluations.
 
         Returns
         -------
         InverseResult
             ``success=False`` with the failing step and residual in ``message`` if a
             forward solve failed on the way; ``extra`` adds the final trajectory's
-            ``lam`` ``(n_steps + 1, C)`` for ECFM.
+            ``lam`` ``(n_steps + 1, C)`` for ECFM; ``eps_cov``, ``eps_stderr``,
+            ``eps_ci95`` and ``noise_model`` when ``uncertainty`` (or
+            ``uncertainty_message`` saying why not).
         """
+        if sigma is not None:
+            sigma = check_positive("sigma", sigma)
         formulation = check_choice("formulation", formulation, FORMULATIONS)
         eps0 = self.system.check_eps(eps0)
         res = adam(
@@ -314,4 +325,61 @@ class DynamicInverseProblem:
         )
         if formulation == "ecfm":
             res.extra["lam"] = self.solve(res.eps, "ecfm").lam
+        if uncertainty and res.success:
+            for key, value in self.uncertainty(res.eps, formulation, sigma).items():
+                setattr(res, key, value)
+        elif uncertainty:
+            res.uncertainty_message = "uncertainty not computed: the fit did not succeed"
         return res
+
+    def uncertainty(self, eps, formulation="ecfm", sigma=None):
+        """Delta-method uncertainty of an estimate of ``eps`` from the data ``V``.
+
+        The estimate is defined by :math:`\\nabla_\\epsilon z(\\epsilon; V) = 0` (Eq.
+        grad, or Eq. ecfm_grad); :func:`~ecfm_uq.inverse.uncertainty.implicit_covariance`
+        differentiates that condition in :math:`\\epsilon` and in every datum
+        :math:`V_{tc}`, ``t >= 1`` (row 0 is unused by both objectives), with i.i.d.
+        noise: :math:`\\sigma^2` given, or :math:`s^2 = \\|r\\|^2/(n_{data} - n_\\epsilon)`
+        from the unforced model's residual at ``eps`` (Student-t intervals then). Adam
+        stops near, not at, the stationary point; the linearization is taken there.
+
+        Returns
+        -------
+        dict
+            ``InverseResult`` fields: ``eps_cov``, ``eps_stderr``, ``eps_ci95``,
+            ``noise_model``, ``eps_jacobian`` (n_eps, n_steps C), or
+            ``uncertainty_message``.
+        """
+        import copy
+
+        from .uncertainty import confidence_intervals, implicit_covariance, residual_variance
+
+        formulation = check_choice("formulation", formulation, FORMULATIONS)
+        eps = self.system.check_eps(eps)
+        data = self.V[1:].ravel()
+        try:
+            if sigma is not None:
+                s2, model, dof = check_positive("sigma", sigma) ** 2, "known", None
+            else:
+                r = self.predictions(self.solve(eps, "standard"))[1:] - self.V[1:]
+                s2, model, dof = residual_variance(r, eps.size), "estimated", r.size - eps.size
+                if s2 <= 0:
+                    raise ValueError("the residual is zero (noise-free data): pass `sigma`")
+            other = copy.copy(self)  # the same problem with perturbed data
+            other._last = dict(self._last)
+
+            def grad(e, w):
+                other.V = np.vstack([self.V[:1], w.reshape(self.n_steps, -1)])
+                return other.objective(formulation)(e)[1]
+
+            cov, D = implicit_covariance(grad, eps, data, s2)
+            se, ci = confidence_intervals(eps, cov, dof=dof)
+        except (ConvergenceError, ValueError) as e:
+            return {"uncertainty_message": f"uncertainty not computed: {e}"}
+        return {
+            "eps_cov": cov,
+            "eps_stderr": se,
+            "eps_ci95": ci,
+            "noise_model": model,
+            "eps_jacobian": D,
+        }
