@@ -352,11 +352,10 @@ class DynamicInverseProblem:
         """
         import copy
 
-        from .uncertainty import confidence_intervals, implicit_covariance, residual_variance
+        from .uncertainty import estimate_uncertainty, residual_variance
 
         formulation = check_choice("formulation", formulation, FORMULATIONS)
         eps = self.system.check_eps(eps)
-        data = self.V[1:].ravel()
         try:
             if sigma is not None:
                 s2, model, dof = check_positive("sigma", sigma) ** 2, "known", None
@@ -365,21 +364,13 @@ class DynamicInverseProblem:
                 s2, model, dof = residual_variance(r, eps.size), "estimated", r.size - eps.size
                 if s2 <= 0:
                     raise ValueError("the residual is zero (noise-free data): pass `sigma`")
-            other = copy.copy(self)  # the same problem with perturbed data
-            other._last = dict(self._last)
-
-            def grad(e, w):
-                other.V = np.vstack([self.V[:1], w.reshape(self.n_steps, -1)])
-                return other.objective(formulation)(e)[1]
-
-            cov, D = implicit_covariance(grad, eps, data, s2)
-            se, ci = confidence_intervals(eps, cov, dof=dof)
         except (ConvergenceError, ValueError) as e:
             return {"uncertainty_message": f"uncertainty not computed: {e}"}
-        return {
-            "eps_cov": cov,
-            "eps_stderr": se,
-            "eps_ci95": ci,
-            "noise_model": model,
-            "eps_jacobian": D,
-        }
+        other = copy.copy(self)  # the same problem with perturbed data
+        other._last = dict(self._last)
+
+        def grad(e, w):
+            other.V = np.vstack([self.V[:1], w.reshape(self.n_steps, -1)])
+            return other.objective(formulation)(e)[1]
+
+        return estimate_uncertainty(grad, eps, self.V[1:].ravel(), s2, model, dof=dof)

@@ -1118,7 +1118,7 @@ def _likelihood_uncertainty(like, formulation, eps, lam):
     distribution. Student-t intervals with D - 1 degrees of freedom (the covariance is
     estimated from D replicates).
     """
-    from .uncertainty import confidence_intervals, implicit_covariance
+    from .uncertainty import estimate_uncertainty
 
     if formulation == "penalty":
         return {
@@ -1140,18 +1140,9 @@ def _likelihood_uncertainty(like, formulation, eps, lam):
             return fs.dlam_deps.T @ fs.lam
 
     w, Sigma_w = replicate_statistics(like.v)
-    try:
-        cov, deps_dw = implicit_covariance(grad, eps, w, Sigma_w, rel_step=1e-4, stencil=4)
-        se, ci = confidence_intervals(eps, cov, dof=like.D - 1)
-    except (ConvergenceError, ValueError) as e:
-        return {"uncertainty_message": f"uncertainty not computed: {e}"}
-    return {
-        "eps_cov": cov,
-        "eps_stderr": se,
-        "eps_ci95": ci,
-        "noise_model": "replicates",
-        "eps_jacobian": deps_dw,
-    }
+    return estimate_uncertainty(
+        grad, eps, w, Sigma_w, "replicates", dof=like.D - 1, rel_step=1e-4, stencil=4
+    )
 
 
 def moment_verdict(mu, var, v, alpha=0.01):

@@ -491,8 +491,7 @@ def _kkt_uncertainty(problem, z, sigma):
     :math:`dx/dv = -(\\partial F/\\partial x)^{-1}\\partial F/\\partial v` and the eps
     block of the covariance is reported (Sigma_v = sigma^2 I).
     """
-    from ..errors import NonIdentifiableError
-    from .uncertainty import confidence_intervals, implicit_covariance
+    from .uncertainty import estimate_uncertainty
 
     n = problem.size
     active = np.flatnonzero(problem.inequality(z) <= ACTIVE_TOL)
@@ -514,25 +513,12 @@ def _kkt_uncertainty(problem, z, sigma):
             ]
         )
 
-    try:
-        cov_x, D = implicit_covariance(kkt, x0, problem.v, float(sigma) ** 2)
-    except NonIdentifiableError as e:
-        return {
-            "uncertainty_message": "uncertainty not computed: the estimate is not determined "
-            f"by the data at this optimum ({active.size} active moment bounds): {e}"
-        }
-    except ValueError as e:
-        return {"uncertainty_message": f"uncertainty not computed: {e}"}
-    sl = slice(problem.N, problem.N + problem.n_eps)
-    cov = cov_x[sl, sl]
-    se, ci = confidence_intervals(z[sl], cov)
-    return {
-        "eps_cov": cov,
-        "eps_stderr": se,
-        "eps_ci95": ci,
-        "noise_model": "known",
-        "eps_jacobian": D[sl],
-    }
+    return estimate_uncertainty(
+        kkt, x0, problem.v, float(sigma) ** 2, "known",
+        block=slice(problem.N, problem.N + problem.n_eps),
+        hint="the estimate is not determined by the data at this optimum, "
+        f"{active.size} active moment bounds",
+    )  # fmt: skip
 
 
 __all__ = ["ConstrainedInverse", "fit_noisy_ecfm", "fit_standard_slsqp"]

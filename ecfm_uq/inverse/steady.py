@@ -289,7 +289,7 @@ def _failed_fit(res, formulation, hist_eps, hist_loss, error):
 
 def _uncertainty(system, M_obs, v, eps, objective, solve_kw, sigma):
     """Delta-method covariance of the fitted eps (implicit differentiation of grad z = 0)."""
-    from .uncertainty import confidence_intervals, implicit_covariance, residual_variance
+    from .uncertainty import estimate_uncertainty, residual_variance
 
     try:
         if sigma is not None:
@@ -304,10 +304,8 @@ def _uncertainty(system, M_obs, v, eps, objective, solve_kw, sigma):
             J = M_obs @ np.einsum("ikm,k->im", dTheta, system.E1)
             r = r - J @ np.linalg.lstsq(J, r, rcond=None)[0]
             s2, model, dof = residual_variance(r, eps.size), "estimated", r.size - eps.size
-        cov, D = implicit_covariance(
-            lambda e, w: objective(system, M_obs, w, e, **solve_kw)[1], eps, v, s2
-        )
-        se, ci = confidence_intervals(eps, cov, dof=dof)
-        return dict(eps_cov=cov, eps_stderr=se, eps_ci95=ci, noise_model=model, eps_jacobian=D)
     except (ConvergenceError, ValueError) as e:
-        return dict(uncertainty_message=f"uncertainty not computed: {e}")
+        return {"uncertainty_message": f"uncertainty not computed: {e}"}
+    return estimate_uncertainty(
+        lambda e, w: objective(system, M_obs, w, e, **solve_kw)[1], eps, v, s2, model, dof=dof
+    )

@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from ..errors import NonIdentifiableError
+from ..errors import ConvergenceError, NonIdentifiableError
 
 #: an information matrix whose smallest/largest singular value is below this is singular
 #: (its finite-difference entries carry ~1e-10 relative round-off)
@@ -257,3 +257,58 @@ def implicit_covariance(grad, eps, v, Sigma_v, rel_step=1e-6, stencil=2):
     dg_dv = fd(lambda w: grad(eps, w), v)
     D = estimate_jacobian(dg_deps, dg_dv)
     return delta_method_covariance(D, Sigma_v), D
+
+
+def estimate_uncertainty(
+    grad, eps, data, Sigma, noise_model, *, dof=None, block=None, hint=None, **fd_options
+):
+    """The uncertainty fields of an :class:`~ecfm_uq.inverse.InverseResult`, or why not.
+
+    Every fit reports its uncertainty through here: :func:`implicit_covariance` of the
+    estimate defined by ``grad(eps, data) = 0``, then :func:`confidence_intervals`.
+
+    Parameters
+    ----------
+    grad : callable ``(x, data) -> (n,)``
+        The optimality condition.
+    eps : (n,) ndarray
+        Where it holds (the estimate, or a larger vector holding it, see ``block``).
+    data : (m,) ndarray
+    Sigma : float, (m,) or (m, m)
+        Covariance of ``data``.
+    noise_model : str
+        Recorded as ``noise_model`` (``"known"``, ``"estimated"``, ``"replicates"``).
+    dof : int, optional
+        Student-t degrees of freedom of the intervals (normal quantile if None).
+    block : slice, optional
+        The parameters' part of ``x`` when the condition has more unknowns (KKT
+        multipliers, states).
+    hint : str, optional
+        Added to the message when the data do not determine the estimate.
+    **fd_options
+        ``rel_step``, ``stencil`` of :func:`implicit_covariance`.
+
+    Returns
+    -------
+    dict
+        ``eps_cov``, ``eps_stderr``, ``eps_ci95``, ``noise_model``, ``eps_jacobian``; or
+        ``uncertainty_message`` when the covariance cannot be computed (never NaN).
+    """
+    try:
+        cov, D = implicit_covariance(grad, eps, data, Sigma, **fd_options)
+    except NonIdentifiableError as e:
+        where = f" ({hint})" if hint else ""
+        return {"uncertainty_message": f"uncertainty not computed{where}: {e}"}
+    except (ConvergenceError, ValueError) as e:
+        return {"uncertainty_message": f"uncertainty not computed: {e}"}
+    eps = np.asarray(eps, dtype=float)
+    if block is not None:
+        cov, D, eps = cov[block, block], D[block], eps[block]
+    se, ci = confidence_intervals(eps, cov, dof=dof)
+    return {
+        "eps_cov": cov,
+        "eps_stderr": se,
+        "eps_ci95": ci,
+        "noise_model": noise_model,
+        "eps_jacobian": D,
+    }
