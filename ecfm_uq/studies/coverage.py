@@ -189,7 +189,7 @@ def _figure(result, raw, out_dir):
     rows = [("steady", f) for f in ("standard", "ecfm")]
     rows += [("steady_estimated_sigma", f) for f in ("standard", "ecfm")]
     rows += [("beam", f) for f in ("standard", "ecfm")]
-    names = {"steady": "steady", "steady_estimated_sigma": "steady (σ est.)", "beam": "beam"}
+    names = {"steady": "steady", "steady_estimated_sigma": "steady\nσ est.", "beam": "beam"}
     for model, form in rows:
         blk = result[model][form]
         labels.append(f"{names[model]}\n{form}")
