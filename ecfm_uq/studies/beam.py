@@ -171,10 +171,16 @@ def build_model(s):
     return model
 
 
-def _fit_all(model, v, s, bounds):
-    """The three estimators on one data set."""
+def _fit_all(model, v, s, bounds, uncertainty=True):
+    """The three estimators on one data set (``uncertainty=False``: the seed study, whose
+    spread over data sets is the uncertainty it reports)."""
     opts = {"solve_options": {"tol": s["solve_tol"]}}
-    common = {"bounds": bounds, "trust_radius": s["trust_radius"], "likelihood_options": opts}
+    common = {
+        "bounds": bounds,
+        "trust_radius": s["trust_radius"],
+        "likelihood_options": opts,
+        "uncertainty": uncertainty,
+    }
     out = {}
     for key, form in (("standard", "standard"), ("inner_outer", "inner-outer")):
         out[key] = fit_pseudo_likelihood(model.system, model.M_obs, v, [s["eps0"]], form, **common)
@@ -188,6 +194,7 @@ def _fit_all(model, v, s, bounds):
         penalty=s["penalty"],
         bounds=bounds,
         likelihood_options=opts,
+        uncertainty=uncertainty,
     )
     return out
 
@@ -324,7 +331,7 @@ def _seed_study(model, s, bounds, progress):
     with progress.bar(len(children), "seed study") as bar:
         for child in children:
             v = model.sample_data(s["true_eps"], s["replicates"], rng=np.random.default_rng(child))
-            for key, res in _fit_all(model, v, s, bounds).items():
+            for key, res in _fit_all(model, v, s, bounds, uncertainty=False).items():
                 rec[key]["eps"].append(float(res.eps[0]))
                 rec[key]["force_norm"].append(res.extra["force_norm"])
                 rec[key]["success"].append(res.success)
