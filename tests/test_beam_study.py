@@ -50,6 +50,21 @@ def test_spec_keys_settings_and_figures(paper):
     assert all(set(r) == {"quantity", "paper", "ours", "holds"} for r in rows)
 
 
+def test_sensor_pce_and_estimate_uncertainty_are_reported(paper):
+    pce = paper["sensor_pce"]
+    q = np.array(pce["quantiles"])  # (3 levels, 5 sensors)
+    assert np.all(np.diff(q, axis=0) > 0) and np.allclose(pce["first_order_sobol"], 1.0)
+    # the quantiles bracket the model mean reported with the data
+    assert np.all((q[0] < paper["data"]["model_mean"]) & (paper["data"]["model_mean"] < q[2]))
+    unc = paper["uncertainty"]
+    for key in ("standard", "inner_outer"):
+        assert unc[key]["noise_model"] == "replicates" and unc[key]["eps_stderr"][0] > 0
+    # ECFM's interval is the wider one, as its scatter over data sets is (seed study)
+    assert unc["inner_outer"]["eps_stderr"][0] > 3 * unc["standard"]["eps_stderr"][0]
+    assert "no minimizer" in unc["penalty"]["message"]
+    assert (paper["_dir"] / "sensor_densities.png").stat().st_size > 0
+
+
 def test_forward_model_claims(paper):
     assert paper["beta_crit"] == pytest.approx(PAPER_BETA, abs=1e-3)
     assert paper["pce_vs_reference_max_rel_error"] < 1e-2  # "agrees satisfactorily"
