@@ -52,6 +52,16 @@ def check_int(name, value, *, minimum=None):
     return value
 
 
+def check_real(name, value):
+    """A finite real number (not a bool), as float, or a TypeError/ValueError naming it."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"`{name}` must be a real number, got {describe(value)}")
+    value = float(value)
+    if not np.isfinite(value):
+        raise ValueError(f"`{name}` must be finite, got {value}")
+    return value
+
+
 def check_positive(name, value):
     """Return ``value`` as a positive finite float."""
     if isinstance(value, bool) or not isinstance(value, numbers.Real):

@@ -29,22 +29,12 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
+from .._validation import as_finite_array
 from ..errors import ConvergenceError, NonIdentifiableError
 
 #: an information matrix whose smallest/largest singular value is below this is singular
 #: (its finite-difference entries carry ~1e-10 relative round-off)
 IDENTIFIABILITY_RCOND = 1e-9
-
-
-def _matrix(name, a, shape=None):
-    a = np.asarray(a, dtype=float)
-    if a.ndim != 2:
-        raise ValueError(f"`{name}` must be a 2-D array, got shape {a.shape}; pass a matrix")
-    if shape is not None and a.shape != shape:
-        raise ValueError(f"`{name}` must have shape {shape}, got {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"`{name}` has non-finite entries; check the fit converged")
-    return a
 
 
 def estimate_jacobian(dg_deps, dg_dv):
@@ -62,10 +52,10 @@ def estimate_jacobian(dg_deps, dg_dv):
     (n_eps, C) ndarray
         ``-(dg/deps)^{-1} dg/dv``.
     """
-    A = _matrix("dg_deps", dg_deps)
+    A = as_finite_array("dg_deps", dg_deps, ndim=2)
     if A.shape[0] != A.shape[1]:
         raise ValueError(f"`dg_deps` must be square, got {A.shape}")
-    B = _matrix("dg_dv", dg_dv)
+    B = as_finite_array("dg_dv", dg_dv, ndim=2)
     if B.shape[0] != A.shape[0]:
         raise ValueError(f"`dg_dv` must have {A.shape[0]} rows (n_eps), got {B.shape[0]}")
     check_identifiable(A)
@@ -111,7 +101,7 @@ def check_identifiable(info, rcond=IDENTIFIABILITY_RCOND, names=None):
         Naming the combination of parameters (the right singular vector of the smallest
         singular value) the data do not determine.
     """
-    A = _matrix("info", info)
+    A = as_finite_array("info", info, ndim=2)
     _, s, Vt = np.linalg.svd(A)
     if s[0] > 0 and s[-1] > rcond * s[0]:
         return
@@ -138,7 +128,7 @@ def delta_method_covariance(deps_dv, Sigma_v):
     -------
     (n_eps, n_eps) ndarray
     """
-    D = _matrix("deps_dv", deps_dv)
+    D = as_finite_array("deps_dv", deps_dv, ndim=2)
     C = D.shape[1]
     S = np.asarray(Sigma_v, dtype=float)
     if not np.all(np.isfinite(S)):
@@ -152,7 +142,7 @@ def delta_method_covariance(deps_dv, Sigma_v):
             raise ValueError(f"`Sigma_v` as variances must be ({C},) and positive")
         cov = (D * S) @ D.T
     else:
-        S = _matrix("Sigma_v", S, (C, C))
+        S = as_finite_array("Sigma_v", S, shape=(C, C))
         cov = D @ S @ D.T
     return 0.5 * (cov + cov.T)
 
@@ -167,7 +157,7 @@ def gauss_newton_covariance(J, sigma2):
     sigma2 : float
         Noise variance.
     """
-    J = _matrix("J", J)
+    J = as_finite_array("J", J, ndim=2)
     if not sigma2 > 0:
         raise ValueError(f"`sigma2` must be positive, got {sigma2}")
     check_identifiable(J.T @ J)
@@ -194,7 +184,7 @@ def confidence_intervals(eps, eps_cov, level=0.95, dof=None):
     if not 0 < level < 1:
         raise ValueError(f"`level` must lie in (0, 1), got {level}")
     eps = np.asarray(eps, dtype=float).ravel()
-    cov = _matrix("eps_cov", eps_cov, (eps.size, eps.size))
+    cov = as_finite_array("eps_cov", eps_cov, shape=(eps.size, eps.size))
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     q = 0.5 + level / 2
     z = stats.norm.ppf(q) if dof is None else stats.t.ppf(q, dof)

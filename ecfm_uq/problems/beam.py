@@ -53,13 +53,12 @@ and the sensor statistics follow Eq. stats. A load at or above buckling for any
 from __future__ import annotations
 
 import functools
-import numbers
 
 import numpy as np
 import scipy.linalg as sla
 from scipy.optimize import brentq
 
-from .._validation import as_finite_array, check_choice, check_int, check_positive
+from .._validation import as_finite_array, check_choice, check_int, check_positive, check_real
 from ..chaos import ChaosBasis, weighted_gram
 from ..errors import SingularSystemError
 from ..spectral import BeamBasis, gaussian_forces, gram, hat_forces, load, sensor_matrix
@@ -79,15 +78,6 @@ DEFAULT_SENSORS = (0.2, 0.4, 0.6, 0.8, 1.0)
 FORCE_SHAPES = ("hat", "gaussian")
 
 
-def _check_real(name, value):
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise TypeError(f"`{name}` must be a real number, got {value!r}")
-    value = float(value)
-    if not np.isfinite(value):
-        raise ValueError(f"`{name}` must be finite, got {value}")
-    return value
-
-
 def _check_eps(eps):
     """The axial load as a float; a 1-element array (the system's eps vector) is accepted."""
     if isinstance(eps, np.ndarray | list | tuple):
@@ -95,18 +85,18 @@ def _check_eps(eps):
         if arr.size != 1:
             raise ValueError(f"`eps` must be a scalar axial load, got shape {arr.shape}")
         return float(arr.reshape(-1)[0])
-    return _check_real("eps", eps)
+    return check_real("eps", eps)
 
 
 def _check_omega(omega):
-    omega = _check_real("omega", omega)
+    omega = check_real("omega", omega)
     if not 0.0 <= omega <= 1.0:
         raise ValueError(f"`omega` must lie in the germ's support [0, 1], got {omega}")
     return omega
 
 
 def _check_delta(delta):
-    delta = _check_real("delta", delta)
+    delta = check_real("delta", delta)
     if delta >= 1.0:
         raise ValueError(
             f"`delta` must be < 1 so that H(x, omega) = H0 (1 - delta omega (1 - 2|x - 1/2|)) "
@@ -146,7 +136,7 @@ class BeamOperators:
     def __init__(self, n_basis, H0=1.0, p=100.0):
         n_basis = check_int("n_basis", n_basis, minimum=1)
         self.H0 = check_positive("H0", H0)
-        self.p = _check_real("p", p)
+        self.p = check_real("p", p)
         self.basis = BeamBasis(n_basis)
         b = self.basis
         tent = lambda x: 1.0 - 2.0 * np.abs(x - 0.5)
@@ -336,7 +326,7 @@ class BeamModel:
         force_width=0.2,
     ):
         self.ops = beam_operators(
-            check_int("n_basis", n_basis, minimum=1), check_positive("H0", H0), _check_real("p", p)
+            check_int("n_basis", n_basis, minimum=1), check_positive("H0", H0), check_real("p", p)
         )
         self.H0, self.p = self.ops.H0, self.ops.p
         self.delta = calibrate_delta(H0=self.H0) if delta is None else _check_delta(delta)

@@ -23,7 +23,7 @@ import numbers
 import numpy as np
 import scipy.sparse as sp
 
-from .._validation import as_finite_array, as_operator, check_int, is_sparse
+from .._validation import as_finite_array, as_operator, check_int, check_real, is_sparse
 from .._validation import describe as _describe
 
 
@@ -88,14 +88,14 @@ class Coefficient:
     @classmethod
     def constant(cls, c):
         """:math:`c(\\epsilon) = c`."""
-        c = _real("c", c)
+        c = check_real("c", c)
         return cls(lambda eps: c, lambda eps: np.zeros(len(eps)), indices=(), label=f"{c:g}")
 
     @classmethod
     def parameter(cls, index, scale=1.0):
         """:math:`c(\\epsilon) = s\\,\\epsilon_m` (e.g. the source scale :math:`\\epsilon_2`)."""
         m = check_int("index", index, minimum=0)
-        scale = _real("scale", scale)
+        scale = check_real("scale", scale)
 
         def grad(eps):
             g = np.zeros(len(eps))
@@ -110,8 +110,8 @@ class Coefficient:
     def power10(cls, index, sign=-1.0, scale=1.0):
         """:math:`c(\\epsilon) = s\\,10^{\\pm\\epsilon_m}` (the viscosity :math:`10^{-\\epsilon_1}`)."""
         m = check_int("index", index, minimum=0)
-        sign = _real("sign", sign)
-        scale = _real("scale", scale)
+        sign = check_real("sign", sign)
+        scale = check_real("scale", scale)
 
         def value(eps):
             return scale * 10.0 ** (sign * float(eps[m]))
@@ -122,15 +122,6 @@ class Coefficient:
             return g
 
         return cls(value, grad, indices=(m,), label=f"{scale:g}*10**({sign:g}*eps[{m}])")
-
-
-def _real(name, value):
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise TypeError(f"`{name}` must be a real number, got {_describe(value)}")
-    value = float(value)
-    if not np.isfinite(value):
-        raise ValueError(f"`{name}` must be finite, got {value}")
-    return value
 
 
 def _evaluation_error(label, eps, cause):
