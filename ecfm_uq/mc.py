@@ -283,14 +283,14 @@ def pseudospectral_projection(fn, chaos, n_points=None):
         If ``fn`` returns NaN or inf at a node (the message names the node).
     """
     from .chaos import ChaosBasis, gauss_legendre
+    from .chaos.pce import _project
 
     if not isinstance(chaos, ChaosBasis) or chaos.dim != 1:
         raise TypeError("`chaos` must be a one-dimensional ChaosBasis")
     n_points = chaos.order + 1 if n_points is None else n_points
     nodes, w = gauss_legendre(check_int("n_points", n_points, minimum=1))
     y = _node_outputs(fn, nodes)
-    Psi = chaos.evaluate(nodes)
-    return (y * w[:, None]).T @ Psi / np.asarray(chaos.norms2)[None, :]
+    return _project(chaos, nodes, w, y).T  # the PCE layer's projection, as (m, P)
 
 
 def relative_error(estimate, reference):
