@@ -17,6 +17,7 @@ import numpy as np
 from scipy import stats
 
 from .._validation import check_int, check_positive
+from ..errors import ConvergenceError
 from ..system import solve_steady
 from .steady import fit_steady
 
@@ -48,10 +49,11 @@ def binomial_band(n, p=0.95, level=0.95):
 
 def _summary(true_eps, estimates, intervals, failed):
     """Pooled coverage and width, plus the per-data-set records (for figures)."""
-    out = {"n_failed": int(failed), "n_intervals": 0}
-    if not estimates:
-        out.update(coverage=float("nan"), mean_width=float("nan"))
-        return out
+    if not estimates:  # a coverage of nothing is not a number to report
+        raise ConvergenceError(
+            f"no data set gave an interval: all {failed} fits failed or had no uncertainty"
+        )
+    out = {"n_failed": int(failed)}
     ci = np.array(intervals)  # (R, n_eps, 2)
     hits = (ci[..., 0] <= true_eps) & (true_eps <= ci[..., 1])
     out.update(

@@ -115,7 +115,7 @@ def _block(r):
     """JSON block of one coverage run (per-data-set arrays kept for the figure only)."""
     keys = ("coverage", "mean_width", "n_failed", "n_intervals", "coverage_per_parameter")
     out = {k: r[k] for k in keys if k in r}
-    out["band"] = binomial_band(max(r["n_intervals"], 1))
+    out["band"] = binomial_band(r["n_intervals"])
     return out
 
 
