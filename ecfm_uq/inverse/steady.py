@@ -228,11 +228,13 @@ def fit_steady(
             msg += f" (stopped at the round-off limit; relative optimality {rel_opt:.1e})"
     if failures:
         msg += f" ({len(failures)} inner solves failed; first: {failures[0]})"
-    unc = _uncertainty(system, M_obs, v, np.asarray(res.x), objective, solve_kw, sigma)
-    lam = sol.lam if formulation == "ecfm" else np.zeros(0)
-    verdict = consistency_verdict(
-        system, M_obs, v, res.x, lam, bounds, sigma=sigma, solve_options=solve_options
+    # the unforced solve at the estimate, shared by the verdict and the residual sigma
+    free = (
+        sol if formulation == "standard" else solve_steady(system, res.x, **(solve_options or {}))
     )
+    unc = _uncertainty(system, M_obs, v, np.asarray(res.x), objective, solve_kw, sigma, free)
+    lam = sol.lam if formulation == "ecfm" else np.zeros(0)
+    verdict = consistency_verdict(system, M_obs, v, res.x, lam, bounds, sigma=sigma, solution=free)
     if not verdict["consistent"]:
         msg += f" [{verdict['message']}]"
     return InverseResult(
@@ -287,16 +289,22 @@ def _failed_fit(res, formulation, hist_eps, hist_loss, error):
     )
 
 
-def _uncertainty(system, M_obs, v, eps, objective, solve_kw, sigma):
-    """Delta-method covariance of the fitted eps (implicit differentiation of grad z = 0)."""
+def _uncertainty(system, M_obs, v, eps, objective, solve_kw, sigma, free=None):
+    """Delta-method covariance of the fitted eps (implicit differentiation of grad z = 0);
+    ``free`` is the unforced solve at ``eps`` if the caller has it (its residual
+    estimates sigma)."""
     from .uncertainty import estimate_uncertainty, residual_variance
 
     try:
         if sigma is not None:
             s2, model, dof = float(sigma) ** 2, "known", None
         else:
-            solve_options = {k: w for k, w in solve_kw.items() if k != "gradient"}
-            sol = solve_steady(system, eps, strict=True, **solve_options)
+            if free is None:
+                opts = {k: w for k, w in solve_kw.items() if k != "gradient"}
+                free = solve_steady(system, eps, **opts)
+            if not free.success:
+                raise ConvergenceError(f"the unforced model fails at the estimate: {free.message}")
+            sol = free
             r = M_obs @ system.mean(sol.Theta) - v
             # project out the model's tangent space: the least-squares residual of the
             # linearized model, so the ECFM estimate's own misfit does not inflate s^2

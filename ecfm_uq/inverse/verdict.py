@@ -34,6 +34,7 @@ def consistency_verdict(
     rtol=FORCE_TO_DATA_RTOL,
     extreme_decades=EXTREME_DECADES,
     solve_options=None,
+    solution=None,
 ):
     """Say whether model and data agree at fitted parameters ``eps``.
 
@@ -62,6 +63,8 @@ def consistency_verdict(
         as extreme (default 8: outside [1e-8, 1e8]).
     solve_options : dict, optional
         Passed to :func:`~ecfm_uq.system.solve_steady`.
+    solution : SteadySolution, optional
+        The unforced solve at ``eps`` if the caller has it (not solved again).
 
     Returns
     -------
@@ -101,7 +104,7 @@ def consistency_verdict(
     if lam is not None and lam.size:
         out["peak_force_index"] = int(np.argmax(np.abs(lam)))
     parts = []
-    sol = solve_steady(system, eps, **dict(solve_options or {}))
+    sol = solve_steady(system, eps, **dict(solve_options or {})) if solution is None else solution
     if sol.success:
         e = v - M_obs @ system.mean(sol.Theta)
         out["force_to_data"] = float(np.linalg.norm(e) / max(np.linalg.norm(v), 1e-300))
