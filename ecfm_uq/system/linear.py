@@ -22,8 +22,8 @@ through a :class:`LinearSolver`, selected by ``solver=``:
     dense-input systems (the paper's problems, unchanged); for ``P = 1`` ``"sparse-direct"``
     (sparse input) or ``"dense"``; otherwise ``"cg"`` (symmetric linear systems) or
     ``"gmres"``. Sparse LU of the chaos-coupled block matrix is never chosen for
-    ``P > 1``: its fill makes it 50x slower than mean-preconditioned CG already at
-    ``N = 225, P = 35``. Nothing larger than the memory budget (:mod:`ecfm_uq.memory`)
+    ``P > 1``: its fill makes it 53x slower than mean-preconditioned CG already at
+    ``N = 169, P = 35`` (``benchmarks/solvers.py``). Nothing larger than the memory budget (:mod:`ecfm_uq.memory`)
     is chosen.
 
 Under the ECFM data constraint the bordered system is solved by the Schur complement on
