@@ -304,8 +304,9 @@ class DecoupledPreconditioner:
     \\bar S)` in that basis (:math:`\\bar S` the quadratic terms linearized at the mean
     state). For a linear system :math:`B = J` (one Krylov iteration); a random
     coefficient then costs the preconditioner nothing, and only the quadratic terms'
-    fluctuation is left to the Krylov method (Burgers with a random viscosity: 7 GMRES
-    iterations to 1e-10 at P = 3..7, against 17-19 with the mean block).
+    fluctuation is left to the Krylov method (Burgers with a random viscosity: 5 GMRES
+    iterations per Newton step at P = 5 against 12.4 with the mean block,
+    ``benchmarks/solvers.py``).
 
     Parameters
     ----------
@@ -372,29 +373,20 @@ class DecoupledPreconditioner:
                     "singular; pass preconditioner='mean' or 'none'"
                 )
             self.factors.append(factor)
-        self.inverses = None
-        if all(isinstance(f, DenseFactor) for f in self.factors) and system.N <= 1000:
-            # small dense blocks: one batched product beats P triangular-solve calls
-            eye = np.eye(system.N)
-            self.inverses = np.stack([f.solve(eye) for f in self.factors])  # (P, N, N)
+
+    def _apply(self, R, transpose):
+        Rh = R @ self.Q
+        solves = [f.solve_transpose if transpose else f.solve for f in self.factors]
+        X = np.column_stack([solve(Rh[:, k]) for k, solve in enumerate(solves)])
+        return X @ self.Q.T
 
     def apply(self, R):
         """Apply to ``R`` of shape (N, P)."""
-        Rh = R @ self.Q
-        if self.inverses is not None:
-            X = np.einsum("kij,jk->ik", self.inverses, Rh)
-        else:
-            X = np.column_stack([f.solve(Rh[:, k]) for k, f in enumerate(self.factors)])
-        return X @ self.Q.T
+        return self._apply(R, transpose=False)
 
     def apply_transpose(self, R):
         """The transposed preconditioner (for adjoint solves)."""
-        Rh = R @ self.Q
-        if self.inverses is not None:
-            X = np.einsum("kji,jk->ik", self.inverses, Rh)
-        else:
-            X = np.column_stack([f.solve_transpose(Rh[:, k]) for k, f in enumerate(self.factors)])
-        return X @ self.Q.T
+        return self._apply(R, transpose=True)
 
 
 def _make_preconditioner(op, kind):
