@@ -608,8 +608,10 @@ def _compiled_march(
     loads = [t for t in system.terms if isinstance(t, LoadTerm)]
     n_eps = system.n_eps
     times = t0 + dt * np.arange(n_steps + 1)
-    dense = [t.K.toarray() if t.sparse else t.K for t in lin]
-    Ks = np.array(dense).reshape(len(lin), N, N)
+    if "_compiled_Ks" not in system.__dict__:  # fixed operators: stacked once per system
+        dense = [t.K.toarray() if t.sparse else t.K for t in lin]
+        system._compiled_Ks = np.array(dense).reshape(len(lin), N, N)
+    Ks = system._compiled_Ks
     # with P = 1 the coupling G = E[g Psi_0 Psi_0] is a scalar factor of the term
     g00 = np.array([t.G[0, 0] for t in lin])
     cs = np.array([t.coef.value(eps) for t in lin]) * g00
