@@ -11,6 +11,7 @@ ChaosBasis           basis terms Psi_k, multi-indices, evaluation, quadrature
 gauss_legendre       Gauss-Legendre nodes and probability weights on [0, 1]
 expectation_tensor   E[Psi_k], E[Psi_i Psi_j], E[Psi_i Psi_j Psi_k] (dense or sparse)
 weighted_gram        E[g(omega) Psi_k Psi_l]
+GaussNodes           a one-germ basis at its P-node Gauss rule (node-wise solvers)
 SparseTensor3        coordinate-form third-order tensor with contractions
 PolynomialChaosExpansion  a PCE as an object: moments, Sobol indices, sampling, chaospy export
 UniformInputs        independent uniform inputs on their own ranges, mapped to the germ
@@ -23,6 +24,7 @@ from .nonintrusive import fit_pce, sample_design, smolyak_rule
 from .pce import PolynomialChaosExpansion
 from .quadrature import gauss_legendre
 from .tensors import (
+    GaussNodes,
     SparseTensor3,
     common_eigenbasis,
     expectation_tensor,
@@ -37,6 +39,7 @@ __all__ = [
     "fit_pce",
     "sample_design",
     "smolyak_rule",
+    "GaussNodes",
     "SparseTensor3",
     "common_eigenbasis",
     "expectation_tensor",

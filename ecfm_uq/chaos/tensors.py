@@ -23,7 +23,13 @@ from ..memory import check_allocation
 from ._kernels import triple_1d, triple_dense, triple_sparse
 from .basis import ChaosBasis
 
-__all__ = ["SparseTensor3", "common_eigenbasis", "expectation_tensor", "weighted_gram"]
+__all__ = [
+    "GaussNodes",
+    "SparseTensor3",
+    "common_eigenbasis",
+    "expectation_tensor",
+    "weighted_gram",
+]
 
 
 def _check_basis(basis):
@@ -363,3 +369,69 @@ def common_eigenbasis(couplings, tol=1e-11):
             return None
         D.append(d)
     return Q, np.array(D)
+
+
+class GaussNodes:
+    """Chaos coefficients and values at the germ's ``P``-node Gauss rule (one germ).
+
+    For a one-germ basis of ``P = p + 1`` terms, the ``P``-node Gauss-Legendre rule is
+    exact for products of two basis terms, so :math:`\\Phi^T W \\Phi = D` with
+    :math:`\\Phi_{kb} = \\Psi_b(\\omega_k)`, :math:`W = \\mathrm{diag}(w)`,
+    :math:`D = \\mathrm{diag}(\\mathbb E[\\Psi_b^2])`, and :math:`\\Phi` is invertible:
+    :math:`\\Phi^{-1} = D^{-1}\\Phi^T W`. A Galerkin operator
+    :math:`\\mathbb E[g\\,\\Psi\\Psi^T]` evaluated with this rule instead of exactly is
+    :math:`\\Phi^T W \\mathrm{diag}(g(\\omega_k))\\,\\Phi`: in node values it is diagonal
+    (Galerkin with the quadrature's aliasing is collocation). The solver layer builds its
+    node-wise preconditioner from this (:class:`ecfm_uq.system.linear.NodalPreconditioner`).
+
+    Parameters
+    ----------
+    basis : ChaosBasis
+        With ``dim == 1``.
+
+    Attributes
+    ----------
+    nodes, weights : (P,) ndarray
+        Gauss-Legendre nodes on [0, 1] and probability weights.
+    Phi : (P, P) ndarray
+        ``Phi[k, b]`` = :math:`\\Psi_b(\\omega_k)`; node values of a state ``Theta``
+        (N, P) are ``Theta @ Phi.T``.
+    to_nodes : (P, P) ndarray
+        :math:`D^{-1}\\Phi^T`: a Galerkin residual's columns (N, P) times this are the
+        node residuals divided by the weights, :math:`r_k` with
+        :math:`R = \\sum_k w_k r_k \\Phi_{k,:}`.
+    from_nodes : (P, P) ndarray
+        :math:`W\\Phi D^{-1}`: node values (N, P) times this are chaos coefficients
+        (the inverse of ``Phi.T``).
+    """
+
+    def __init__(self, basis):
+        from .quadrature import gauss_legendre
+
+        _check_basis(basis)
+        if basis.dim != 1 or basis.size != basis.order + 1:
+            raise ValueError(
+                f"GaussNodes needs a one-germ basis (dim=1), got dim={basis.dim}; the "
+                "node-wise form of a multi-germ basis has more nodes than terms"
+            )
+        P = basis.size
+        self.nodes, self.weights = gauss_legendre(P)
+        self.Phi = basis.evaluate(self.nodes)
+        dinv = 1.0 / np.asarray(basis.norms2, dtype=float)
+        self.to_nodes = np.ascontiguousarray(dinv[:, None] * self.Phi.T)
+        self.from_nodes = np.ascontiguousarray(self.weights[:, None] * self.Phi * dinv[None, :])
+
+    def coupling_values(self, G):
+        """Node values of a coupling :math:`G = \\mathbb E[g\\Psi\\Psi^T]`.
+
+        The diagonal of :math:`\\Phi^{-T} G\\,\\Phi^{-1}` over the weights, i.e.
+        :math:`\\mathbb E[g L_k^2]/w_k` with :math:`L_k` the Lagrange polynomial of node
+        :math:`k`: a local average of ``g`` around :math:`\\omega_k`, equal to
+        :math:`g(\\omega_k)` when ``g`` is affine in the germ.
+        """
+        G = as_finite_array("G", G, ndim=2)
+        P = self.Phi.shape[0]
+        if G.shape != (P, P):
+            raise ValueError(f"`G` must have shape {(P, P)}, got {G.shape}")
+        A = self.to_nodes.T @ G @ self.to_nodes  # Phi D^-1 G D^-1 Phi^T
+        return self.weights * np.diag(A)

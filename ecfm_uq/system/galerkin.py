@@ -302,6 +302,21 @@ class GalerkinSystem:
             self._decoupling = self._find_decoupling()
         return self._decoupling
 
+    def gauss_nodes(self):
+        """The one-germ chaos basis at its ``P``-node Gauss rule (cached), or ``None``.
+
+        ``None`` for ``P = 1`` or a basis with several germs. The node-wise
+        preconditioner and the compiled stochastic march use it
+        (:class:`ecfm_uq.chaos.GaussNodes`).
+        """
+        if not hasattr(self, "_gauss_nodes"):
+            from ..chaos.tensors import GaussNodes
+
+            basis = self.basis
+            one_germ = basis is not None and basis.dim == 1 and self.P > 1
+            self._gauss_nodes = GaussNodes(basis) if one_germ else None
+        return self._gauss_nodes
+
     def _find_decoupling(self):
         from ..chaos.tensors import common_eigenbasis
 
