@@ -119,7 +119,9 @@ def test_dynamic_adjoint_burgers_viscosity_in_20_cells(formulation, chaos_order)
     eps = eps_true + 0.1 * rng.standard_normal(21)
     z1, g1 = fwd.objective(formulation)(eps)
     z2, g2 = adj.objective(formulation)(eps)
-    assert z1 == z2
+    # with P > 1 the forward march runs node-preconditioned iterations, the adjoint one
+    # keeps dense factors: the same states to the Newton tolerance, not to the last bit
+    assert z1 == pytest.approx(z2, rel=1e-10)
     np.testing.assert_allclose(g2, g1, rtol=1e-8, atol=1e-12 * np.abs(g1).max())
     assert_second_order(adj.objective(formulation), eps, rng.standard_normal(21))
 

@@ -51,6 +51,13 @@ def _lu_factor(A, lu, piv):
     for i in range(n):
         for j in range(n):
             lu[j, i] = A[i, j]
+    return _lu_factor_inplace(lu, piv)
+
+
+@numba.njit(cache=True)
+def _lu_factor_inplace(lu, piv):
+    """LU of the matrix whose element (r, c) is ``lu[c, r]``, in place; False when singular."""
+    n = lu.shape[0]
     info = _getrf(100, n, n, lu.ctypes, n, piv.ctypes)
     if info != 0:
         return False
@@ -283,3 +290,340 @@ def adjoint_p1(LUs, pivs, Th, Mdt, Ks, gK, rows, ptr, idx, val, gq, dF, g):
             grad -= glive.T @ (KTh @ mu)
         carry = Mdt.T @ mu
     return grad
+
+
+# --------------------------------------------------------------------------------------
+# P > 1: the stochastic Galerkin march, preconditioned by the node-wise Jacobians
+# --------------------------------------------------------------------------------------
+# States are (N, P) chaos coefficients. The quadratic term's linearizations at the P
+# chaos columns are kept side by side, Sf[i, j P + b] = S(Theta[:, b])[i, j], so that its
+# Galerkin projection sum_{b,c} E[Psi_b Psi_c Psi_l] S_b X_c is one product Sf @ Y(X) with
+# Y[j P + b, l] = sum_c X[j, c] E[Psi_b Psi_c Psi_l] (E3m = E3 as (c, b l)).
+
+
+@numba.njit(cache=True)
+def _sg_linearize(Z, rows, ptr, idx, val, Sf):
+    """``Sf[i, j P + b] = S(Z[:, b])[i, j]`` for every chaos column, one pass over the tensor."""
+    N, P = Z.shape
+    Sf[:, :] = 0.0
+    for r in range(rows.shape[0]):
+        i = rows[r] // N
+        base = (rows[r] - i * N) * P
+        for e in range(ptr[r], ptr[r + 1]):
+            v = val[e]
+            k = idx[e]
+            for b in range(P):
+                Sf[i, base + b] += v * Z[k, b]
+
+
+@numba.njit(cache=True)
+def _sg_quadratic(X, Sf, E3m):
+    """``sum_{b,c} E[Psi_b Psi_c Psi_l] S_b X[:, c]`` for every l, shape (N, P)."""
+    N, P = X.shape
+    return Sf @ (X @ E3m).reshape(N * P, P)
+
+
+@numba.njit(cache=True)
+def _sg_linear(X, Mdt, E2, e2_eye, Kc, Gs, out):
+    """``out = Mdt X E2 + sum_q Kc_q X G_q``: the linear part of the step operator."""
+    if e2_eye:
+        out[:, :] = Mdt @ X
+    else:
+        out[:, :] = (Mdt @ X) @ E2
+    for j in range(Kc.shape[0]):
+        out += (Kc[j] @ X) @ Gs[j]
+
+
+@numba.njit(cache=True)
+def _sg_apply(X, Mdt, E2, e2_eye, Kc, Gs, cq, Sf, E3m, out):
+    """``out = J X``, the step Jacobian applied to ``X`` (N, P)."""
+    _sg_linear(X, Mdt, E2, e2_eye, Kc, Gs, out)
+    if cq != 0.0:
+        out += cq * _sg_quadratic(X, Sf, E3m)
+
+
+@numba.njit(cache=True)
+def _sg_factor_nodes(Mdt, Kc, cq, Sf, PhiT, mnode, gnode, LUs, pivs):
+    """Factorize the node-wise Jacobians ``mnode_k Mdt + sum_q gnode_qk Kc_q + cq S(u_k)``.
+
+    ``S(u_k) = sum_b PhiT[b, k] S_b`` (S is linear); each matrix is written straight into
+    LAPACK's column-major layout. False when one is singular.
+    """
+    N = Mdt.shape[0]
+    P = PhiT.shape[0]
+    nq = Kc.shape[0]
+    SN = Sf.reshape(N * N, P) @ PhiT if cq != 0.0 else np.zeros((N * N, P))
+    for kn in range(P):
+        lu = LUs[kn]
+        m = mnode[kn]
+        for i in range(N):
+            for j in range(N):
+                a = m * Mdt[i, j] + cq * SN[i * N + j, kn]
+                for q in range(nq):
+                    a += gnode[q, kn] * Kc[q, i, j]
+                lu[j, i] = a
+        if not _lu_factor_inplace(lu, pivs[kn]):
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def _sg_precond(R, Tn, Tb, LUs, pivs, out):
+    """``out`` = the node-wise preconditioner applied to ``R`` (N, P).
+
+    Chaos columns to node values (``R Tn``), one LU solve per node, back (``X Tb``).
+    """
+    Rn = R @ Tn
+    x = np.empty(R.shape[0])
+    for k in range(Rn.shape[1]):
+        x[:] = Rn[:, k]
+        _lu_solve(LUs[k], pivs[k], x)
+        Rn[:, k] = x
+    out[:, :] = Rn @ Tb
+
+
+@numba.njit(cache=True)
+def _sg_gmres(
+    b, Mdt, E2, e2_eye, Kc, Gs, cq, Sf, E3m, Tn, Tb, LUs, pivs, rtol, restart, maxiter, x
+):
+    """Right-preconditioned restarted GMRES for ``J x = b`` (``b``, ``x`` of shape (N, P)).
+
+    Returns ``(iterations, relative residual)``; ``x`` is overwritten (zero start).
+    Right preconditioning keeps the monitored residual the true one; the restart's
+    residual is recomputed, so the returned value is not an estimate.
+    """
+    N, P = b.shape
+    n = N * P
+    x[:, :] = 0.0
+    bnorm = np.sqrt(np.sum(b * b))
+    if bnorm == 0.0:
+        return 0, 0.0
+    m = restart
+    V = np.empty((m + 1, n))
+    Zs = np.empty((m, n))
+    H = np.zeros((m + 1, m))
+    cs = np.empty(m)
+    sn = np.empty(m)
+    g = np.empty(m + 1)
+    r = b.copy()
+    w = np.empty((N, P))
+    z = np.empty((N, P))
+    its = 0
+    while True:
+        rel = np.sqrt(np.sum(r * r)) / bnorm
+        if rel <= rtol or its >= maxiter:
+            return its, rel
+        V[0] = r.reshape(n) / (rel * bnorm)
+        g[:] = 0.0
+        g[0] = rel * bnorm
+        H[:, :] = 0.0
+        j_end = 0
+        for j in range(m):
+            _sg_precond(V[j].reshape(N, P), Tn, Tb, LUs, pivs, z)
+            Zs[j] = z.reshape(n)
+            _sg_apply(z, Mdt, E2, e2_eye, Kc, Gs, cq, Sf, E3m, w)
+            wv = w.reshape(n).copy()
+            for i in range(j + 1):  # modified Gram-Schmidt
+                h = np.dot(V[i], wv)
+                H[i, j] = h
+                wv -= h * V[i]
+            hn = np.sqrt(np.dot(wv, wv))
+            H[j + 1, j] = hn
+            for i in range(j):  # the previous Givens rotations
+                t = cs[i] * H[i, j] + sn[i] * H[i + 1, j]
+                H[i + 1, j] = -sn[i] * H[i, j] + cs[i] * H[i + 1, j]
+                H[i, j] = t
+            d = np.sqrt(H[j, j] ** 2 + H[j + 1, j] ** 2)
+            if d == 0.0:
+                return its, np.inf
+            cs[j] = H[j, j] / d
+            sn[j] = H[j + 1, j] / d
+            H[j, j] = d
+            H[j + 1, j] = 0.0
+            g[j + 1] = -sn[j] * g[j]
+            g[j] = cs[j] * g[j]
+            its += 1
+            j_end = j + 1
+            if abs(g[j + 1]) <= rtol * bnorm or hn == 0.0 or its >= maxiter:
+                break
+            V[j + 1] = wv / hn
+        y = np.zeros(j_end)  # back substitution on the rotated Hessenberg matrix
+        for i in range(j_end - 1, -1, -1):
+            acc = g[i]
+            for k in range(i + 1, j_end):
+                acc -= H[i, k] * y[k]
+            y[i] = acc / H[i, i]
+        xf = x.reshape(n)
+        for i in range(j_end):
+            xf += y[i] * Zs[i]
+        _sg_apply(x, Mdt, E2, e2_eye, Kc, Gs, cq, Sf, E3m, w)
+        r = b - w
+
+
+@numba.njit(cache=True)
+def march_sg(
+    Mdt,
+    E2,
+    Ks,
+    cs,
+    Gs,
+    gK,
+    rows,
+    ptr,
+    idx,
+    val,
+    cq,
+    gq,
+    E3m,
+    F,
+    dF,
+    PhiT,
+    Tn,
+    Tb,
+    mnode,
+    gnode,
+    theta0,
+    guess,
+    use_guess,
+    tol,
+    maxiter,
+    sens,
+    sens_rtol,
+    restart,
+    lin_maxiter,
+    chord_rate,
+):
+    """March the ``P > 1`` Galerkin system (no data constraint), preconditioned node-wise.
+
+    Step residual (Eq. backward_euler projected on the chaos basis)
+    ``R = Mdt (Z - Th_{t-1}) E2 + sum_q c_q K_q Z G_q + cq/2 sum_{b,c} E3[b,c,:] S_b Z_c - F_t``.
+    The preconditioner ``B`` is the Galerkin Jacobian with the triple products taken by
+    the germ's ``P``-node Gauss rule: in node values it splits into the deterministic
+    Jacobians ``mnode_k Mdt + sum_q gnode_qk c_q K_q + cq S(u_k)`` at the nodes, the
+    matrices a collocation solve factorizes. Each step first iterates
+    ``Z <- Z - B^{-1} R(Z)`` with ``B`` factorized once at the step's first iterate (a
+    chord iteration: ``B`` differs from the Jacobian by the quadrature's aliasing, a few
+    per cent for a smooth random input); if the residual falls by less than a factor
+    ``chord_rate`` per iteration the rest of the step is Newton-Krylov (GMRES
+    preconditioned by ``B`` refreshed every Newton step, linear tolerance
+    ``min(1e-4, 0.05 tol / ||R||)``). Sensitivities (Eq. discrete_sens) are GMRES
+    solves to ``sens_rtol``. ``chord_rate <= 0``: Newton-Krylov from the first iteration.
+
+    Parameters (shapes)
+    -------------------
+    Mdt (N, N), E2 (P, P)          mass / dt and its coupling E[Psi Psi^T]
+    Ks (nq, N, N), cs (nq,)        linear operators and their coefficients
+    Gs (nq, P, P), gK (nq, n_eps)  their couplings and coefficient gradients
+    rows, ptr, idx, val            the quadratic term's folded tensor (empty: none)
+    cq, gq (n_eps,)                its coefficient and gradient
+    E3m (P, P * P)                 E3[b, c, l] as row c, column b P + l
+    F (n_t, N, P), dF (n_t, N, P, n_eps)   loads (chaos coefficients) and derivatives
+    PhiT (P, P)                    PhiT[b, k] = Psi_b(node_k)
+    Tn, Tb (P, P)                  residual chaos columns to node values; node values back
+    mnode (P,), gnode (nq, P)      node factors of the mass coupling and of each G_q
+    theta0 (N, P), guess (n_t, N, P)
+
+    Returns
+    -------
+    Th (n_t, N, P), dTh (n_t, N, P, n_eps), nits (n_t - 1,) iterations per step,
+    kits (n_t - 1,) GMRES iterations per step (sensitivities included), failed step
+    (-1: none), rnorm at failure (-1: a singular node Jacobian, -2: GMRES stalled).
+    """
+    n_t = F.shape[0]
+    N, P = theta0.shape
+    nq = Ks.shape[0]
+    n_eps = gK.shape[1]
+    e2_eye = True
+    for a in range(P):
+        for b in range(P):
+            if E2[a, b] != (1.0 if a == b else 0.0):
+                e2_eye = False
+    Kc = np.empty_like(Ks)
+    for j in range(nq):
+        Kc[j] = cs[j] * Ks[j]
+    has_quad = rows.shape[0] > 0 and cq != 0.0
+    cq_eff = cq if has_quad else 0.0
+    Th = np.zeros((n_t, N, P))
+    Th[0] = theta0
+    dTh = np.zeros((n_t, N, P, n_eps))
+    nits = np.zeros(n_t - 1, dtype=np.int64)
+    kits = np.zeros(n_t - 1, dtype=np.int64)
+    Sf = np.zeros((N, N * P))
+    LUs = np.empty((P, N, N))
+    pivs = np.empty((P, N), dtype=np.int32)
+    R = np.empty((N, P))
+    X = np.empty((N, P))
+    for s in range(n_t - 1):
+        t1 = s + 1
+        Z = guess[t1].copy() if use_guess else Th[s].copy()
+        converged = False
+        factored = False
+        krylov = False
+        rnorm = np.inf
+        prev = np.inf
+        for k in range(maxiter + 1):
+            if has_quad:
+                _sg_linearize(Z, rows, ptr, idx, val, Sf)
+            _sg_linear(Z - Th[s], Mdt, E2, e2_eye, Kc[:0], Gs[:0], R)
+            for j in range(nq):
+                R += (Kc[j] @ Z) @ Gs[j]
+            if has_quad:
+                R += (0.5 * cq) * _sg_quadratic(Z, Sf, E3m)
+            R -= F[t1]
+            rnorm = np.sqrt(np.sum(R * R))
+            nits[s] = k
+            if not np.isfinite(rnorm):
+                break
+            if rnorm < tol:
+                converged = True
+                break
+            if k == maxiter:
+                break
+            if not krylov and (chord_rate <= 0.0 or (k > 0 and rnorm > chord_rate * prev)):
+                krylov = True
+            if krylov or not factored:
+                if not _sg_factor_nodes(Mdt, Kc, cq_eff, Sf, PhiT, mnode, gnode, LUs, pivs):
+                    return Th, dTh, nits, kits, s, -1.0
+                factored = True
+            if krylov:
+                eta = min(1e-4, max(0.05 * tol / rnorm, 1e-13))
+                its, rel = _sg_gmres(
+                    R, Mdt, E2, e2_eye, Kc, Gs, cq_eff, Sf, E3m, Tn, Tb, LUs, pivs, eta,
+                    restart, lin_maxiter, X,
+                )  # fmt: skip
+                kits[s] += its
+                if not rel <= eta:
+                    return Th, dTh, nits, kits, s, -2.0
+            else:
+                _sg_precond(R, Tn, Tb, LUs, pivs, X)
+            Z -= X
+            prev = rnorm
+        if not converged:
+            return Th, dTh, nits, kits, s, rnorm
+        Th[t1] = Z
+        if not sens:
+            continue
+        # dTh_t solves J dTh_t = Mdt dTh_{t-1} E2 - dR/deps (Eq. discrete_sens), J at the
+        # converged state (Sf is), preconditioned by this step's node factors
+        if not factored:
+            if not _sg_factor_nodes(Mdt, Kc, cq_eff, Sf, PhiT, mnode, gnode, LUs, pivs):
+                return Th, dTh, nits, kits, s, -1.0
+        Wq = 0.5 * _sg_quadratic(Z, Sf, E3m) if has_quad else np.zeros((N, P))
+        rhs = np.empty((N, P))
+        for e in range(n_eps):
+            _sg_linear(np.ascontiguousarray(dTh[s, :, :, e]), Mdt, E2, e2_eye, Kc[:0], Gs[:0], rhs)
+            rhs += dF[t1, :, :, e]
+            for j in range(nq):
+                if gK[j, e] != 0.0:
+                    rhs -= gK[j, e] * ((Ks[j] @ Z) @ Gs[j])
+            if has_quad and gq[e] != 0.0:
+                rhs -= gq[e] * Wq
+            its, rel = _sg_gmres(
+                rhs, Mdt, E2, e2_eye, Kc, Gs, cq_eff, Sf, E3m, Tn, Tb, LUs, pivs, sens_rtol,
+                restart, lin_maxiter, X,
+            )  # fmt: skip
+            kits[s] += its
+            if not rel <= sens_rtol:
+                return Th, dTh, nits, kits, s, -2.0
+            dTh[t1, :, :, e] = X
+    return Th, dTh, nits, kits, -1, 0.0

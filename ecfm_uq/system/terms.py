@@ -439,7 +439,7 @@ class LoadTerm:
         self.coef = None  # Coefficient of a scaled load (its indices are checked)
         self.n_eps = None  # columns of B for a linear load
         self._Ft = None  # F(t) of a scaled load: its values on a time grid are cached
-        self._grid = (None, None)  # (time grid bytes, (n_t, N) table of F(t))
+        self._grid = (None, None)  # (time grid bytes, (n_t, N, P) table of F(t))
 
     @classmethod
     def constant(cls, F, name="load"):
@@ -535,31 +535,33 @@ class LoadTerm:
         return -d.reshape(N * P, len(eps))
 
     def on_grid(self, eps, times, derivative=False):
-        """The deterministic load :math:`F(\\epsilon, t)` at every time of a grid (``P = 1``).
+        """The load's chaos coefficients at every time of a grid, for a compiled march.
 
-        Returns ``F`` of shape (n_t, N) and, with ``derivative``, ``dF`` of shape
-        (n_t, N, n_eps) (else ``None``). A scaled load :math:`c(\\epsilon) F(t)` evaluates
-        ``F(t)`` once per time grid and keeps the table (``F(t)`` must depend on ``t``
-        only), so a march at new parameters costs no Python call per step.
+        Returns ``F`` of shape (n_t, N, P) and, with ``derivative``, ``dF`` of shape
+        (n_t, N, P, n_eps) (else ``None``): the negated :meth:`apply` and
+        :meth:`eps_jacobian` at each time. A scaled load :math:`c(\\epsilon) F(t)`
+        evaluates ``F(t)`` once per time grid and keeps the table (``F(t)`` must depend
+        on ``t`` only), so a march at new parameters costs no Python call per step.
         """
-        N = self._N
-        zero = np.zeros((N, 1))
+        N, P = self._N, self._E1.size
+        n_eps = len(eps)
+        zero = np.zeros((N, P))
         if self._Ft is None:
-            F = np.array([-self.apply(zero, eps, t)[:, 0] for t in times]).reshape(-1, N)
+            F = np.array([-self.apply(zero, eps, t) for t in times]).reshape(-1, N, P)
             if not derivative:
                 return F, None
             dF = np.array([-self.eps_jacobian(zero, eps, t) for t in times])
-            return F, dF.reshape(len(times), N, len(eps))
+            return F, dF.reshape(len(times), N, P, n_eps)
         key = np.asarray(times, dtype=float).tobytes()
         if self._grid[0] != key:
-            table = np.array([self._chaos(self._Ft(t))[:, 0] for t in times]).reshape(-1, N)
+            table = np.array([self._chaos(self._Ft(t)) for t in times]).reshape(-1, N, P)
             self._grid = (key, table)
         table = self._grid[1]
         F = self.coef.value(eps) * table
         if not derivative:
             return F, None
         grad = np.asarray(self.coef.grad(eps), dtype=float)
-        return F, table[:, :, None] * grad[None, None, :]
+        return F, table[..., None] * grad
 
     def eps_vjp(self, Theta, eps, mu, t=None):
         """:math:`(\\partial R/\\partial\\epsilon)^T\\mu` without the (NP, n_eps) matrix."""
