@@ -16,7 +16,10 @@ through a :class:`LinearSolver`, selected by ``solver=``:
     preconditioner :math:`I\\otimes\\bar K` (Powell & Elman 2009): :math:`\\bar K`, the
     Jacobian of the mean problem, is factorized once (``"mean"``: ``splu`` or dense LU;
     ``"mean-amg"``: a PyAMG smoothed-aggregation V-cycle) and applied to all ``P`` chaos
-    columns at once. Iterations are nearly independent of ``N``.
+    columns at once. Iterations are nearly independent of ``N``. Or ``"decoupled"``
+    (exact on linear terms whose couplings share an eigenbasis) or ``"nodal"`` (one
+    germ: the ``P`` deterministic Jacobians at the germ's Gauss nodes, quadratic terms
+    included; :class:`NodalPreconditioner`).
 ``"auto"`` (default)
     ``"decoupled"`` when available (steady, unconstrained); ``"gmres"`` with the
     ``"nodal"`` preconditioner for the backward-Euler march of a small nonlinear
