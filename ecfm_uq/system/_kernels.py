@@ -324,12 +324,18 @@ def _sg_quadratic(X, Sf, E3m):
 
 
 @numba.njit(cache=True)
-def _sg_linear(X, Mdt, E2, e2_eye, Kc, Gs, out):
-    """``out = Mdt X E2 + sum_q Kc_q X G_q``: the linear part of the step operator."""
+def _sg_mass(X, Mdt, E2, e2_eye, out):
+    """``out = Mdt X E2``: the mass term (``E2 = I`` for an orthonormal basis)."""
     if e2_eye:
         out[:, :] = Mdt @ X
     else:
         out[:, :] = (Mdt @ X) @ E2
+
+
+@numba.njit(cache=True)
+def _sg_linear(X, Mdt, E2, e2_eye, Kc, Gs, out):
+    """``out = Mdt X E2 + sum_q Kc_q X G_q``: the linear part of the step operator."""
+    _sg_mass(X, Mdt, E2, e2_eye, out)
     for j in range(Kc.shape[0]):
         out += (Kc[j] @ X) @ Gs[j]
 
@@ -564,7 +570,7 @@ def march_sg(
         for k in range(maxiter + 1):
             if has_quad:
                 _sg_linearize(Z, rows, ptr, idx, val, Sf)
-            _sg_linear(Z - Th[s], Mdt, E2, e2_eye, Kc[:0], Gs[:0], R)
+            _sg_mass(Z - Th[s], Mdt, E2, e2_eye, R)
             for j in range(nq):
                 R += (Kc[j] @ Z) @ Gs[j]
             if has_quad:
@@ -611,7 +617,7 @@ def march_sg(
         Wq = 0.5 * _sg_quadratic(Z, Sf, E3m) if has_quad else np.zeros((N, P))
         rhs = np.empty((N, P))
         for e in range(n_eps):
-            _sg_linear(np.ascontiguousarray(dTh[s, :, :, e]), Mdt, E2, e2_eye, Kc[:0], Gs[:0], rhs)
+            _sg_mass(np.ascontiguousarray(dTh[s, :, :, e]), Mdt, E2, e2_eye, rhs)
             rhs += dF[t1, :, :, e]
             for j in range(nq):
                 if gK[j, e] != 0.0:

@@ -794,9 +794,10 @@ class LinearSolver:
     def _label(self):
         if self.name not in ("cg", "gmres"):
             return self.name
-        return f"{self.name}+{self._preconditioner_kind() or 'none'}"
+        return f"{self.name}+{self.preconditioner_kind() or 'none'}"
 
-    def _preconditioner_kind(self):
+    def preconditioner_kind(self):
+        """The Krylov preconditioner ``"auto"`` resolves to (``None``: none)."""
         kind = self.options.preconditioner
         if kind == "none":
             return None
@@ -864,7 +865,7 @@ class LinearSolver:
             except np.linalg.LinAlgError:
                 return None
         else:
-            precond = _make_preconditioner(J, self._preconditioner_kind())
+            precond = _make_preconditioner(J, self.preconditioner_kind())
             inner = KrylovFactor(J, name, precond, self.options, self.record)
         if not augmented:
             return inner

@@ -610,7 +610,7 @@ def _compiled_march(
         return None
     if P > 1 and not (
         linear.name == "gmres"
-        and linear._preconditioner_kind() == "nodal"
+        and linear.preconditioner_kind() == "nodal"
         and M_obs is None
         and not keep
         and nodal_march_eligible(system)
