@@ -157,3 +157,12 @@ def test_failures_are_reported(model):
     # one GMRES iteration cannot reach the sensitivities' tolerance
     stalled = _march(model, solver={"maxiter": 1}, sensitivities=True)
     assert not stalled.success and "GMRES did not reach its tolerance" in stalled.message
+
+
+def test_warm_start_same_states_fewer_iterations(model):
+    cold = _march(model)
+    near = march(model.system, EPS + 0.01, model.Theta0, model.dt, model.n_steps, tol=1e-12)
+    warm = _march(model, guess=near)
+    assert warm.solver == "gmres+nodal (compiled)"
+    np.testing.assert_allclose(warm.Theta, cold.Theta, rtol=0, atol=1e-11)
+    assert warm.nit.sum() < cold.nit.sum()
