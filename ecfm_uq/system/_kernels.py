@@ -110,15 +110,28 @@ def _lu_solve_transpose(lu, piv, x):
 
 
 @numba.njit(cache=True)
+def _linearize(Z, rows, ptr, idx, val, Sf):
+    """``Sf[i, j P + b] = S(Z[:, b])[i, j]`` for every column of ``Z`` (N, P), one pass.
+
+    ``S(theta) = dq/dtheta`` from the folded tensor's compressed rows
+    (``QuadraticTerm.linearization_table``); for ``P = 1``, ``Sf`` is ``S`` itself.
+    """
+    N, P = Z.shape
+    Sf[:, :] = 0.0
+    for r in range(rows.shape[0]):
+        i = rows[r] // N
+        base = (rows[r] - i * N) * P
+        for e in range(ptr[r], ptr[r + 1]):
+            v = val[e]
+            k = idx[e]
+            for b in range(P):
+                Sf[i, base + b] += v * Z[k, b]
+
+
+@numba.njit(cache=True)
 def _quadratic(theta, rows, ptr, idx, val, q, S):
     """S = dq/dth from the folded tensor's compressed rows, and q = S th / 2."""
-    S[:, :] = 0.0
-    flat = S.reshape(-1)
-    for r in range(rows.shape[0]):
-        acc = 0.0
-        for e in range(ptr[r], ptr[r + 1]):
-            acc += val[e] * theta[idx[e]]
-        flat[rows[r]] = acc
+    _linearize(theta.reshape(theta.shape[0], 1), rows, ptr, idx, val, S)
     q[:] = 0.5 * (S @ theta)
 
 
@@ -299,21 +312,6 @@ def adjoint_p1(LUs, pivs, Th, Mdt, Ks, gK, rows, ptr, idx, val, gq, dF, g):
 # chaos columns are kept side by side, Sf[i, j P + b] = S(Theta[:, b])[i, j], so that its
 # Galerkin projection sum_{b,c} E[Psi_b Psi_c Psi_l] S_b X_c is one product Sf @ Y(X) with
 # Y[j P + b, l] = sum_c X[j, c] E[Psi_b Psi_c Psi_l] (E3m = E3 as (c, b l)).
-
-
-@numba.njit(cache=True)
-def _sg_linearize(Z, rows, ptr, idx, val, Sf):
-    """``Sf[i, j P + b] = S(Z[:, b])[i, j]`` for every chaos column, one pass over the tensor."""
-    N, P = Z.shape
-    Sf[:, :] = 0.0
-    for r in range(rows.shape[0]):
-        i = rows[r] // N
-        base = (rows[r] - i * N) * P
-        for e in range(ptr[r], ptr[r + 1]):
-            v = val[e]
-            k = idx[e]
-            for b in range(P):
-                Sf[i, base + b] += v * Z[k, b]
 
 
 @numba.njit(cache=True)
@@ -567,15 +565,15 @@ def march_sg(
         krylov = False
         rnorm = np.inf
         prev = np.inf
+        _sg_mass(Th[s], Mdt, E2, e2_eye, X)
+        Fs = F[t1] + X  # the step's fixed part: load and previous state
         for k in range(maxiter + 1):
             if has_quad:
-                _sg_linearize(Z, rows, ptr, idx, val, Sf)
-            _sg_mass(Z - Th[s], Mdt, E2, e2_eye, R)
-            for j in range(nq):
-                R += (Kc[j] @ Z) @ Gs[j]
+                _linearize(Z, rows, ptr, idx, val, Sf)
+            _sg_linear(Z, Mdt, E2, e2_eye, Kc, Gs, R)
             if has_quad:
                 R += (0.5 * cq) * _sg_quadratic(Z, Sf, E3m)
-            R -= F[t1]
+            R -= Fs
             rnorm = np.sqrt(np.sum(R * R))
             nits[s] = k
             if not np.isfinite(rnorm):
