@@ -65,8 +65,8 @@ _DENSE_AUTO_BYTES = 256 * 2**20
 _SPLU_AUTO_SIZE = 400_000
 # "auto" preconditioner: the decoupled or nodal one (P factorizations) up to this N
 _DECOUPLED_AUTO_SIZE = 5_000
-# the compiled stochastic Galerkin march (system/_kernels.march_sg) handles N up to this
-_NODAL_MARCH_MAX_N = 128
+# the compiled marches (system/_kernels: march_p1, march_sg) handle N up to this
+COMPILED_MARCH_MAX_N = 128
 
 
 @dataclass(frozen=True)
@@ -302,7 +302,35 @@ class MeanPreconditioner:
         return self._solve_t(R) / self.d[None, :]
 
 
-class NodalPreconditioner:
+class _ChaosBlockDiagonal:
+    """A preconditioner block-diagonal in another basis of the chaos space.
+
+    ``R (N, P) -> solve_k((R L)[:, k]) -> X Rt``: ``P`` factorized ``N x N`` blocks
+    between the transforms ``L`` and ``Rt`` (``Rt = L^{-1}``, or ``L^T`` when ``L`` is
+    orthogonal); the transpose runs the same blocks transposed between ``Rt^T`` and
+    ``L^T``. Subclasses set ``left``, ``right`` and ``factors``.
+    """
+
+    def _apply(self, R, left, right, transpose):
+        Rh = R @ left
+        X = np.column_stack(
+            [
+                (f.solve_transpose if transpose else f.solve)(Rh[:, k])
+                for k, f in enumerate(self.factors)
+            ]
+        )
+        return X @ right
+
+    def apply(self, R):
+        """Apply to ``R`` of shape (N, P)."""
+        return self._apply(R, self.left, self.right, transpose=False)
+
+    def apply_transpose(self, R):
+        """The transposed preconditioner (for adjoint solves)."""
+        return self._apply(R, self.right.T, self.left.T, transpose=True)
+
+
+class NodalPreconditioner(_ChaosBlockDiagonal):
     """The Galerkin Jacobian with its chaos integrals taken by the ``P``-node Gauss rule.
 
     For a one-germ basis, replacing every :math:`\\mathbb E[g\\,\\Psi\\Psi^T]` and
@@ -318,7 +346,7 @@ class NodalPreconditioner:
     ``J`` only by the rule's aliasing (exact for affine couplings, up to the quadratic
     terms' degree-``3p`` products), so for smooth random inputs Krylov methods converge
     in a few iterations (Burgers with a random viscosity, ``P = 5``:
-    :math:`\\|I - B^{-1}J\\|_2 \approx 0.03`). ``B^{-1}`` costs ``P`` factorized
+    :math:`\\|I - B^{-1}J\\|_2 \\approx 0.03`). ``B^{-1}`` costs ``P`` factorized
     ``N x N`` solves and two ``P x P`` transforms.
 
     Parameters
@@ -342,6 +370,7 @@ class NodalPreconditioner:
                 "preconditioner='mean' or 'decoupled'"
             )
         self.nodes = nodes
+        self.left, self.right = nodes.to_nodes, nodes.from_nodes
         P = op.P
         blocks = [None] * P
 
@@ -373,20 +402,8 @@ class NodalPreconditioner:
                 )
             self.factors.append(factor)
 
-    def apply(self, R):
-        """Apply to ``R`` of shape (N, P): to node values, ``P`` solves, back."""
-        Rn = R @ self.nodes.to_nodes
-        X = np.column_stack([f.solve(Rn[:, k]) for k, f in enumerate(self.factors)])
-        return X @ self.nodes.from_nodes
 
-    def apply_transpose(self, R):
-        """The transposed preconditioner (for adjoint solves)."""
-        Rn = R @ self.nodes.from_nodes.T
-        X = np.column_stack([f.solve_transpose(Rn[:, k]) for k, f in enumerate(self.factors)])
-        return X @ self.nodes.to_nodes.T
-
-
-class DecoupledPreconditioner:
+class DecoupledPreconditioner(_ChaosBlockDiagonal):
     """Exact on the linear part in the couplings' common eigenbasis, mean-based on the rest.
 
     With :math:`G_q = Q D_q Q^T` for every linear term and for :math:`\\mathbb E[\\Psi\\Psi^T]`
@@ -430,7 +447,7 @@ class DecoupledPreconditioner:
                 "not have one: pass preconditioner='mean'"
             )
         Q, D = found
-        self.Q = Q
+        self.left, self.right = Q, Q.T
         shared = None  # (M / dt + S_bar), coupled through E[Psi Psi^T]
         for part in quad:
             block = part.mean_block(E2[0, 0])
@@ -468,20 +485,6 @@ class DecoupledPreconditioner:
                     "singular; pass preconditioner='mean' or 'none'"
                 )
             self.factors.append(factor)
-
-    def _apply(self, R, transpose):
-        Rh = R @ self.Q
-        solves = [f.solve_transpose if transpose else f.solve for f in self.factors]
-        X = np.column_stack([solve(Rh[:, k]) for k, solve in enumerate(solves)])
-        return X @ self.Q.T
-
-    def apply(self, R):
-        """Apply to ``R`` of shape (N, P)."""
-        return self._apply(R, transpose=False)
-
-    def apply_transpose(self, R):
-        """The transposed preconditioner (for adjoint solves)."""
-        return self._apply(R, transpose=True)
 
 
 def _make_preconditioner(op, kind):
@@ -695,7 +698,7 @@ def nodal_march_eligible(system):
         and n_quad <= 1
         and not system.sparse_input
         and system.M is not None
-        and N <= _NODAL_MARCH_MAX_N
+        and N <= COMPILED_MARCH_MAX_N
     )
 
 

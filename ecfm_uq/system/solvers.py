@@ -26,7 +26,14 @@ import scipy.sparse as sp
 
 from .._validation import as_finite_array, as_operator, check_choice, check_int, check_positive
 from ..errors import ConvergenceError, KrylovError, ModelEvaluationError
-from .linear import DenseFactor, LinearSolver, dense_lu, nodal_march_eligible, solver_options
+from .linear import (
+    COMPILED_MARCH_MAX_N,
+    DenseFactor,
+    LinearSolver,
+    dense_lu,
+    nodal_march_eligible,
+    solver_options,
+)
 from .operator import AugmentedOperator
 from .terms import LinearTerm, LoadTerm, QuadraticTerm
 
@@ -567,7 +574,6 @@ def _generic_adjoint(system, eps, Theta, times, factors, mass_T):
     return adjoint
 
 
-_COMPILED_MAX_N = 128
 # the P > 1 march's chord iteration hands a step to Newton-Krylov when its residual falls
 # by less than this factor per iteration (<= 0: Newton-Krylov throughout)
 _CHORD_RATE = 0.25
@@ -604,7 +610,7 @@ def _compiled_march(
     """
     N, P = system.shape
     quads = [t for t in system.terms if isinstance(t, QuadraticTerm)]
-    if len(quads) > 1 or N > _COMPILED_MAX_N:
+    if len(quads) > 1 or N > COMPILED_MARCH_MAX_N:
         return None
     if P == 1 and linear.name != "dense":
         return None
