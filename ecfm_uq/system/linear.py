@@ -27,7 +27,7 @@ through a :class:`LinearSolver`, selected by ``solver=``:
     dense-input systems (the paper's problems, unchanged); for ``P = 1`` ``"sparse-direct"``
     (sparse input) or ``"dense"``; otherwise ``"cg"`` (symmetric linear systems) or
     ``"gmres"``. Sparse LU of the chaos-coupled block matrix is never chosen for
-    ``P > 1``: its fill makes it 53x slower than mean-preconditioned CG already at
+    ``P > 1``: its fill makes it 30-53x slower than mean-preconditioned CG already at
     ``N = 169, P = 35`` (``benchmarks/solvers.py``). Nothing larger than the memory budget (:mod:`ecfm_uq.memory`)
     is chosen.
 
@@ -346,7 +346,7 @@ class NodalPreconditioner(_ChaosBlockDiagonal):
     ``J`` only by the rule's aliasing (exact for affine couplings, up to the quadratic
     terms' degree-``3p`` products), so for smooth random inputs Krylov methods converge
     in a few iterations (Burgers with a random viscosity, ``P = 5``:
-    :math:`\\|I - B^{-1}J\\|_2 \\approx 0.03`). ``B^{-1}`` costs ``P`` factorized
+    :math:`\\|I - B^{-1}J\\|_2 = 0.030`, ``benchmarks/solvers.py``). ``B^{-1}`` costs ``P`` factorized
     ``N x N`` solves and two ``P x P`` transforms.
 
     Parameters
