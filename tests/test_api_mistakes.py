@@ -297,21 +297,23 @@ def test_nan_from_a_callable_load_is_reported():
     assert "load term 'src': F(eps, t) returned NaN or inf" in sol.message
 
 
-def _heat_like(n=8):
-    """Deterministic 1-D diffusion 10**eps0 K theta = F with hat forces at 3 sensors."""
+def _heat_system(F=None, forces=True, n=8):
+    """1-D diffusion 10**eps0 K theta = F (default all ones), 3 sensors and, with
+    ``forces``, hat constraint forces at them; returns ``(system, M_obs)``."""
     basis = SineBasis(n)
-    Kb = stiffness(basis)
     x = np.array([0.25, 0.5, 0.75])
-    return basis, Kb, x
+    F = np.ones(n) if F is None else F
+    system = GalerkinSystem(
+        [LinearTerm(stiffness(basis), Coefficient.power10(0, sign=1.0)), LoadTerm.constant(F)],
+        1,
+        Gamma=hat_forces(basis, x, 0.1) if forces else None,
+    )
+    return system, sensor_matrix(basis, x)
 
 
 def test_bfgs_fit_on_unexplainable_data_says_the_coefficient_ran_away():
     """Standard BFGS on data of the wrong sign drives 10**eps up; the verdict says so."""
-    basis, Kb, x = _heat_like()
-    system = GalerkinSystem(
-        [LinearTerm(Kb, Coefficient.power10(0, sign=1.0)), LoadTerm.constant(np.ones(8))], 1
-    )
-    M = sensor_matrix(basis, x)
+    system, M = _heat_system(forces=False)
     v = -np.ones(3)  # a positive load can never give negative deflections
     res = fit_steady(system, M, v, [0.0], "standard", options={"maxiter": 200})
     assert np.all(np.isfinite(res.eps))
@@ -319,34 +321,24 @@ def test_bfgs_fit_on_unexplainable_data_says_the_coefficient_ran_away():
     assert "coefficient of term 'linear' is extreme" in res.message
 
 
-def _overflowing_fit_system():
-    basis, Kb, x = _heat_like()
-    system = GalerkinSystem(
-        [LinearTerm(Kb, Coefficient.power10(0, sign=1.0)), LoadTerm.constant(np.ones(8))],
-        1,
-        Gamma=hat_forces(basis, x, 0.1),
-    )
-    return system, sensor_matrix(basis, x)
-
-
 def test_objective_overflow_is_a_convergence_error_not_overflow_error():
     from ecfm_uq.inverse import ecfm_objective, standard_objective
 
-    system, M = _overflowing_fit_system()
+    system, M = _heat_system()
     for objective in (standard_objective, ecfm_objective):
         with pytest.raises(ConvergenceError, match="overflow"):
             objective(system, M, np.ones(3), [400.0])
 
 
 def test_fit_from_an_overflowing_start_is_refused_clearly():
-    system, M = _overflowing_fit_system()
+    system, M = _heat_system()
     with pytest.raises(ConvergenceError, match=r"cannot be solved at eps0=\[400\.\].*overflow"):
         fit_steady(system, M, np.ones(3), [400.0])
 
 
 def test_fit_treats_overflow_at_trial_points_as_failed_inner_solves():
     """A bounded fit whose trial points overflow: reported, never a raw OverflowError."""
-    system, M = _overflowing_fit_system()
+    system, M = _heat_system()
     v = M @ solve_steady(system, [0.0]).Theta[:, 0]
     calls = []
     orig = system.terms[0].coef._value
@@ -363,14 +355,7 @@ def test_fit_treats_overflow_at_trial_points_as_failed_inner_solves():
 
 
 def test_ecfm_on_unexplainable_data_says_forces_stayed_large():
-    basis, Kb, x = _heat_like()
-    Fv = np.linspace(1.0, 2.0, 8)
-    system = GalerkinSystem(
-        [LinearTerm(Kb, Coefficient.power10(0, sign=1.0)), LoadTerm.constant(Fv)],
-        1,
-        Gamma=hat_forces(basis, x, 0.1),
-    )
-    M = sensor_matrix(basis, x)
+    system, M = _heat_system(np.linspace(1.0, 2.0, 8))
     v = np.array([1.0, -2.0, 1.0])  # no diffusion coefficient gives this shape
     res = fit_steady(system, M, v, [0.0])
     verdict = res.extra["verdict"]
@@ -380,14 +365,7 @@ def test_ecfm_on_unexplainable_data_says_forces_stayed_large():
 
 
 def test_ecfm_on_consistent_data_is_consistent():
-    basis, Kb, x = _heat_like()
-    Fv = np.linspace(1.0, 2.0, 8)
-    system = GalerkinSystem(
-        [LinearTerm(Kb, Coefficient.power10(0, sign=1.0)), LoadTerm.constant(Fv)],
-        1,
-        Gamma=hat_forces(basis, x, 0.1),
-    )
-    M = sensor_matrix(basis, x)
+    system, M = _heat_system(np.linspace(1.0, 2.0, 8))
     v = M @ solve_steady(system, [0.3]).Theta[:, 0]
     res = fit_steady(system, M, v, [0.0])
     assert res.success
@@ -398,13 +376,7 @@ def test_ecfm_on_consistent_data_is_consistent():
 
 
 def test_verdict_reports_bound_and_extreme_and_peak():
-    basis, Kb, x = _heat_like()
-    system = GalerkinSystem(
-        [LinearTerm(Kb, Coefficient.power10(0, sign=1.0)), LoadTerm.constant(np.ones(8))],
-        1,
-        Gamma=hat_forces(basis, x, 0.1),
-    )
-    M = sensor_matrix(basis, x)
+    system, M = _heat_system()
     v = M @ solve_steady(system, [0.0]).Theta[:, 0]
     v[2] += 1.0
     out = consistency_verdict(system, M, v, [-14.0], lam=[0.0, 0.1, -3.0], bounds=[(-14, 2)])
@@ -418,11 +390,7 @@ def test_verdict_reports_bound_and_extreme_and_peak():
 
 
 def test_verdict_chi2_for_noisy_data():
-    basis, Kb, x = _heat_like()
-    system = GalerkinSystem(
-        [LinearTerm(Kb, Coefficient.power10(0, sign=1.0)), LoadTerm.constant(np.ones(8))], 1
-    )
-    M = sensor_matrix(basis, x)
+    system, M = _heat_system(forces=False)
     v = M @ solve_steady(system, [0.0]).Theta[:, 0]
     noise = np.array([1e-3, -1e-3, 5e-4])
     assert consistency_verdict(system, M, v + noise, [0.0], sigma=1e-3)["consistent"]
