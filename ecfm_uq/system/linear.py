@@ -346,8 +346,8 @@ class NodalPreconditioner(_ChaosBlockDiagonal):
     ``J`` only by the rule's aliasing (exact for affine couplings, up to the quadratic
     terms' degree-``3p`` products), so for smooth random inputs Krylov methods converge
     in a few iterations (Burgers with a random viscosity, ``P = 5``:
-    :math:`\\|I - B^{-1}J\\|_2 = 0.030`, ``benchmarks/solvers.py``). ``B^{-1}`` costs ``P`` factorized
-    ``N x N`` solves and two ``P x P`` transforms.
+    :math:`\\|I - B^{-1}J\\|_2 = 0.030`, ``benchmarks/solvers.py``). ``B^{-1}`` costs
+    ``P`` factorized ``N x N`` solves and two ``P x P`` transforms.
 
     Parameters
     ----------
