@@ -2,11 +2,42 @@
 
 from __future__ import annotations
 
+import os
+import tempfile
+from pathlib import Path
+
 import numpy as np
 
 from ._validation import as_finite_array
 
-__all__ = ["pair_plot"]
+__all__ = ["pair_plot", "pyplot", "save_figure"]
+
+
+def save_figure(fig, path, dpi=130):
+    """Save a matplotlib figure atomically and close it."""
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        plt.close(fig)
+
+
+def pyplot():
+    """matplotlib.pyplot with a non-interactive backend."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
 
 
 def pair_plot(samples, names=None, truth=None, laplace=None, bins=40):
@@ -27,8 +58,6 @@ def pair_plot(samples, names=None, truth=None, laplace=None, bins=40):
     -------
     matplotlib.figure.Figure
     """
-    from .studies._common import pyplot
-
     plt = pyplot()
     X = as_finite_array("samples", samples, ndim=2)
     n = X.shape[1]

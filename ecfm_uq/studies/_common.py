@@ -1,4 +1,4 @@
-"""Plumbing shared by the study modules: atomic output, figures, progress.
+"""Plumbing shared by the study modules: atomic output and progress (figures: ``ecfm_uq.plotting``).
 
 Study modules hold no numerics: they read settings, call the library, and write
 ``result.json`` plus figures through these helpers.
@@ -56,33 +56,6 @@ def write_atomic(path, data, mode="w"):
 def write_json(path, result):
     """Write a result dictionary as pretty JSON, atomically."""
     write_atomic(path, json.dumps(to_jsonable(result), indent=2, sort_keys=True) + "\n")
-
-
-def save_figure(fig, path, dpi=130):
-    """Save a matplotlib figure atomically and close it."""
-    import matplotlib.pyplot as plt
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        plt.close(fig)
-
-
-def pyplot():
-    """matplotlib.pyplot with a non-interactive backend."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 class Progress:

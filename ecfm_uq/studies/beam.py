@@ -33,8 +33,8 @@ from ..inverse.likelihood import (
     optimal_forces,
 )
 from ..mc import relative_error
+from ..plotting import pyplot, save_figure
 from ..problems.beam import BeamModel, buckling_load
-from ._common import pyplot, save_figure
 
 NAME = "beam"
 DESCRIPTION = (

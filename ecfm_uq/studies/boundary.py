@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..inverse import fit_steady
+from ..plotting import pyplot, save_figure
 from ..problems.heat import boundary_closed_form, boundary_problem, gaussian_source
-from ._common import pyplot, save_figure
 
 NAME = "boundary"
 DESCRIPTION = (

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..inverse.diagnostics import condition_number, fd_hessian, loss_surface
 from ..inverse.dynamic import DynamicInverseProblem
+from ..plotting import pyplot, save_figure
 from ..problems.burgers import (
     INITIAL_STATES,
     PAPER_SENSORS,
@@ -31,7 +32,6 @@ from ..problems.burgers import (
     initial_condition,
     source,
 )
-from ._common import pyplot, save_figure
 
 NAME = "burgers"
 DESCRIPTION = "Burgers dynamic inverse problem, standard vs ECFM with Adam (paper Section 3.1)"

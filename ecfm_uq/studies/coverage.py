@@ -23,9 +23,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..inverse.coverage import binomial_band, likelihood_coverage, steady_coverage
+from ..plotting import pyplot, save_figure
 from ..problems.beam import BeamModel
 from ..problems.heat import boundary_problem
-from ._common import pyplot, save_figure
 
 NAME = "coverage"
 DESCRIPTION = (

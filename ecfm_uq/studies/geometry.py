@@ -18,13 +18,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..plotting import pyplot, save_figure
 from ..problems.heat import (
     gaussian_source,
     interval_closed_form,
     interval_problem,
     rectangle_problem,
 )
-from ._common import pyplot, save_figure
 from .boundary import _history_figure, fit_both, force_pattern, summary_rows_common
 
 NAME = "geometry"

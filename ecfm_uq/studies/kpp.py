@@ -21,6 +21,7 @@ import numpy as np
 
 from ..inverse.noise import consistency_test, noise_bounds
 from ..inverse.noisy import fit_noisy_ecfm, fit_standard_slsqp
+from ..plotting import pyplot, save_figure
 from ..problems.fisher_kpp import (
     DEFAULT_OMEGA,
     SOURCE_AMPLITUDE,
@@ -33,7 +34,6 @@ from ..problems.fisher_kpp import (
     source_relative_error,
     true_source,
 )
-from ._common import pyplot, save_figure
 
 NAME = "kpp"
 DESCRIPTION = "Fisher-KPP with noisy data: standard vs noise-aware ECFM with SLSQP (Section 3.2)"

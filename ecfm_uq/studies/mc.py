@@ -22,8 +22,8 @@ from ..mc import (
     quadrature_moments,
     relative_error,
 )
+from ..plotting import pyplot, save_figure
 from ..problems.beam import BeamModel, buckling_load
-from ._common import pyplot, save_figure
 
 NAME = "mc"
 DESCRIPTION = (
