@@ -1,19 +1,30 @@
 """Inverse formulations: standard least squares, ECFM (equality constraint forces),
 noisy ECFM (z-score and chi-squared bounds), pseudo-likelihood constraint forces.
 
-==========================  ==============================================  ===========
-formulation                 entry point                                     paper
-==========================  ==============================================  ===========
-steady standard / ECFM      :func:`fit_steady`                              Eqs. traditional, ecfm; Sec. 4
-dynamic standard / ECFM     :class:`DynamicInverseProblem`                  Eqs. inv_obj, ecfm_obj
-noisy standard / ECFM       :func:`fit_standard_slsqp`, :func:`fit_noisy_ecfm`  Eqs. kpp_inv, ecfm_noise
-pseudo-likelihood forces    :func:`fit_pseudo_likelihood`                   Eq. stochastic_model
-==========================  ==============================================  ===========
+One entry point, :func:`fit`, takes a problem (the model, its sensors and the data) and
+returns an :class:`InverseResult` (``success``/``status``, the estimate, its
+:class:`Uncertainty` and the :class:`Verdict` on whether the model explains the data):
+
+==========================  =====================================================  ================
+problem                     formulations (``fit(problem, eps0, formulation=...)``)  paper
+==========================  =====================================================  ================
+:class:`SteadyProblem`      ``"standard"``, ``"ecfm"``, ``"noisy-ecfm"``            Eqs. traditional,
+                                                                                   ecfm, kpp_inv,
+                                                                                   ecfm_noise; Sec. 4
+:class:`DynamicInverse\\    ``"standard"``, ``"ecfm"``                              Eqs. inv_obj,
+Problem`                                                                           ecfm_obj
+:class:`ReplicatedProblem`  ``"standard"``, ``"inner-outer"``, ``"penalty"``        Eq. stochastic_model
+==========================  =====================================================  ================
+
+The v0.2 entry points (:func:`fit_steady`, :func:`fit_standard_slsqp`,
+:func:`fit_noisy_ecfm`, :func:`fit_pseudo_likelihood`, ``DynamicInverseProblem.fit``) are
+thin deprecated aliases of :func:`fit`.
 """
 
 from .coverage import likelihood_coverage, steady_coverage
 from .diagnostics import condition_number, fd_hessian, loss_surface, taylor_remainders
 from .dynamic import DynamicInverseProblem
+from .fitting import fit
 from .likelihood import (
     DegenerateVarianceError,
     PseudoLikelihood,
@@ -26,10 +37,18 @@ from .likelihood import (
 from .noise import ConsistencyTest, consistency_test, noise_bounds, sample_moments
 from .noisy import ConstrainedInverse, fit_noisy_ecfm, fit_standard_slsqp
 from .optimizers import adam
-from .result import InverseResult
+from .problems import ReplicatedProblem, SteadyProblem
+from .result import InverseResult, Uncertainty, Verdict
+from .status import FitStatus
 from .steady import ecfm_objective, fit_steady, standard_objective
 
 __all__ = [
+    "FitStatus",
+    "ReplicatedProblem",
+    "SteadyProblem",
+    "Uncertainty",
+    "Verdict",
+    "fit",
     "ConsistencyTest",
     "ConstrainedInverse",
     "DegenerateVarianceError",

@@ -2,9 +2,9 @@
 
 A 95 % interval is honest when, over many data sets drawn from the model at known
 parameters, it contains the true value in 95 % of them. :func:`steady_coverage` checks
-the intervals of :func:`~ecfm_uq.inverse.fit_steady` (Gaussian sensor noise of known
+the intervals of :func:`~ecfm_uq.inverse.fit` (steady) (Gaussian sensor noise of known
 standard deviation, sigma known or estimated from the residual);
-:func:`likelihood_coverage` those of :func:`~ecfm_uq.inverse.fit_pseudo_likelihood`
+:func:`likelihood_coverage` those of the pseudo-likelihood fits
 (replicated data, covariance from the replicates). With R data sets and all parameters
 pooled, the empirical coverage of honest intervals lies in
 :func:`binomial_band` (R n_eps, 0.95) with probability about 95 % (pooled parameters of
@@ -19,7 +19,8 @@ from scipy import stats
 from .._validation import check_int, check_positive
 from ..errors import ConvergenceError
 from ..system import solve_steady
-from .steady import fit_steady
+from .fitting import fit
+from .problems import ReplicatedProblem, SteadyProblem
 
 __all__ = ["binomial_band", "likelihood_coverage", "steady_coverage"]
 
@@ -84,7 +85,7 @@ def steady_coverage(
     known_sigma=False,
     eps0=None,
 ):
-    """Coverage of the 95% intervals of :func:`fit_steady` on ``n_datasets`` noisy data sets.
+    """Coverage of the 95% intervals of the steady fits on ``n_datasets`` noisy data sets.
 
     Data set r is :math:`v = \\mathcal M\\,\\mathbb E[\\theta(\\epsilon_{true})] + \\sigma
     \\xi_r`, :math:`\\xi_r \\sim N(0, I)` from ``numpy.random.default_rng(seed)``.
@@ -123,7 +124,8 @@ def steady_coverage(
     est, ints, failed = [], [], 0
     for _ in range(n):
         v = v0 + sigma * rng.normal(size=v0.size)
-        res = fit_steady(system, M_obs, v, eps0, formulation, sigma=sigma if known_sigma else None)
+        problem = SteadyProblem(system, M_obs, v)
+        res = fit(problem, eps0, formulation=formulation, sigma=sigma if known_sigma else None)
         if not res.success or res.eps_ci95 is None:
             failed += 1
             continue
@@ -141,9 +143,11 @@ def likelihood_coverage(
     n_datasets=200,
     seed=0,
     formulation="standard",
+    *,
+    problem_options=None,
     **fit_options,
 ):
-    """Coverage of the 95% intervals of :func:`fit_pseudo_likelihood` on replicated data.
+    """Coverage of the 95% intervals of the pseudo-likelihood fits on replicated data.
 
     Parameters
     ----------
@@ -161,16 +165,16 @@ def likelihood_coverage(
     seed : int
     formulation : {"standard", "inner-outer"}
         The penalty form has no uncertainty (no optimality condition defines it).
+    problem_options : dict, optional
+        Passed to :class:`~ecfm_uq.inverse.ReplicatedProblem` (e.g. ``tol`` of the solves).
     **fit_options
-        Passed to :func:`fit_pseudo_likelihood` (``bounds``, ``likelihood_options``, ...).
+        Passed to :func:`~ecfm_uq.inverse.fit` (``bounds``, ``options``, ...).
 
     Returns
     -------
     dict
         As :func:`steady_coverage`, plus ``stderr`` (R', n_eps).
     """
-    from .likelihood import fit_pseudo_likelihood
-
     n, seed = _check_common(n_datasets, seed)
     if formulation not in ("standard", "inner-outer"):
         raise ValueError(
@@ -183,7 +187,8 @@ def likelihood_coverage(
     est, ints, se, failed = [], [], [], 0
     for child in np.random.SeedSequence(seed).spawn(n):
         v = sample(np.random.default_rng(child))
-        res = fit_pseudo_likelihood(system, M_obs, v, eps0, formulation, **fit_options)
+        problem = ReplicatedProblem(system, M_obs, v, **dict(problem_options or {}))
+        res = fit(problem, eps0, formulation=formulation, **fit_options)
         if not res.success or res.eps_ci95 is None:
             failed += 1
             continue

@@ -41,8 +41,10 @@ import numpy as np
 from .._validation import as_dense_rows, as_finite_array, check_choice, check_int, check_positive
 from ..errors import ConvergenceError
 from ..system import march
+from .drivers import check_minimize_method, minimize_scaled
 from .gradients import choose_gradient
 from .optimizers import adam
+from .result import InverseResult, Verdict
 
 FORMULATIONS = ("standard", "ecfm")
 
@@ -285,52 +287,23 @@ class DynamicInverseProblem:
         sigma=None,
         uncertainty=True,
     ):
-        """Minimize one objective with Adam (the paper's optimizer for Section 3.1).
+        """Deprecated: ``fit(problem, eps0, formulation=..., method="adam", ...)``.
 
-        Parameters
-        ----------
-        eps0 : (n_eps,) array_like
-            Start.
-        formulation : {"standard", "ecfm"}
-        lr, epochs, betas, eps_hat, callback
-            See :func:`ecfm_uq.inverse.optimizers.adam`.
-        sigma : float, optional
-            Known noise standard deviation of the data (else estimated from the residual).
-        uncertainty : bool
-            Attach the delta-method uncertainty (:meth:`uncertainty`); it costs
-            ``2 (n_eps + n_steps C)`` gradient evaluations.
-
-        Returns
-        -------
-        InverseResult
-            ``success=False`` with the failing step and residual in ``message`` if a
-            forward solve failed on the way; ``extra`` adds the final trajectory's
-            ``lam`` ``(n_steps + 1, C)`` for ECFM; ``eps_cov``, ``eps_stderr``,
-            ``eps_ci95`` and ``noise_model`` when ``uncertainty`` (or
-            ``uncertainty_message`` saying why not).
+        The v0.2 call shape (Adam, the paper's optimizer for Section 3.1), a thin alias
+        of :func:`~ecfm_uq.inverse.fit`: ``epochs`` is ``maxiter``; ``lr``, ``betas``,
+        ``eps_hat`` and ``callback`` are Adam's ``options``
+        (:func:`ecfm_uq.inverse.optimizers.adam`).
         """
-        if sigma is not None:
-            sigma = check_positive("sigma", sigma)
-        formulation = check_choice("formulation", formulation, FORMULATIONS)
-        eps0 = self.system.check_eps(eps0)
-        res = adam(
-            self.objective(formulation),
-            eps0,
-            lr=lr,
-            epochs=epochs,
-            betas=betas,
-            eps_hat=eps_hat,
-            method=formulation,
-            callback=callback,
+        from .fitting import fit, warn_deprecated
+
+        warn_deprecated(
+            "DynamicInverseProblem.fit", "fit(problem, eps0, formulation=..., method='adam')"
         )
-        if formulation == "ecfm":
-            res.extra["lam"] = self.solve(res.eps, "ecfm").lam
-        if uncertainty and res.success:
-            for key, value in self.uncertainty(res.eps, formulation, sigma).items():
-                setattr(res, key, value)
-        elif uncertainty:
-            res.uncertainty_message = "uncertainty not computed: the fit did not succeed"
-        return res
+        options = {"lr": lr, "betas": betas, "eps_hat": eps_hat, "callback": callback}
+        return fit(
+            self, eps0, formulation=formulation, method="adam", sigma=sigma, maxiter=epochs,
+            options=options, uncertainty=uncertainty,
+        )  # fmt: skip
 
     def uncertainty(self, eps, formulation="ecfm", sigma=None):
         """Delta-method uncertainty of an estimate of ``eps`` from the data ``V``.
@@ -374,3 +347,105 @@ class DynamicInverseProblem:
             return other.objective(formulation)(e)[1]
 
         return estimate_uncertainty(grad, eps, self.V[1:].ravel(), s2, model, dof=dof)
+
+
+#: defaults of the dynamic fits: Adam's epochs (the paper's 250), and the relative gradient
+#: tolerance and iterations of the quasi-Newton methods
+_ADAM_EPOCHS = 250
+_DEFAULT_TOL = 1e-10
+_DEFAULT_MAXITER = 500
+
+
+def fit_dynamic_problem(problem, eps0, s):
+    """:func:`~ecfm_uq.inverse.fit` for a :class:`DynamicInverseProblem`.
+
+    ``method``: ``"adam"`` (the paper's optimizer; ``maxiter`` epochs, ``options`` ``lr``,
+    ``betas``, ``eps_hat``, ``callback``) or a gradient method of
+    ``scipy.optimize.minimize`` on the objective scaled by its value at ``eps0``
+    (``"auto"``: BFGS). The verdict tests the unforced model's trajectory residual (chi2
+    with ``sigma``, the noise-free rule without).
+    """
+    formulation = check_choice("formulation", s.formulation, FORMULATIONS)
+    eps0 = problem.system.check_eps(eps0)
+    method = "BFGS" if s.method == "auto" else s.method
+    if method == "adam":
+        opts = s.take({"lr": 1e-2, "betas": (0.9, 0.999), "eps_hat": 1e-8, "callback": None})
+        res = adam(
+            problem.objective(formulation),
+            eps0,
+            lr=opts["lr"],
+            epochs=_ADAM_EPOCHS if s.maxiter is None else s.maxiter,
+            betas=opts["betas"],
+            eps_hat=opts["eps_hat"],
+            method=formulation,
+            callback=opts["callback"],
+        )
+        traj = None
+    else:
+        check_minimize_method(method)
+
+        def evaluate(eps):
+            z, g, traj = _OBJECTIVE[formulation](problem, eps, gradient=True)
+            return z, g, traj
+
+        out = minimize_scaled(
+            evaluate, eps0, method, s.bounds, _DEFAULT_TOL if s.tol is None else s.tol,
+            _DEFAULT_MAXITER if s.maxiter is None else s.maxiter, s.options,
+        )  # fmt: skip
+        res = InverseResult(
+            eps=out.x, loss=out.loss, status=out.status, message=out.message, nit=out.nit,
+            nfev=out.nfev, njev=out.nfev, method=formulation, optimizer=method,
+            eps_history=out.eps_history, loss_history=out.loss_history,
+        )  # fmt: skip
+        traj = out.payload
+    if traj is None and method != "adam":  # stopped where the model cannot be marched
+        res.verdict = Verdict(False, test="none", message=f"NOT consistent: {res.message}")
+        return res
+    if formulation == "ecfm":
+        traj = traj if traj is not None else problem.solve(res.eps, "ecfm")
+        res.extra["lam"] = traj.lam
+    if s.uncertainty and res.success:
+        for key, value in problem.uncertainty(res.eps, formulation, s.sigma).items():
+            setattr(res, key, value)
+    elif s.uncertainty:
+        res.uncertainty_message = "uncertainty not computed: the fit did not succeed"
+    else:
+        res.uncertainty_message = "not computed (uncertainty=False)"
+    res.verdict = _verdict(problem, res, s, traj if formulation == "standard" else None)
+    return res
+
+
+_OBJECTIVE = {
+    "standard": DynamicInverseProblem.standard_objective,
+    "ecfm": DynamicInverseProblem.ecfm_objective,
+}
+
+
+def _verdict(problem, res, s, traj=None):
+    """Whether the unforced model's trajectory at the estimate explains the data
+    (``traj``: that trajectory if the caller has it)."""
+    from .verdict import EXTREME_DECADES, _at_bound, _extreme, decide, residual_verdict
+
+    at_bound = _at_bound(res.eps, s.bounds)
+    extreme = _extreme(problem.system, res.eps, EXTREME_DECADES)
+    saved = dict(problem._last)  # the check must not move the optimizer's warm starts
+    try:
+        traj = problem.solve(res.eps, "standard") if traj is None else traj
+    except ConvergenceError as e:
+        return decide(
+            "chi2" if s.sigma is not None else "force-to-data (noise-free)",
+            None if s.sigma is None else 0.0, s.alpha,
+            [f"the unforced model cannot be marched at the estimate: {e}"],
+            explained=False, at_bound=at_bound, extreme=extreme,
+        )  # fmt: skip
+    finally:
+        problem._last = saved
+    e = problem.predictions(traj)[1:] - problem.V[1:]
+    details = {}
+    if "lam" in res.extra:
+        lam = res.extra["lam"][1:]
+        details["peak_force_index"] = int(np.argmax(np.abs(lam).max(axis=0)))
+    return residual_verdict(
+        e, problem.V[1:], s.sigma, s.alpha, problem.system.n_eps, at_bound=at_bound,
+        extreme=extreme, details=details,
+    )  # fmt: skip

@@ -43,7 +43,7 @@ import time
 import numpy as np
 import scipy.optimize as sopt
 
-from .._validation import as_dense_rows, as_finite_array, check_int, check_positive
+from .._validation import as_dense_rows, as_finite_array, check_positive
 from ..system import solve_steady
 from .noise import noise_bounds, sample_moments
 from .result import InverseResult
@@ -252,12 +252,11 @@ def _start(problem, eps0, theta0, lam0, solve_options):
     return problem.stack(theta0, eps0, lam0), note
 
 
-def _check_options(gradients, maxiter, ftol):
+def _check_v02_names(gradients, ftol):
+    """The deprecated aliases' own argument names, checked under those names."""
     if gradients not in _GRADIENTS:
         raise ValueError(f"unknown `gradients` {gradients!r}; choose 'analytic' or 'fd'")
-    maxiter = check_int("maxiter", maxiter, minimum=1)
-    ftol = check_positive("ftol", ftol)
-    return maxiter, ftol
+    check_positive("ftol", ftol)
 
 
 def _solve(problem, z0, note, gradients, maxiter, ftol, method_name):
@@ -320,6 +319,73 @@ def _solve(problem, z0, note, gradients, maxiter, ftol, method_name):
     )
 
 
+#: defaults of the all-at-once SLSQP fits: ``tol`` is SLSQP's ``ftol`` (its precision
+#: goal on the objective, also its feasibility tolerance)
+_DEFAULT_TOL = 1e-12
+_DEFAULT_MAXITER = 500
+
+
+def fit_all_at_once(problem, eps0, s):
+    """:func:`~ecfm_uq.inverse.fit` of a steady problem in stacked variables with SLSQP.
+
+    ``formulation="standard"`` with ``method="all-at-once"`` is Eq. (kpp_inv);
+    ``formulation="noisy-ecfm"`` (``sigma`` required, bounds at level ``alpha``) is Eq.
+    (ecfm_noise). ``options``: ``theta0`` (N,) and ``lam0`` (C,) starts (default: the
+    Newton solution at ``eps0``, zero forces), ``jac`` (``"analytic"``, or ``"fd"`` to let
+    SLSQP difference objective and constraints: benchmarks only).
+    """
+    if s.formulation not in ("standard", "noisy-ecfm"):
+        raise ValueError(
+            f"method='all-at-once' solves formulation 'standard' or 'noisy-ecfm', not "
+            f"{s.formulation!r}"
+        )
+    if s.method not in ("auto", "all-at-once"):
+        raise ValueError(
+            f"formulation='noisy-ecfm' is solved all at once by SLSQP: pass method='auto' "
+            f"or 'all-at-once', not {s.method!r}"
+        )
+    known = {"theta0": None, "jac": "analytic"}
+    if s.formulation == "noisy-ecfm":
+        known["lam0"] = None
+        if s.sigma is None:
+            raise ValueError("formulation='noisy-ecfm' needs the noise level `sigma`")
+    opts = s.take(known)
+    if opts["jac"] not in _GRADIENTS:
+        raise ValueError(f"unknown `options['jac']` {opts['jac']!r}; choose 'analytic' or 'fd'")
+    tol = _DEFAULT_TOL if s.tol is None else s.tol
+    maxiter = _DEFAULT_MAXITER if s.maxiter is None else s.maxiter
+    system = problem.system
+    if s.formulation == "standard":
+        inverse = ConstrainedInverse(system, problem.M_obs, problem.v, "standard")
+        label = "standard-slsqp"
+    else:
+        inverse = ConstrainedInverse(
+            system, problem.M_obs, problem.v, "noisy-ecfm", sigma=s.sigma, alpha=s.alpha
+        )
+        label = "noisy-ecfm"
+    z0, note = _start(inverse, eps0, opts["theta0"], opts.get("lam0"), problem.solve_options)
+    res = _solve(inverse, z0, note, opts["jac"], maxiter, tol, label)
+    if not res.success:
+        res.uncertainty_message = "uncertainty not computed: the fit did not succeed"
+    elif not s.uncertainty:
+        res.uncertainty_message = "not computed (uncertainty=False)"
+    elif s.formulation == "standard":
+        # the all-at-once optimum is the reduced one: same optimality condition
+        # grad z^INV(eps) = 0, hence the same covariance code path as the reduced fit
+        from .steady import _uncertainty, standard_objective
+
+        for k, val in _uncertainty(
+            system, inverse.M_obs, inverse.v, res.eps, standard_objective,
+            dict(problem.solve_options), s.sigma,
+        ).items():  # fmt: skip
+            setattr(res, k, val)
+    else:
+        for k, val in _kkt_uncertainty(inverse, res.extra["z"], s.sigma).items():
+            setattr(res, k, val)
+    _attach_verdict(res, inverse, s.sigma, s.alpha)
+    return res
+
+
 def fit_standard_slsqp(
     system,
     M_obs,
@@ -333,69 +399,34 @@ def fit_standard_slsqp(
     solve_options=None,
     sigma=None,
 ):
-    """Standard inverse problem, Eq. (kpp_inv), all at once with SLSQP.
+    """Deprecated: ``fit(SteadyProblem(system, M_obs, v), eps0, method="all-at-once")``.
+
+    Standard inverse problem, Eq. (kpp_inv), all at once with SLSQP:
 
     .. math::
 
         \\min_{\\theta, \\epsilon} \\tfrac12\\|\\mathcal M\\theta - v\\|^2
         \\quad\\text{s.t.}\\quad R(\\theta;\\epsilon) = 0
 
-    Parameters
-    ----------
-    system : GalerkinSystem
-        Steady, deterministic (P = 1).
-    M_obs : (C, N) array_like
-    v : (C,) array_like
-    eps0 : (n_eps,) array_like, optional
-        Starting parameters (default 0).
-    theta0 : (N,) array_like, optional
-        Starting state (default: Newton solution of :math:`R(\\theta;\\epsilon_0) = 0`).
-    gradients : {"analytic", "fd"}
-        ``"fd"`` lets SLSQP difference objective and constraints (benchmarks only).
-    maxiter : int
-        SLSQP iterations.
-    ftol : float
-        SLSQP's precision goal on the objective (also its feasibility tolerance).
-    solve_options : dict, optional
-        Passed to :func:`~ecfm_uq.system.solve_steady` for the starting state.
-    sigma : float, optional
-        Known noise standard deviation, for ``eps_cov`` (otherwise estimated from the
-        residual) and the consistency verdict ``extra["verdict"]``.
-
-    Returns
-    -------
-    InverseResult
-        With ``eps_cov``, ``eps_stderr``, ``eps_ci95`` from the implicit derivative of
-        :math:`\\nabla z^{INV}(\\epsilon) = 0` (the same path as
-        :func:`~ecfm_uq.inverse.fit_steady`). ``method="standard-slsqp"``; ``success``, ``message``, ``nit`` are SLSQP's.
-        ``extra``: ``theta``, ``discrepancy``, ``mean_discrepancy``, ``var_discrepancy``,
-        ``residual_norm`` (:math:`\\|R\\|_2` at the end), ``nfev``, ``njev``, ``start``.
+    ``ftol`` is ``tol``; ``theta0`` and ``gradients`` (``"analytic"``/``"fd"``) are the
+    ``options`` ``theta0`` and ``jac``; ``eps0`` defaults to zero. Returns
+    ``method="standard-slsqp"`` with ``extra``: ``theta``, ``discrepancy``,
+    ``mean_discrepancy``, ``var_discrepancy``, ``residual_norm`` (:math:`\\|R\\|_2` at the
+    end), ``nfev``, ``njev``, ``start``.
     """
-    maxiter, ftol = _check_options(gradients, maxiter, ftol)
-    if sigma is not None:
-        sigma = check_positive("sigma", sigma)
-    problem = ConstrainedInverse(system, M_obs, v, "standard")
-    z0, note = _start(problem, eps0, theta0, None, solve_options)
-    res = _solve(problem, z0, note, gradients, maxiter, ftol, "standard-slsqp")
-    if res.success:
-        # the all-at-once optimum is the reduced one: same optimality condition
-        # grad z^INV(eps) = 0, hence the same covariance code path as fit_steady
-        from .steady import _uncertainty, standard_objective
+    from .fitting import fit, warn_deprecated
+    from .problems import SteadyProblem
 
-        for k, val in _uncertainty(
-            system,
-            problem.M_obs,
-            problem.v,
-            res.eps,
-            standard_objective,
-            dict(solve_options or {}),
-            sigma,
-        ).items():
-            setattr(res, k, val)
-    else:
-        res.uncertainty_message = "uncertainty not computed: the fit did not succeed"
-    _attach_verdict(res, problem, sigma)
-    return res
+    warn_deprecated(
+        "fit_standard_slsqp", "fit(SteadyProblem(system, M_obs, v), eps0, method='all-at-once')"
+    )
+    _check_v02_names(gradients, ftol)
+    problem = SteadyProblem(system, M_obs, v, **dict(solve_options or {}))
+    eps0 = np.zeros(system.n_eps) if eps0 is None else eps0
+    return fit(
+        problem, eps0, formulation="standard", method="all-at-once", sigma=sigma, tol=ftol,
+        maxiter=maxiter, options={"theta0": theta0, "jac": gradients},
+    )  # fmt: skip
 
 
 def fit_noisy_ecfm(
@@ -413,7 +444,10 @@ def fit_noisy_ecfm(
     ftol=1e-12,
     solve_options=None,
 ):
-    """Noise-aware ECFM, Eq. (ecfm_noise), all at once with SLSQP.
+    """Deprecated: ``fit(SteadyProblem(system, M_obs, v), eps0, formulation="noisy-ecfm",
+    sigma=sigma, alpha=alpha)``.
+
+    Noise-aware ECFM, Eq. (ecfm_noise), all at once with SLSQP:
 
     .. math::
 
@@ -421,65 +455,44 @@ def fit_noisy_ecfm(
         R(\\theta;\\epsilon) - \\Gamma\\lambda = 0,\\ \\ell_1 \\le \\bar e \\le \\ell_2,\\
         p_1 \\le s^2_e \\le p_2
 
-    Parameters
-    ----------
-    system : GalerkinSystem
-        Steady, deterministic, with ``Gamma`` of shape (N, C).
-    M_obs : (C, N) array_like
-    v : (C,) array_like
-    sigma : float
-        Known noise standard deviation.
-    alpha : float
-        Significance level of the bounds (0.05: 95 % intervals).
-    eps0, theta0, lam0 : array_like, optional
-        Start (defaults: :math:`\\epsilon_0 = 0`, :math:`\\lambda_0 = 0`, :math:`\\theta_0`
-        the Newton solution at :math:`(\\epsilon_0, \\lambda_0)`).
-    gradients, maxiter, ftol, solve_options
-        As in :func:`fit_standard_slsqp`.
-
-    Returns
-    -------
-    InverseResult
-        With ``eps_cov``, ``eps_stderr``, ``eps_ci95`` from the implicit derivative of the
-        KKT conditions in the data (the active moment bounds; if none is active the data
-        do not determine eps and ``uncertainty_message`` says so), and
-        ``extra["verdict"]`` (z / chi-squared bounds of the discrepancy).
-        ``method="noisy-ecfm"``; ``extra`` as in :func:`fit_standard_slsqp` plus ``lam``
-        (C,), ``inequality`` (the four scaled constraint values, >= 0 when feasible) and
-        ``bounds``.
+    ``alpha`` is the level of the bounds and of the verdict's test; ``eps0`` defaults to
+    zero; ``theta0``, ``lam0``, ``gradients`` are the ``options`` ``theta0``, ``lam0``,
+    ``jac``. Returns ``method="noisy-ecfm"`` with ``extra`` as
+    :func:`fit_standard_slsqp` plus ``lam`` (C,), ``inequality`` (the four scaled
+    constraint values, >= 0 when feasible) and ``bounds``.
     """
-    maxiter, ftol = _check_options(gradients, maxiter, ftol)
+    from .fitting import fit, warn_deprecated
+    from .problems import SteadyProblem
+
+    warn_deprecated(
+        "fit_noisy_ecfm",
+        "fit(SteadyProblem(system, M_obs, v), eps0, formulation='noisy-ecfm', sigma=...)",
+    )
     if isinstance(sigma, bool) or not isinstance(sigma, numbers.Real):
         raise TypeError(f"`sigma` must be a positive real number, got {sigma!r}")
-    problem = ConstrainedInverse(system, M_obs, v, "noisy-ecfm", sigma=sigma, alpha=alpha)
-    z0, note = _start(problem, eps0, theta0, lam0, solve_options)
-    res = _solve(problem, z0, note, gradients, maxiter, ftol, "noisy-ecfm")
-    if res.success:
-        for k, val in _kkt_uncertainty(problem, res.extra["z"], sigma).items():
-            setattr(res, k, val)
-    else:
-        res.uncertainty_message = "uncertainty not computed: the fit did not succeed"
-    _attach_verdict(res, problem, sigma)
-    return res
+    _check_v02_names(gradients, ftol)
+    problem = SteadyProblem(system, M_obs, v, **dict(solve_options or {}))
+    eps0 = np.zeros(system.n_eps) if eps0 is None else eps0
+    return fit(
+        problem, eps0, formulation="noisy-ecfm", sigma=sigma, alpha=alpha, tol=ftol,
+        maxiter=maxiter, options={"theta0": theta0, "lam0": lam0, "jac": gradients},
+    )  # fmt: skip
 
 
 #: a scaled moment inequality within this of zero is active at the optimum
 ACTIVE_TOL = 1e-6
 
 
-def _attach_verdict(res, problem, sigma):
-    """chi-squared / z verdict of the discrepancy when the noise is modelled."""
+def _attach_verdict(res, problem, sigma, alpha):
+    """The paper's z / chi-squared test of the discrepancy (Eq. ecfm_noise) when the noise
+    is modelled, as the fit's :class:`~.result.Verdict`."""
     if sigma is None:
         return
     from .noise import consistency_test
+    from .verdict import moments_bounds_verdict
 
-    test = consistency_test(res.extra["discrepancy"], sigma)
-    res.extra["verdict"] = {
-        "consistent": bool(test.consistent),
-        "message": ("model and data are consistent" if test.consistent else "NOT consistent")
-        + f": discrepancy mean {test.mean:.3g}, variance {test.var:.3g} against the "
-        f"{100 * (1 - test.bounds['alpha']):g} % bounds for sigma = {sigma:g}",
-    }
+    test = consistency_test(res.extra["discrepancy"], sigma, alpha)
+    res.verdict = moments_bounds_verdict(test, sigma, alpha)
 
 
 def _kkt_uncertainty(problem, z, sigma):

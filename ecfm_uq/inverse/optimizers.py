@@ -24,6 +24,7 @@ import numpy as np
 from .._validation import as_finite_array, check_int, check_positive
 from ..errors import ConvergenceError
 from .result import InverseResult
+from .status import FitStatus
 
 
 def adam(
@@ -125,9 +126,12 @@ def adam(
     return InverseResult(
         eps=xs[-1],
         loss=fs[-1],
-        success=success,
+        status=FitStatus.CONVERGED if success else FitStatus.MODEL_FAILURE,
         message=message,
         nit=len(xs) - 1,
+        nfev=len(xs) + (not success),
+        njev=len(xs) + (not success),
+        optimizer="adam",
         method=method,
         eps_history=np.array(xs),
         loss_history=np.array(fs),

@@ -1,67 +1,328 @@
-"""The common result of every inverse formulation."""
+"""The one result of every inverse fit, with its uncertainty and its verdict.
+
+In the manner of :class:`scipy.optimize.OptimizeResult` (and of pyPESTO, where profiles
+and samples are computed *from* a result and stored beside it), every formulation —
+standard, ECFM, noisy, pseudo-likelihood, steady or dynamic — returns an
+:class:`InverseResult` with the same fields:
+
+* how the optimizer ended: ``success``, ``status`` (:class:`~.status.FitStatus`, decided
+  from the optimality conditions at the returned point), ``message``, ``nit``, ``nfev``,
+  ``njev``, ``optimality``;
+* the estimate: ``eps``, ``loss``, histories, formulation-specific arrays in ``extra``;
+* ``uncertainty``: an :class:`Uncertainty` (covariance, standard errors, intervals, how
+  they were computed, or why not);
+* ``verdict``: a :class:`Verdict`, the answer to "can this model explain these data?"
+  as a test of stated size.
+
+The v0.2 spellings (``eps_cov``, ``eps_stderr``, ``eps_ci95``, ``noise_model``,
+``uncertainty_message``, ``eps_jacobian``, ``extra["verdict"][...]``) still read (and
+write) the same information.
+"""
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from .status import FitStatus
 
-@dataclass
+__all__ = ["InverseResult", "Uncertainty", "Verdict"]
+
+
+@dataclass(frozen=True)
+class Uncertainty:
+    """How sure an estimate is: covariance, standard errors and intervals, or why not.
+
+    Attributes
+    ----------
+    success : bool
+        Whether the uncertainty could be computed (``False``: see ``message``).
+    message : str
+        Why not, or how (e.g. the non-identifiable parameter combination).
+    cov : (n_eps, n_eps) ndarray or None
+    stderr : (n_eps,) ndarray or None
+    intervals : (n_eps, 2) ndarray or None
+        Two-sided intervals at ``level`` (normal, or Student-t with ``dof``).
+    level : float
+        Coverage the intervals are built for (0.95).
+    method : str
+        ``"implicit"`` (delta method by implicit differentiation of the optimality
+        condition: the full-Hessian sandwich for least squares), ``"gauss-newton"``
+        (:math:`s^2(J^TJ)^{-1}`), ``"replicates"`` (sandwich from replicated data) or
+        ``""`` when not computed.
+    noise_model : str
+        ``"known"`` (sigma given), ``"estimated"`` (from the residual), ``"replicates"``
+        or ``"none"``.
+    dof : int or None
+        Degrees of freedom of Student-t intervals (sigma estimated), else ``None``.
+    jacobian : (n_eps, n_data) ndarray or None
+        :math:`d\\hat\\epsilon/dv`, the estimate's derivative in the data it was fitted to.
+    """
+
+    success: bool
+    message: str = ""
+    cov: np.ndarray | None = None
+    stderr: np.ndarray | None = None
+    intervals: np.ndarray | None = None
+    level: float = 0.95
+    method: str = ""
+    noise_model: str = "none"
+    dof: int | None = None
+    jacobian: np.ndarray | None = None
+
+    @classmethod
+    def failed(cls, message):
+        """No uncertainty, and why."""
+        return cls(False, str(message))
+
+
+_UNCERTAINTY_ALIASES = {
+    "eps_cov": "cov",
+    "eps_stderr": "stderr",
+    "eps_ci95": "intervals",
+    "noise_model": "noise_model",
+    "eps_jacobian": "jacobian",
+}
+
+
+@dataclass(frozen=True)
+class Verdict(Mapping):
+    """Whether the fitted model explains the data: a test of stated size, one rule for all.
+
+    ``consistent`` is ``p_value >= alpha`` (the data are compatible with the model plus
+    its noise at level ``alpha``), and no parameter ran to a bound or to an extreme value.
+    For noise-free data (no noise model) there is no test of stated size: ``p_value`` and
+    ``alpha`` are ``None`` and the rule is that the constraint forces change the
+    observations by at most ``rtol`` of the data (``details["force_to_data"]``).
+
+    Attributes
+    ----------
+    consistent : bool
+    p_value : float or None
+    alpha : float or None
+        The test's size (default 0.05).
+    test : str
+        Which test: e.g. ``"chi2"``, ``"likelihood-ratio tau=0"``, ``"moments z
+        (Bonferroni)"``, ``"force-to-data"``.
+    statistic : float or None
+    message : str
+        One sentence.
+    details : dict
+        Test-specific numbers (``chi2``, ``force_to_data``, ``peak_sensor_index``,
+        ``peak_force_index``, ``at_bound``, ``extreme``, ...).
+
+    Notes
+    -----
+    Reads as a mapping too (``verdict["consistent"]``, ``verdict["force_to_data"]``), the
+    v0.2 dict form.
+    """
+
+    consistent: bool
+    p_value: float | None = None
+    alpha: float | None = None
+    test: str = ""
+    statistic: float | None = None
+    message: str = ""
+    details: dict = field(default_factory=dict)
+
+    def _view(self):
+        out = {
+            "consistent": self.consistent,
+            "message": self.message,
+            "p_value": self.p_value,
+            "alpha": self.alpha,
+            "test": self.test,
+            "statistic": self.statistic,
+        }
+        out.update(self.details)
+        return out
+
+    def __getitem__(self, key):
+        return self._view()[key]
+
+    def __iter__(self):
+        return iter(self._view())
+
+    def __len__(self):
+        return len(self._view())
+
+    def __eq__(self, other):
+        if isinstance(other, Verdict):
+            return dataclasses.astuple(self) == dataclasses.astuple(other)
+        return NotImplemented
+
+    __hash__ = None
+
+
 class InverseResult:
-    """Outcome of an inverse solve.
+    """Outcome of an inverse fit (every formulation, every optimizer).
 
     Attributes
     ----------
     eps : (n_eps,) ndarray
-        Final model parameters.
+        The estimate (the optimizer's final point).
     loss : float
         Objective at ``eps``.
     success : bool
-        Whether the optimizer (and every inner solve) reported success.
+        ``status == FitStatus.CONVERGED``: the optimality conditions hold at ``eps``.
+    status : FitStatus
     message : str
     nit : int
         Optimizer iterations (epochs for Adam).
+    nfev, njev : int
+        Objective and gradient (or Jacobian) evaluations.
+    optimality : float or None
+        The measured first-order optimality at ``eps`` (unit-free; see
+        :mod:`ecfm_uq.inverse.convergence`), when measured.
     method : str
-        ``"standard"``, ``"ecfm"``, ``"noisy-ecfm"``, ...
+        Label of the formulation that ran (``"standard"``, ``"ecfm"``, ``"noisy-ecfm"``,
+        ``"likelihood-inner-outer"``, ...).
+    optimizer : str
+        The optimizer that ran (``"BFGS"``, ``"adam"``, ``"SLSQP"``, ...).
     eps_history : (nit + 1, n_eps) ndarray
     loss_history : (nit + 1,) ndarray
     extra : dict
-        Formulation-specific outputs (state, forces, diagnostics).
-    eps_cov : (n_eps, n_eps) ndarray or None
-        Delta-method covariance of ``eps`` (:mod:`ecfm_uq.inverse.uncertainty`);
-        None where not computed (see ``uncertainty_message``).
-    eps_stderr : (n_eps,) ndarray or None
-    eps_ci95 : (n_eps, 2) ndarray or None
-    noise_model : str
-        ``"known"`` (sigma given), ``"estimated"`` (s^2 = ||r||^2/(C - n_eps)),
-        ``"replicates"`` (sample covariance of replicated data) or ``"none"``.
-    uncertainty_message : str
-        Why the uncertainty fields are None, if they are.
-    eps_jacobian : (n_eps, n_data) ndarray or None
-        :math:`d\\hat\\epsilon/dv`, the implicit derivative of the estimate in the data it
-        was computed from (for :func:`~ecfm_uq.inverse.fit_pseudo_likelihood` the replicate
-        statistics of :func:`~ecfm_uq.inverse.likelihood.replicate_statistics`).
+        Formulation-specific outputs (state, forces, diagnostics); ``extra["verdict"]``
+        is :attr:`verdict`.
+    uncertainty : Uncertainty
+    verdict : Verdict or None
+
+    Notes
+    -----
+    The v0.2 names ``eps_cov``, ``eps_stderr``, ``eps_ci95``, ``noise_model``,
+    ``eps_jacobian`` and ``uncertainty_message`` read and write :attr:`uncertainty`.
     """
 
-    eps: np.ndarray
-    loss: float
-    success: bool
-    message: str
-    nit: int
-    method: str
-    eps_history: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
-    loss_history: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    extra: dict = field(default_factory=dict)
-    eps_cov: np.ndarray | None = None
-    eps_stderr: np.ndarray | None = None
-    eps_ci95: np.ndarray | None = None
-    noise_model: str = "none"
-    uncertainty_message: str = ""
-    eps_jacobian: np.ndarray | None = None
+    def __init__(
+        self,
+        eps,
+        loss,
+        success=None,
+        message="",
+        nit=0,
+        method="",
+        eps_history=None,
+        loss_history=None,
+        extra=None,
+        *,
+        status=None,
+        nfev=0,
+        njev=0,
+        optimality=None,
+        optimizer="",
+        uncertainty=None,
+        verdict=None,
+        eps_cov=None,
+        eps_stderr=None,
+        eps_ci95=None,
+        noise_model="none",
+        uncertainty_message="",
+        eps_jacobian=None,
+    ):
+        self.eps = np.asarray(eps, dtype=float)
+        self.loss = float(loss)
+        if status is None:
+            status = FitStatus.CONVERGED if success else FitStatus.STALLED
+        self.status = FitStatus(status)
+        if success is not None and bool(success) != self.status.success:
+            raise ValueError(f"`success`={success} contradicts `status`={self.status.name}")
+        self.message = str(message)
+        self.nit = int(nit)
+        self.nfev, self.njev = int(nfev), int(njev)
+        self.optimality = None if optimality is None else float(optimality)
+        self.method = method
+        self.optimizer = optimizer
+        self.eps_history = np.zeros((0, 0)) if eps_history is None else np.asarray(eps_history)
+        self.loss_history = np.zeros(0) if loss_history is None else np.asarray(loss_history)
+        self.extra = {} if extra is None else dict(extra)
+        if uncertainty is None:
+            computed = eps_cov is not None
+            uncertainty = Uncertainty(
+                computed,
+                uncertainty_message,
+                eps_cov,
+                eps_stderr,
+                eps_ci95,
+                noise_model=noise_model,
+                jacobian=eps_jacobian,
+                method="implicit" if computed else "",
+            )
+        self.uncertainty = uncertainty
+        if verdict is None and "verdict" in self.extra:
+            verdict = self.extra["verdict"]
+        self.verdict = verdict
+
+    # -- status ---------------------------------------------------------------------------
+    @property
+    def success(self):
+        """Whether the fit converged (``status == FitStatus.CONVERGED``)."""
+        return self.status.success
+
+    @success.setter
+    def success(self, value):
+        if bool(value):
+            self.status = FitStatus.CONVERGED
+        elif self.status.success:
+            self.status = FitStatus.STALLED
+
+    # -- verdict (also extra["verdict"]) --------------------------------------------------
+    @property
+    def verdict(self):
+        """The :class:`Verdict` (``None`` when the formulation has no noise model yet)."""
+        return self._verdict
+
+    @verdict.setter
+    def verdict(self, value):
+        if isinstance(value, Mapping) and not isinstance(value, Verdict):
+            value = _verdict_from_dict(value)
+        self._verdict = value
+        if value is None:
+            self.extra.pop("verdict", None)
+        else:
+            self.extra["verdict"] = value
+
+    # -- v0.2 names of the uncertainty ----------------------------------------------------
+    @property
+    def uncertainty_message(self):
+        """Why the uncertainty is missing (empty when it was computed)."""
+        return self.uncertainty.message
+
+    @uncertainty_message.setter
+    def uncertainty_message(self, value):
+        self.uncertainty = dataclasses.replace(self.uncertainty, message=str(value))
 
     def __repr__(self):
         return (
             f"InverseResult(method={self.method!r}, eps={np.array2string(self.eps, precision=6)}, "
-            f"loss={self.loss:.3e}, success={self.success}, nit={self.nit}, message={self.message!r})"
+            f"loss={self.loss:.3e}, success={self.success}, status={self.status.name}, "
+            f"nit={self.nit}, message={self.message!r})"
         )
+
+
+def _alias_property(old, new):
+    def get(self):
+        return getattr(self.uncertainty, new)
+
+    def set_(self, value):
+        changes = {new: value}
+        if new == "cov":
+            changes["success"] = value is not None
+        self.uncertainty = dataclasses.replace(self.uncertainty, **changes)
+
+    return property(get, set_, doc=f"v0.2 name of ``uncertainty.{new}``.")
+
+
+for _old, _new in _UNCERTAINTY_ALIASES.items():
+    setattr(InverseResult, _old, _alias_property(_old, _new))
+
+
+def _verdict_from_dict(d):
+    """A :class:`Verdict` from the v0.2 dict form (``consistent``, ``message``, details)."""
+    d = dict(d)
+    keys = ("consistent", "p_value", "alpha", "test", "statistic", "message")
+    fields = {k: d.pop(k) for k in keys if k in d}
+    fields.setdefault("consistent", False)
+    return Verdict(**fields, details=d)

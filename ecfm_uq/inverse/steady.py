@@ -16,14 +16,14 @@ sensitivities:
 from __future__ import annotations
 
 import numpy as np
-import scipy.optimize as sopt
 
-from .._validation import as_finite_array, as_operator, check_int, check_positive
+from .._validation import as_finite_array, as_operator
 from ..errors import ConvergenceError
 from ..system import solve_steady
+from .drivers import check_minimize_method, minimize_scaled
 from .gradients import choose_gradient
-from .result import InverseResult
-from .verdict import check_bounds, consistency_verdict
+from .result import InverseResult, Verdict
+from .verdict import consistency_verdict
 
 
 def _data(system, M_obs, v):
@@ -81,6 +81,88 @@ def ecfm_objective(system, M_obs, v, eps, gradient="auto", **solve_kw):
 
 
 _OBJECTIVES = {"standard": standard_objective, "ecfm": ecfm_objective}
+#: the reduced formulations' defaults (tol is the relative gradient tolerance: the
+#: optimizer sees the objective divided by its value at eps0, so it has no data units)
+_DEFAULT_TOL = 1e-10
+_DEFAULT_MAXITER = 500
+
+
+def fit_steady_problem(problem, eps0, s):
+    """:func:`~ecfm_uq.inverse.fit` for a :class:`~.problems.SteadyProblem` (validated
+    settings ``s``, a :class:`~.fitting.FitSettings`)."""
+    system = problem.system
+    if s.formulation == "noisy-ecfm" or s.method == "all-at-once":
+        from .noisy import fit_all_at_once
+
+        return fit_all_at_once(problem, eps0, s)
+    if s.formulation not in _OBJECTIVES:
+        raise ValueError(
+            f"unknown `formulation` {s.formulation!r}; choose 'standard', 'ecfm' or 'noisy-ecfm'"
+        )
+    if s.formulation == "ecfm" and system.Gamma is None:
+        raise ValueError("formulation='ecfm' needs a system with constraint forces (Gamma)")
+    M_obs, v = problem.M_obs, problem.v
+    eps0 = system.check_eps(eps0)
+    method = "BFGS" if s.method == "auto" else s.method
+    check_minimize_method(method)
+    gtol = _DEFAULT_TOL if s.tol is None else s.tol
+    maxiter = _DEFAULT_MAXITER if s.maxiter is None else s.maxiter
+    bounds, sigma = s.bounds, s.sigma
+    if v.size < system.n_eps:
+        raise ValueError(
+            f"`v` has {v.size} measurements for {system.n_eps} parameters: fewer sensors "
+            "than parameters cannot determine eps; add sensors (rows of `M_obs`) or fix "
+            "parameters"
+        )
+    objective = _OBJECTIVES[s.formulation]
+    solve_kw = {**problem.solve_options, "gradient": problem.gradient}
+
+    def evaluate(eps):
+        return objective(system, M_obs, v, eps, **solve_kw)
+
+    try:
+        out = minimize_scaled(evaluate, eps0, method, bounds, gtol, maxiter, s.options)
+    except ConvergenceError as e:
+        raise ConvergenceError(f"fit_steady: {e}") from e
+    if out.payload is None:  # the optimizer stopped where the model fails
+        return InverseResult(
+            eps=out.x, loss=np.inf, message=out.message, nit=out.nit, nfev=out.nfev,
+            status=out.status, method=s.formulation, optimizer=method,
+            eps_history=out.eps_history, loss_history=out.loss_history,
+            verdict=Verdict(False, test="none", message=f"NOT consistent: {out.final_error}"),
+        )  # fmt: skip
+    res, z, sol, msg = out, out.loss, out.payload, out.message
+    # the unforced solve at the estimate, shared by the verdict and the residual sigma
+    free = (
+        sol if s.formulation == "standard" else solve_steady(system, res.x, **problem.solve_options)
+    )
+    if s.uncertainty:
+        unc = _uncertainty(system, M_obs, v, np.asarray(res.x), objective, solve_kw, sigma, free)
+    else:
+        unc = {"uncertainty_message": "not computed (uncertainty=False)"}
+    lam = sol.lam if s.formulation == "ecfm" else np.zeros(0)
+    verdict = consistency_verdict(
+        system, M_obs, v, res.x, lam, bounds, sigma=sigma, alpha=s.alpha,
+        n_fitted=system.n_eps, solution=free,
+    )  # fmt: skip
+    if not verdict.consistent:
+        msg += f" [{verdict.message}]"
+    return InverseResult(
+        **unc,
+        eps=np.asarray(res.x),
+        loss=z,
+        status=out.status,
+        message=msg,
+        nit=out.nit,
+        nfev=out.nfev,
+        njev=out.nfev,
+        method=s.formulation,
+        optimizer=method,
+        eps_history=out.eps_history,
+        loss_history=out.loss_history,
+        extra={"Theta": sol.Theta, "lam": lam},
+        verdict=verdict,
+    )
 
 
 def fit_steady(
@@ -99,194 +181,24 @@ def fit_steady(
     gradient="auto",
     sigma=None,
 ):
-    """Fit :math:`\\epsilon` of a steady system to data by the standard or ECFM formulation.
+    """Deprecated: ``fit(SteadyProblem(system, M_obs, v, ...), eps0, formulation=...)``.
 
-    Parameters
-    ----------
-    system : GalerkinSystem
-        With ``Gamma`` for ``formulation="ecfm"``.
-    M_obs : (C, N) array_like or scipy.sparse matrix
-    v : (C,) array_like
-    eps0 : (n_eps,) array_like
-        Starting point.
-    formulation : {"standard", "ecfm"}
-    method : str
-        A gradient-based ``scipy.optimize.minimize`` method (BFGS, L-BFGS-B, ...).
-    gtol : float
-        Gradient tolerance, relative: the optimizer sees the objective divided by its
-        value at ``eps0`` (so the tolerance does not depend on the data's units).
-    maxiter : int
-    bounds : sequence of (lo, hi), optional
-        For bounded methods; keeps trial parameters physical (e.g. a positive length).
-    solve_options : dict, optional
-        Passed to :func:`solve_steady` (``tol``, ``maxiter``, ``solver``).
-    options : dict, optional
-        Extra ``scipy.optimize.minimize`` options (override the defaults above).
-    gradient : {"auto", "forward", "adjoint"}
-        Forward sensitivities or one adjoint solve per evaluation
-        (:func:`~ecfm_uq.inverse.gradients.choose_gradient`).
-    sigma : float, optional
-        Known sensor noise standard deviation. Without it the noise variance is
-        estimated from the standard residual at the estimate,
-        s^2 = ||r||^2 / (C - n_eps) (``noise_model="estimated"``).
-
-    Returns
-    -------
-    InverseResult
-        ``extra`` holds ``Theta`` and ``lam`` at the optimum (``lam`` is the ECFM
-        constraint force, zero-length for the standard formulation) and ``verdict``, the
-        :func:`~ecfm_uq.inverse.verdict.consistency_verdict` of the fit (whether model
-        and data agree, where the forces peak, parameters at a bound or extreme); its
-        message is appended to ``message`` when the fit is not consistent. Inner solves
-        that fail (including a coefficient that overflows at a trial ``eps``) count as
-        ``z = inf`` and are reported in ``message``; no numpy/Python arithmetic error
-        escapes.
-
-    Raises
-    ------
-    ValueError, TypeError
-        For malformed data, ``eps0``, ``method``, ``gtol``, ``maxiter``, ``bounds`` or
-        ``sigma`` (<= 0), or fewer measurements than parameters; all before any solve.
-        A singular information matrix (a parameter combination the data do not
-        determine) is not raised: ``eps_cov`` is None and ``uncertainty_message`` names
-        the combination.
-    ConvergenceError
-        When the model cannot be solved at ``eps0``.
+    The v0.2 call shape, kept as a thin alias of :func:`~ecfm_uq.inverse.fit`:
+    ``gtol`` is ``tol``, ``solve_options`` (``tol``, ``maxiter``, ``solver``) and
+    ``gradient`` go to :class:`~ecfm_uq.inverse.SteadyProblem`; the default
+    ``formulation`` is ``"ecfm"`` here (``"standard"`` in ``fit``).
     """
-    if not isinstance(formulation, str) or formulation not in _OBJECTIVES:
-        raise ValueError(f"unknown `formulation` {formulation!r}; choose 'standard' or 'ecfm'")
-    if formulation == "ecfm" and system.Gamma is None:
-        raise ValueError("formulation='ecfm' needs a system with constraint forces (Gamma)")
-    M_obs, v = _data(system, M_obs, v)
-    eps0 = system.check_eps(eps0)
-    method, gtol, maxiter, bounds = _check_fit_options(system, method, gtol, maxiter, bounds)
-    sigma = _check_sigma(sigma)
-    if v.size < system.n_eps:
-        raise ValueError(
-            f"`v` has {v.size} measurements for {system.n_eps} parameters: fewer sensors "
-            "than parameters cannot determine eps; add sensors (rows of `M_obs`) or fix "
-            "parameters"
-        )
-    objective = _OBJECTIVES[formulation]
-    solve_kw = dict(solve_options or {})
-    solve_kw["gradient"] = choose_gradient(gradient, system.n_eps)
-    hist_eps, hist_loss = [], []
-    failures = []
+    from .fitting import fit, warn_deprecated
+    from .problems import SteadyProblem
 
-    last = {}
-
-    def fun(eps):
-        try:
-            z, g, _ = objective(system, M_obs, v, eps, **solve_kw)
-        except ConvergenceError as e:
-            failures.append(str(e))
-            z, g = np.inf, np.zeros_like(eps)
-        last["eps"], last["z"] = np.array(eps), z
-        return z / scale, g / scale
-
-    def callback(xk, *args):
-        # the optimizer evaluated fun at xk last (no second solve); fall back otherwise
-        z = last["z"] if "eps" in last and np.array_equal(last["eps"], xk) else fun(xk)[0] * scale
-        hist_eps.append(np.array(xk))
-        hist_loss.append(z)
-
-    scale = 1.0
-    z0 = fun(eps0)[0]
-    if not np.isfinite(z0):
-        raise ConvergenceError(
-            f"fit_steady: the model cannot be solved at eps0={eps0}: {failures[0]}"
-        )
-    scale = z0 if z0 > 0 else 1.0
-    last["z"] = z0  # z0 was computed with scale 1
-    callback(eps0)
-    opts = {"maxiter": maxiter}
-    if method.upper() in {"BFGS", "CG", "L-BFGS-B", "TNC"}:
-        opts["gtol"] = gtol
-    if method.upper() == "L-BFGS-B":
-        opts["ftol"] = 1e-15  # stop on the (relative) gradient, not on a stalled decrease
-    opts.update(options or {})
-    res = sopt.minimize(
-        fun, eps0, jac=True, method=method, bounds=bounds, options=opts, callback=callback
-    )
-    try:
-        z, g, sol = objective(system, M_obs, v, res.x, **solve_kw)
-    except ConvergenceError as e:  # the optimizer stopped where the model fails
-        return _failed_fit(res, formulation, hist_eps, hist_loss, e)
-    msg = str(res.message)
-    success = bool(res.success)
-    if not success and res.get("status") == 2 and not failures:
-        # the line search could not decrease z at machine precision. That is convergence
-        # when z is at round-off zero (both objectives are >= 0: a global minimum) or
-        # when first-order optimality holds relative to z itself: a relative change of
-        # eps would change z by less than 1e-6 relative (misspecified data: z* > 0)
-        rel_opt = float(np.linalg.norm(g) * max(np.linalg.norm(res.x), 1.0) / max(z, 1e-300))
-        if z <= 1e-20 * scale:
-            success = True
-            msg += " (objective at round-off zero: global minimum)"
-        elif rel_opt <= 1e-6:
-            success = True
-            msg += f" (stopped at the round-off limit; relative optimality {rel_opt:.1e})"
-    if failures:
-        msg += f" ({len(failures)} inner solves failed; first: {failures[0]})"
-    # the unforced solve at the estimate, shared by the verdict and the residual sigma
-    free = (
-        sol if formulation == "standard" else solve_steady(system, res.x, **(solve_options or {}))
-    )
-    unc = _uncertainty(system, M_obs, v, np.asarray(res.x), objective, solve_kw, sigma, free)
-    lam = sol.lam if formulation == "ecfm" else np.zeros(0)
-    verdict = consistency_verdict(system, M_obs, v, res.x, lam, bounds, sigma=sigma, solution=free)
-    if not verdict["consistent"]:
-        msg += f" [{verdict['message']}]"
-    return InverseResult(
-        **unc,
-        eps=np.asarray(res.x),
-        loss=z,
-        success=success,
-        message=msg,
-        nit=int(res.get("nit", 0)),
-        method=formulation,
-        eps_history=np.array(hist_eps),
-        loss_history=np.array(hist_loss),
-        extra={"Theta": sol.Theta, "lam": lam, "verdict": verdict},
-    )
-
-
-_METHODS = ("BFGS", "CG", "L-BFGS-B", "TNC", "SLSQP", "Newton-CG", "trust-constr")
-
-
-def _check_fit_options(system, method, gtol, maxiter, bounds):
-    """Validate the optimizer arguments of :func:`fit_steady` (before any solve)."""
-    if not isinstance(method, str) or method.upper() not in {m.upper() for m in _METHODS}:
-        raise ValueError(f"unknown `method` {method!r}; choose a gradient method of {_METHODS}")
-    gtol = check_positive("gtol", gtol)
-    maxiter = check_int("maxiter", maxiter, minimum=1)
-    bounds = check_bounds(bounds, system.n_eps)
-    return method, gtol, maxiter, bounds
-
-
-def _check_sigma(sigma):
-    """``sigma`` is None or a positive finite noise standard deviation (checked up front)."""
-    if sigma is None:
-        return None
-    try:
-        return check_positive("sigma", sigma)
-    except (TypeError, ValueError) as e:
-        raise type(e)(f"{e}; `sigma` is the known sensor noise standard deviation") from e
-
-
-def _failed_fit(res, formulation, hist_eps, hist_loss, error):
-    """A reported failure: the model cannot be solved at the optimizer's last point."""
-    return InverseResult(
-        eps=np.asarray(res.x),
-        loss=np.inf,
-        success=False,
-        message=f"{res.message} (the model cannot be solved at the final eps: {error})",
-        nit=int(res.get("nit", 0)),
-        method=formulation,
-        eps_history=np.array(hist_eps),
-        loss_history=np.array(hist_loss),
-        extra={"verdict": {"consistent": False, "message": str(error)}},
-    )
+    warn_deprecated("fit_steady", "fit(SteadyProblem(system, M_obs, v), eps0, formulation=...)")
+    if not isinstance(solve_options, dict | type(None)):
+        raise TypeError(f"`solve_options` must be a dict, got {solve_options!r}")
+    problem = SteadyProblem(system, M_obs, v, gradient=gradient, **dict(solve_options or {}))
+    return fit(
+        problem, eps0, formulation=formulation, method=method, sigma=sigma, bounds=bounds,
+        tol=gtol, maxiter=maxiter, options=options,
+    )  # fmt: skip
 
 
 def _uncertainty(system, M_obs, v, eps, objective, solve_kw, sigma, free=None):

@@ -1,10 +1,23 @@
-"""Whether a fitted model and the data are consistent (issue 15).
+"""Whether a fitted model and the data are consistent: one rule for every formulation.
 
-An optimizer's ``success`` only says that it stopped at a stationary point. For ECFM
-(paper Eq. ecfm) the constraint forces :math:`\\Gamma\\lambda` carry whatever the model
-cannot explain: at a consistent fit they vanish, on data the model cannot explain they
-stay large. :func:`consistency_verdict` measures how much the forces had to do, in the
-units of the data, and whether the parameters ran to a bound or to an extreme value.
+An optimizer's ``success`` only says that it stopped at a stationary point. Every fit
+also answers "can this model explain these data?" with a :class:`~.result.Verdict`
+built by :func:`decide`, the one rule: a test of stated size ``alpha`` (default
+:data:`DEFAULT_ALPHA` = 0.05 for every formulation) whose p-value is at least ``alpha``,
+and no parameter at a bound or at an extreme value. The test depends on what the data
+carry:
+
+* one data set with known noise sigma: the chi-squared test of the unforced model's
+  residual at the estimate, :math:`\\|e\\|^2/\\sigma^2 \\sim \\chi^2_{C - n_\\epsilon}`
+  (:func:`consistency_verdict`);
+* the paper's noisy ECFM: its z and chi-squared moment bounds (Eq. ecfm_noise), combined
+  by Bonferroni (:func:`moments_bounds_verdict`);
+* replicated data: z-tests of the sensor means against the model's moments, Bonferroni
+  over the sensors (:func:`~ecfm_uq.inverse.replicated.moment_verdict`);
+* noise-free data (no noise model): no test has a size; the rule is that the constraint
+  forces change the observations by at most ``rtol`` of the data (for ECFM, paper Eq.
+  ecfm: they vanish at a consistent fit and stay large on data the model cannot
+  explain).
 """
 
 from __future__ import annotations
@@ -15,11 +28,108 @@ import numpy as np
 
 from .._validation import as_finite_array, as_operator, check_positive
 from ..errors import ModelEvaluationError
+from .result import Verdict
 
 #: default for ``rtol``: the forces may change the observations by 0.1 % of the data
 FORCE_TO_DATA_RTOL = 1e-3
 #: default for ``extreme_decades``: a coefficient outside [1e-8, 1e8] is extreme
 EXTREME_DECADES = 8.0
+#: the size of every consistency test unless the caller chooses another
+DEFAULT_ALPHA = 0.05
+
+
+def check_alpha(alpha):
+    """``alpha`` as a float in (0, 1), or a ValueError naming it."""
+    if isinstance(alpha, bool) or not isinstance(alpha, numbers.Real) or not 0 < alpha < 1:
+        raise ValueError(
+            f"`alpha` (the size of the consistency test) must lie in (0, 1), got {alpha!r}"
+        )
+    return float(alpha)
+
+
+def decide(test, p_value, alpha, parts, *, statistic=None, explained=None, at_bound=(),
+           extreme=(), details=None):  # fmt: skip
+    """The one rule: a :class:`~.result.Verdict` from a test's p-value and the fit's state.
+
+    Parameters
+    ----------
+    test : str
+        Name of the test.
+    p_value : float or None
+        ``None`` for the noise-free rule (then ``explained`` decides).
+    alpha : float or None
+        The test's size.
+    parts : list of str
+        Sentences describing the test's outcome (joined into the message).
+    statistic : float, optional
+    explained : bool, optional
+        Whether the data are explained, for the noise-free rule.
+    at_bound : sequence of int
+        Parameters at a bound.
+    extreme : sequence of (name, value)
+        Coefficients at an extreme value.
+    details : dict, optional
+
+    Returns
+    -------
+    Verdict
+    """
+    if p_value is not None:
+        explained = bool(p_value >= alpha)
+    parts = list(parts)
+    if at_bound:
+        parts.append(f"parameters {list(at_bound)} are at a bound")
+    if extreme:
+        name, c = extreme[0]
+        parts.append(f"coefficient of term {name!r} is extreme ({c:.3g})")
+    consistent = bool(explained and not at_bound and not extreme)
+    word = "model and data are consistent" if consistent else "NOT consistent"
+    details = dict(details or {})
+    details.setdefault("at_bound", list(at_bound))
+    details.setdefault("extreme", list(extreme))
+    return Verdict(
+        consistent=consistent,
+        p_value=None if p_value is None else float(p_value),
+        alpha=None if p_value is None else float(alpha),
+        test=test,
+        statistic=None if statistic is None else float(statistic),
+        message=f"{word}: " + "; ".join(parts),
+        details=details,
+    )
+
+
+def moments_bounds_verdict(test, sigma, alpha=DEFAULT_ALPHA, at_bound=()):
+    """The paper's noise test (Eq. ecfm_noise) as a :class:`~.result.Verdict`.
+
+    The two-sided z test of the discrepancy's sample mean and the chi-squared test of
+    its sample variance, each at the paper's level, combined by Bonferroni into one
+    p-value :math:`\\min(1, 2\\min(p_{mean}, p_{var}))`.
+
+    Parameters
+    ----------
+    test : ConsistencyTest
+        From :func:`~ecfm_uq.inverse.noise.consistency_test`.
+    sigma : float
+    alpha : float
+    at_bound : sequence of int
+    """
+    from scipy import stats
+
+    C = test.bounds["n_sensors"]
+    z = test.mean / (sigma / np.sqrt(C))
+    p_mean = 2.0 * stats.norm.sf(abs(z))
+    q = test.var * (C - 1) / sigma**2
+    p_var = 2.0 * min(stats.chi2.sf(q, C - 1), stats.chi2.cdf(q, C - 1))
+    p = min(1.0, 2.0 * min(p_mean, p_var))
+    parts = [
+        f"discrepancy mean {test.mean:.3g} (p = {p_mean:.2g}), variance {test.var:.3g} "
+        f"(p = {p_var:.2g}) against sigma = {sigma:g}, Bonferroni p = {p:.3g} "
+        f"{'>=' if p >= alpha else '<'} alpha = {alpha:g}"
+    ]
+    return decide(
+        "moments z and chi2 (Bonferroni)", p, alpha, parts, statistic=q, at_bound=at_bound,
+        details={"mean": test.mean, "var": test.var, "p_mean": p_mean, "p_var": p_var},
+    )  # fmt: skip
 
 
 def consistency_verdict(
@@ -31,12 +141,14 @@ def consistency_verdict(
     bounds=None,
     *,
     sigma=None,
+    alpha=DEFAULT_ALPHA,
+    n_fitted=0,
     rtol=FORCE_TO_DATA_RTOL,
     extreme_decades=EXTREME_DECADES,
     solve_options=None,
     solution=None,
 ):
-    """Say whether model and data agree at fitted parameters ``eps``.
+    """Say whether model and data agree at fitted parameters ``eps`` (one data set).
 
     Parameters
     ----------
@@ -54,8 +166,12 @@ def consistency_verdict(
         The optimizer's bounds (``None`` entries for open sides).
     sigma : float, optional
         Noise standard deviation of ``v``. Given, the verdict is the chi-squared test
-        :math:`\\chi^2 = \\|e\\|^2/\\sigma^2` at the 99 % quantile of :math:`\\chi^2_C`;
-        otherwise (noise-free data) it is ``force_to_data <= rtol``.
+        :math:`\\chi^2 = \\|e\\|^2/\\sigma^2` with ``C - n_fitted`` degrees of freedom at
+        size ``alpha``; otherwise (noise-free data) it is ``force_to_data <= rtol``.
+    alpha : float
+        Size of the test (default 0.05, as for every formulation).
+    n_fitted : int
+        Parameters fitted to ``v`` (a fit passes ``n_eps``; 0 for given parameters).
     rtol : float
         Threshold on ``force_to_data`` for noise-free data (default 1e-3).
     extreme_decades : float
@@ -68,28 +184,14 @@ def consistency_verdict(
 
     Returns
     -------
-    dict
-        ``force_to_data``
-            :math:`\\|e\\|/\\|v\\|` with :math:`e = v - \\mathcal M\\,\\mathbb E[\\theta(\\epsilon,
-            \\lambda=0)]`: what the forces must add to the unforced model's observations,
-            relative to the data (``inf`` when the model cannot be solved at ``eps``).
-        ``peak_sensor_index``
-            Sensor where :math:`|e|` peaks (``None`` if unsolved).
-        ``peak_force_index``
-            Force where :math:`|\\lambda|` peaks (``None`` without ``lam``).
-        ``chi2``, ``chi2_limit``
-            Only with ``sigma``.
-        ``at_bound``
-            Indices of parameters within 1e-8 (relative to the bound's width, or absolute
-            for one-sided bounds) of a bound.
-        ``extreme``
-            ``(term name, coefficient value)`` pairs of coefficients outside the
-            ``extreme_decades`` range.
-        ``consistent``
-            True when the data are explained (see ``sigma``/``rtol``) and no parameter is
-            at a bound or extreme.
-        ``message``
-            One sentence saying the above.
+    Verdict
+        ``details`` (also readable as ``verdict[key]``): ``force_to_data``
+        (:math:`\\|e\\|/\\|v\\|` with :math:`e = v - \\mathcal M\\,\\mathbb E[\\theta(\\epsilon,
+        \\lambda=0)]`, what the forces must add to the unforced model's observations;
+        ``inf`` when the model cannot be solved at ``eps``), ``peak_sensor_index`` (where
+        :math:`|e|` peaks), ``peak_force_index`` (where :math:`|\\lambda|` peaks),
+        ``chi2``, ``chi2_limit``, ``dof`` (with ``sigma``), ``at_bound`` (parameters within
+        1e-8 of a bound, relative to its width), ``extreme`` (``(term, value)`` pairs).
     """
     from ..system import solve_steady
 
@@ -97,53 +199,88 @@ def consistency_verdict(
     v = as_finite_array("v", v, shape=(M_obs.shape[0],))
     eps = system.check_eps(eps)
     rtol = check_positive("rtol", rtol)
+    alpha = check_alpha(alpha)
     extreme_decades = check_positive("extreme_decades", extreme_decades)
     lam = None if lam is None else as_finite_array("lam", lam).ravel()
     bounds = check_bounds(bounds, system.n_eps)
     out = {"force_to_data": np.inf, "peak_sensor_index": None, "peak_force_index": None}
     if lam is not None and lam.size:
         out["peak_force_index"] = int(np.argmax(np.abs(lam)))
-    parts = []
     sol = solve_steady(system, eps, **dict(solve_options or {})) if solution is None else solution
-    if sol.success:
-        e = v - M_obs @ system.mean(sol.Theta)
-        out["force_to_data"] = float(np.linalg.norm(e) / max(np.linalg.norm(v), 1e-300))
-        out["peak_sensor_index"] = int(np.argmax(np.abs(e)))
-        if sigma is not None:
-            from scipy.stats import chi2
+    at_bound, extreme = _at_bound(eps, bounds), _extreme(system, eps, extreme_decades)
+    if not sol.success:
+        parts = [f"the unforced model cannot be solved at eps={eps.tolist()}: {sol.message}"]
+        test = "chi2" if sigma is not None else "force-to-data (noise-free)"
+        return decide(
+            test, None if sigma is None else 0.0, alpha, parts, explained=False,
+            at_bound=at_bound, extreme=extreme, details=out,
+        )  # fmt: skip
+    e = v - M_obs @ system.mean(sol.Theta)
+    return residual_verdict(
+        e, v, sigma, alpha, n_fitted, rtol=rtol, at_bound=at_bound, extreme=extreme,
+        details=out,
+    )  # fmt: skip
 
-            sigma = check_positive("sigma", sigma)
-            r = e / sigma  # not (e @ e) / sigma**2: sigma**2 may overflow
-            out["chi2"] = float(r @ r)
-            out["chi2_limit"] = float(chi2.ppf(0.99, df=v.size))
-            explained = out["chi2"] <= out["chi2_limit"]
-            parts.append(
-                f"chi2 = {out['chi2']:.3g} {'<=' if explained else '>'} "
-                f"{out['chi2_limit']:.3g} (99 % quantile, {v.size} sensors)"
-            )
-        else:
-            explained = out["force_to_data"] <= rtol
-            parts.append(
-                f"the forces change the observations by {out['force_to_data']:.2e} of the "
-                f"data ({'<=' if explained else '>'} rtol={rtol:g}), most at sensor "
-                f"{out['peak_sensor_index']}"
-            )
-        if out["peak_force_index"] is not None:
-            parts[-1] += f"; largest force {out['peak_force_index']}"
-    else:
-        explained = False
-        parts.append(f"the unforced model cannot be solved at eps={eps.tolist()}: {sol.message}")
-    out["at_bound"] = _at_bound(eps, bounds)
-    if out["at_bound"]:
-        parts.append(f"parameters {out['at_bound']} are at a bound")
-    out["extreme"] = _extreme(system, eps, extreme_decades)
-    if out["extreme"]:
-        name, c = out["extreme"][0]
-        parts.append(f"coefficient of term {name!r} is extreme ({c:.3g}) at eps={eps.tolist()}")
-    out["consistent"] = bool(explained and not out["at_bound"] and not out["extreme"])
-    verdict = "model and data are consistent" if out["consistent"] else "NOT consistent"
-    out["message"] = f"{verdict}: " + "; ".join(parts)
-    return out
+
+def residual_verdict(e, v, sigma=None, alpha=DEFAULT_ALPHA, n_fitted=0, *, rtol=FORCE_TO_DATA_RTOL,
+                     at_bound=(), extreme=(), details=None):  # fmt: skip
+    """The verdict from the unforced model's residual ``e = v - M theta(eps, lam=0)``.
+
+    With ``sigma``: the chi-squared test :math:`\\|e\\|^2/\\sigma^2 \\sim
+    \\chi^2_{n - n_{fitted}}` at size ``alpha``. Without: the noise-free rule
+    ``force_to_data = ||e|| / ||v|| <= rtol``.
+
+    Parameters
+    ----------
+    e, v : array_like
+        Residual and data, any matching shape (a time series is flattened).
+    sigma : float, optional
+    alpha : float
+    n_fitted : int
+        Parameters fitted to the data (degrees of freedom lost).
+    rtol : float
+    at_bound, extreme, details
+        As in :func:`decide`; ``details`` gains ``force_to_data``, ``peak_sensor_index``
+        (flat index of the largest ``|e|``) and ``chi2``, ``chi2_limit``, ``dof``.
+
+    Returns
+    -------
+    Verdict
+    """
+    from scipy.stats import chi2
+
+    e = np.ravel(np.asarray(e, dtype=float))
+    v = np.ravel(np.asarray(v, dtype=float))
+    out = dict(details or {})
+    out["force_to_data"] = float(np.linalg.norm(e) / max(np.linalg.norm(v), 1e-300))
+    out["peak_sensor_index"] = int(np.argmax(np.abs(e)))
+    force = out.get("peak_force_index")
+    where = "" if force is None else f"; largest force {force}"
+    if sigma is None:
+        explained = out["force_to_data"] <= rtol
+        parts = [
+            f"the forces change the observations by {out['force_to_data']:.2e} of the "
+            f"data ({'<=' if explained else '>'} rtol={rtol:g}), most at sensor "
+            f"{out['peak_sensor_index']}{where}"
+        ]
+        return decide(
+            "force-to-data (noise-free)", None, alpha, parts, explained=explained,
+            at_bound=at_bound, extreme=extreme, details=out,
+        )  # fmt: skip
+    sigma = check_positive("sigma", sigma)
+    r = e / sigma  # not (e @ e) / sigma**2: sigma**2 may overflow
+    dof = max(e.size - int(n_fitted), 1)
+    statistic = float(r @ r)
+    p_value = float(chi2.sf(statistic, df=dof))
+    out.update(chi2=statistic, chi2_limit=float(chi2.ppf(1 - alpha, df=dof)), dof=dof)
+    parts = [
+        f"chi2 = {statistic:.3g} on {dof} degrees of freedom, p = {p_value:.3g} "
+        f"{'>=' if p_value >= alpha else '<'} alpha = {alpha:g}{where}"
+    ]
+    return decide(
+        "chi2", p_value, alpha, parts, statistic=statistic, at_bound=at_bound,
+        extreme=extreme, details=out,
+    )  # fmt: skip
 
 
 def check_bounds(bounds, n_eps):

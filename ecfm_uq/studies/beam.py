@@ -6,7 +6,7 @@ The axial load of an Euler-Bernoulli beam with a random soft centre
 (:class:`ecfm_uq.problems.beam.BeamModel`) is recovered from D replicated measurements at
 C sensors, each replicate one draw of the germ measured at all sensors from the PCE at
 the true load with zero forces. Three estimators
-(:func:`ecfm_uq.inverse.likelihood.fit_pseudo_likelihood`):
+(:func:`ecfm_uq.inverse.fit` of a :class:`~ecfm_uq.inverse.ReplicatedProblem`):
 
 * ``inner_outer`` (the main result, ``eps``): for each eps the forces maximizing the
   pseudo-likelihood, then the eps whose forces are smallest -- the faithful reading of
@@ -25,13 +25,10 @@ from scipy import stats
 
 from ..chaos import ChaosBasis
 from ..errors import SingularSystemError
-from ..inverse.likelihood import (
-    PseudoLikelihood,
-    eps_curvature,
-    expected_relative_error,
-    fit_pseudo_likelihood,
-    optimal_forces,
-)
+from ..inverse import ReplicatedProblem, fit
+from ..inverse.diagnostics import expected_relative_error
+from ..inverse.forces import eps_curvature, optimal_forces
+from ..inverse.pseudo_likelihood import PseudoLikelihood
 from ..mc import relative_error
 from ..plotting import pyplot, save_figure
 from ..problems.beam import BeamModel, buckling_load
@@ -174,28 +171,19 @@ def build_model(s):
 def _fit_all(model, v, s, bounds, uncertainty=True):
     """The three estimators on one data set (``uncertainty=False``: the seed study, whose
     spread over data sets is the uncertainty it reports)."""
-    opts = {"solve_options": {"tol": s["solve_tol"]}}
-    common = {
-        "bounds": bounds,
-        "trust_radius": s["trust_radius"],
-        "likelihood_options": opts,
-        "uncertainty": uncertainty,
-    }
+    problem = ReplicatedProblem(model.system, model.M_obs, v, tol=s["solve_tol"])
+    common = {"bounds": bounds, "uncertainty": uncertainty}
     out = {}
     for key, form in (("standard", "standard"), ("inner_outer", "inner-outer")):
-        out[key] = fit_pseudo_likelihood(model.system, model.M_obs, v, [s["eps0"]], form, **common)
-    out["penalty"] = fit_pseudo_likelihood(
-        model.system,
-        model.M_obs,
-        v,
-        [s["eps0"]],
-        "penalty",
-        lam0=np.full(model.sensors.size, s["lam0"]),
-        penalty=s["penalty"],
-        bounds=bounds,
-        likelihood_options=opts,
-        uncertainty=uncertainty,
-    )
+        out[key] = fit(
+            problem, [s["eps0"]], formulation=form,
+            options={"trust_radius": s["trust_radius"]}, **common,
+        )  # fmt: skip
+    out["penalty"] = fit(
+        problem, [s["eps0"]], formulation="penalty",
+        options={"lam0": np.full(model.sensors.size, s["lam0"]), "penalty": s["penalty"]},
+        **common,
+    )  # fmt: skip
     return out
 
 

@@ -10,7 +10,7 @@ sets, all noiseless at the true parameters:
   only mismatch);
 * misspecified: the truth has an extra localized heat source the model does not know.
 
-Both formulations are fitted by :func:`ecfm_uq.inverse.fit_steady`. This module holds no
+Both formulations are fitted by :func:`ecfm_uq.inverse.fit`. This module holds no
 numerics beyond calling the library; the helpers here are shared with ``geometry``.
 """
 
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..inverse import fit_steady
+from ..inverse import SteadyProblem, fit
 from ..plotting import pyplot, save_figure
 from ..problems.heat import boundary_closed_form, boundary_problem, gaussian_source
 
@@ -139,7 +139,8 @@ def fit_both(problem, v, start, method, true_eps):
     bounds = problem.bounds if method.upper() == "L-BFGS-B" else None
     out, res = {}, {}
     for key, form in (("inv", "standard"), ("ecfm", "ecfm")):
-        r = fit_steady(problem.system, problem.M_obs, v, start, form, method=method, bounds=bounds)
+        fitted = SteadyProblem(problem.system, problem.M_obs, v)
+        r = fit(fitted, start, formulation=form, method=method, bounds=bounds)
         res[key] = r
         entry = {
             "eps": r.eps,
@@ -321,9 +322,9 @@ def _history_figure(fits, true_eps, names, path):
     fig, axes = plt.subplots(1, n, figsize=(5 * n, 3.8), squeeze=False)
     styles = {"consistent": "-", "exact": "-.", "misspecified": ":"}
     for m, ax in enumerate(axes[0]):
-        for key, fit in fits.items():
+        for key, pair in fits.items():
             for meth, color in (("inv", "C0"), ("ecfm", "C1")):
-                h = fit[meth].eps_history[:, m]
+                h = pair[meth].eps_history[:, m]
                 label = f"{'standard' if meth == 'inv' else 'ECFM'}, {key}"
                 ax.plot(np.arange(h.size), h, color=color, ls=styles.get(key, "-"), label=label)
         ax.axhline(true_eps[m], color="k", lw=0.8, label="true")

@@ -20,8 +20,8 @@ import time
 
 import numpy as np
 
+from ..inverse import DynamicInverseProblem, fit
 from ..inverse.diagnostics import condition_number, fd_hessian, loss_surface
-from ..inverse.dynamic import DynamicInverseProblem
 from ..plotting import pyplot, save_figure
 from ..problems.burgers import (
     INITIAL_STATES,
@@ -211,13 +211,11 @@ def run(settings, out_dir, progress):
     for key, formulation in METHODS:
         t0 = time.perf_counter()
         with progress.bar(s["epochs"] + 1, f"Adam ({formulation})") as bar:
-            res = problem.fit(
-                s["start"],
-                formulation,
-                lr=s["lr"],
-                epochs=s["epochs"],
-                callback=lambda *a, bar=bar: bar.update(),
-            )
+            res = fit(
+                problem, s["start"], formulation=formulation, method="adam",
+                maxiter=s["epochs"],
+                options={"lr": s["lr"], "callback": lambda *a, bar=bar: bar.update()},
+            )  # fmt: skip
         fit_time = time.perf_counter() - t0
         fits[key] = res
         # Hessian at the estimate: central differences of the sensitivity gradient

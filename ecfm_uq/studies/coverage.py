@@ -8,11 +8,11 @@ counts how often the reported 95 % intervals contain the truth
 
 * ``steady``: the paper's heat rod with unknown boundary data (Section 4,
   :func:`ecfm_uq.problems.heat.boundary_problem`), 7 sensors, Gaussian sensor noise of
-  known standard deviation (:func:`~ecfm_uq.inverse.fit_steady` with ``sigma``); the
+  known standard deviation (:func:`~ecfm_uq.inverse.fit` with ``sigma``); the
   same with sigma estimated from the residual is recorded as ``steady_estimated_sigma``;
 * ``beam``: the stochastic beam of Section 3.3 (:class:`ecfm_uq.problems.beam.BeamModel`)
   from D replicated measurements, standard and ECFM inner-outer pseudo-likelihood
-  estimates (:func:`~ecfm_uq.inverse.fit_pseudo_likelihood`), covariance from the
+  estimates (:func:`~ecfm_uq.inverse.fit` of replicated data), covariance from the
   replicates.
 
 This module only reads settings, calls the library and draws the figure.
@@ -128,7 +128,7 @@ def run(settings, out_dir, progress):
     beam = BeamModel(n_basis=bm["n_basis"], order=bm["order"], sensors=bm["sensors"])
     beam_fit = {
         "bounds": [(0.0, bm["eps_upper_bound_fraction"] * beam.beta_min)],
-        "likelihood_options": {"solve_options": {"tol": bm["solve_tol"]}},
+        "problem_options": {"tol": bm["solve_tol"]},
     }
 
     def sample(gen):

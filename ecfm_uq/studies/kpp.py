@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..inverse import SteadyProblem, fit
 from ..inverse.noise import consistency_test, noise_bounds
-from ..inverse.noisy import fit_noisy_ecfm, fit_standard_slsqp
 from ..plotting import pyplot, save_figure
 from ..problems.fisher_kpp import (
     DEFAULT_OMEGA,
@@ -174,10 +174,12 @@ def run(settings, out_dir, progress):
         )
         data = make_data(problem, sigma, s["seed"], s["source_amplitude"], box)
         bar.update()
-        common = dict(maxiter=s["maxiter"], ftol=s["ftol"])
-        inv = fit_standard_slsqp(problem.system, problem.M_obs, data.v, **common)
+        fitted = SteadyProblem(problem.system, problem.M_obs, data.v)
+        eps0 = np.zeros(problem.system.n_eps)
+        common = dict(maxiter=s["maxiter"], tol=s["ftol"])
+        inv = fit(fitted, eps0, formulation="standard", method="all-at-once", **common)
         bar.update()
-        ecfm = fit_noisy_ecfm(problem.system, problem.M_obs, data.v, sigma, alpha, **common)
+        ecfm = fit(fitted, eps0, formulation="noisy-ecfm", sigma=sigma, alpha=alpha, **common)
         bar.update()
 
         C = problem.M_obs.shape[0]

@@ -1,0 +1,197 @@
+"""One entry point for every inverse fit: :func:`fit`.
+
+In the manner of :func:`scipy.optimize.minimize`: one call shape whatever the problem
+(steady, dynamic, replicated), the formulation (standard, ECFM, noisy, pseudo-likelihood)
+and the optimizer, dispatching to the module that owns each problem kind; one tolerance
+vocabulary (``tol``, ``maxiter``); method-specific settings in one ``options`` dict,
+checked by name; one result class (:class:`~ecfm_uq.inverse.InverseResult`).
+
+=====================  ===============================  ==============================
+problem                formulation                      method (``"auto"`` first)
+=====================  ===============================  ==============================
+SteadyProblem          ``"standard"``, ``"ecfm"``       ``"BFGS"``, any gradient method
+                                                        of ``scipy.optimize.minimize``,
+                                                        ``"all-at-once"`` (SLSQP on
+                                                        (theta, eps), standard only)
+SteadyProblem          ``"noisy-ecfm"`` (sigma)         ``"all-at-once"``
+DynamicInverseProblem  ``"standard"``, ``"ecfm"``       ``"BFGS"``, ``"adam"``, any
+                                                        gradient method of ``minimize``
+ReplicatedProblem      ``"standard"``,                  ``"trust-region"``;
+                       ``"inner-outer"`` (``"ecfm"``),  ``"SLSQP"`` for the penalty
+                       ``"penalty"``                    form
+=====================  ===============================  ==============================
+"""
+
+from __future__ import annotations
+
+import numbers
+import warnings
+from dataclasses import dataclass, field
+
+from .._validation import check_int, check_positive
+from .verdict import DEFAULT_ALPHA, check_alpha, check_bounds
+
+__all__ = ["FitSettings", "fit"]
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """The validated arguments of :func:`fit`, handed to the problem kind's fitter."""
+
+    formulation: str
+    method: str
+    sigma: float | None
+    bounds: list | None
+    tol: float | None
+    maxiter: int | None
+    options: dict = field(default_factory=dict)
+    uncertainty: bool = True
+    alpha: float = DEFAULT_ALPHA
+
+    def take(self, known):
+        """``options`` completed by the defaults in ``known`` (name -> default).
+
+        Raises TypeError naming any option this formulation and method do not know.
+        """
+        unknown = sorted(set(self.options) - set(known))
+        if unknown:
+            raise TypeError(
+                f"`options` has unknown name(s) {unknown} for formulation="
+                f"{self.formulation!r}, method={self.method!r}; known: {sorted(known)}"
+            )
+        return {**known, **self.options}
+
+
+def _problem_kind(problem):
+    from .dynamic import DynamicInverseProblem
+    from .problems import ReplicatedProblem, SteadyProblem
+
+    for cls, kind in (
+        (SteadyProblem, "steady"),
+        (DynamicInverseProblem, "dynamic"),
+        (ReplicatedProblem, "replicated"),
+    ):
+        if isinstance(problem, cls):
+            return kind
+    raise TypeError(
+        f"`problem` must be a SteadyProblem, DynamicInverseProblem or ReplicatedProblem, got "
+        f"{type(problem).__name__}; e.g. fit(SteadyProblem(system, M_obs, v), eps0)"
+    )
+
+
+def _check_sigma(sigma):
+    if sigma is None:
+        return None
+    try:
+        return check_positive("sigma", sigma)
+    except (TypeError, ValueError) as e:
+        raise type(e)(f"{e}; `sigma` is the known sensor noise standard deviation") from e
+
+
+def fit(
+    problem,
+    eps0,
+    *,
+    formulation="standard",
+    method="auto",
+    sigma=None,
+    bounds=None,
+    tol=None,
+    maxiter=None,
+    options=None,
+    uncertainty=True,
+    alpha=DEFAULT_ALPHA,
+):
+    """Estimate the parameters :math:`\\epsilon` of a model from data.
+
+    Parameters
+    ----------
+    problem : SteadyProblem, DynamicInverseProblem or ReplicatedProblem
+        The model, its sensors and the data (:mod:`ecfm_uq.inverse.problems`).
+    eps0 : (n_eps,) array_like
+        Starting point.
+    formulation : str
+        ``"standard"`` (least squares / maximum likelihood), ``"ecfm"`` (the paper's
+        explicit constraint forces), ``"noisy-ecfm"`` (the paper's z / chi-squared
+        bounds, steady), ``"inner-outer"`` / ``"penalty"`` (pseudo-likelihood forces,
+        replicated data); see the table in :mod:`ecfm_uq.inverse.fitting`.
+    method : str
+        The optimizer; ``"auto"`` picks the formulation's default.
+    sigma : float, optional
+        Known noise standard deviation of the data (else estimated where needed).
+    bounds : sequence of (lo, hi), optional
+        Bounds on :math:`\\epsilon` (``None`` for an open side).
+    tol : float, optional
+        Optimality tolerance (the method's default when omitted).
+    maxiter : int, optional
+        Iterations (epochs for Adam).
+    options : dict, optional
+        Method- and formulation-specific settings by name (e.g. ``{"lr": 1e-2}`` for
+        Adam, ``{"penalty": 100}`` for the penalty form); an unknown name is refused.
+    uncertainty : bool
+        Attach the estimate's uncertainty (costs extra gradient evaluations).
+    alpha : float
+        Size of the consistency test of the verdict (default 0.05).
+
+    Returns
+    -------
+    InverseResult
+        ``success``/``status``/``message``, ``eps``, ``uncertainty``, ``verdict``, ...
+
+    Raises
+    ------
+    TypeError, ValueError
+        For a malformed argument (named), before any model solve.
+    ConvergenceError
+        When the model cannot be solved at ``eps0``.
+    """
+    kind = _problem_kind(problem)
+    if not isinstance(formulation, str):
+        raise TypeError(f"`formulation` must be a string, got {formulation!r}")
+    if not isinstance(method, str):
+        raise TypeError(f"`method` must be a string, got {method!r}")
+    if options is not None and not isinstance(options, dict):
+        raise TypeError(f"`options` must be a dict of named settings, got {options!r}")
+    if tol is not None:
+        tol = check_positive("tol", tol)
+    if maxiter is not None:
+        maxiter = check_int("maxiter", maxiter, minimum=1)
+    if not isinstance(uncertainty, bool | numbers.Integral):
+        raise TypeError(f"`uncertainty` must be True or False, got {uncertainty!r}")
+    settings = FitSettings(
+        formulation=formulation,
+        method=method,
+        sigma=_check_sigma(sigma),
+        bounds=check_bounds(bounds, problem.system.n_eps),
+        tol=tol,
+        maxiter=maxiter,
+        options=dict(options or {}),
+        uncertainty=bool(uncertainty),
+        alpha=check_alpha(alpha),
+    )
+    if kind == "steady":
+        from .steady import fit_steady_problem
+
+        return fit_steady_problem(problem, eps0, settings)
+    if kind == "dynamic":
+        from .dynamic import fit_dynamic_problem
+
+        return fit_dynamic_problem(problem, eps0, settings)
+    from .replicated import fit_replicated_problem
+
+    return fit_replicated_problem(problem, eps0, settings)
+
+
+_WARNED = set()
+
+
+def warn_deprecated(old, new):
+    """A DeprecationWarning, once per old name, pointing at its replacement."""
+    if old in _WARNED:
+        return
+    _WARNED.add(old)
+    warnings.warn(
+        f"{old} is deprecated and will be removed in a future release; use {new}",
+        DeprecationWarning,
+        stacklevel=3,
+    )

@@ -1,0 +1,137 @@
+"""Inverse problems as objects: a model, its sensors, the data, and how to solve the model.
+
+A problem is what :func:`ecfm_uq.inverse.fit` fits (as a function is what
+:func:`scipy.optimize.minimize` minimizes). Three kinds, by what the data are:
+
+==========================  =======================================  ======================
+problem                     data                                     paper
+==========================  =======================================  ======================
+:class:`SteadyProblem`      one data set ``v`` (C,) of a steady      Eqs. traditional,
+                            model                                    ecfm, kpp_inv,
+                                                                     ecfm_noise; Sec. 4
+:class:`~ecfm_uq.inverse.   a time series ``V`` (n_steps + 1, C) of  Eqs. inv_obj, ecfm_obj
+dynamic.Dynamic\\           a backward-Euler model
+InverseProblem`
+:class:`ReplicatedProblem`  replicates ``v`` (C, D) of a stochastic  Eq. stochastic_model
+                            (chaos) model
+==========================  =======================================  ======================
+
+Each validates its data once, here, and holds the settings of the model's solves
+(Newton ``tol``/``maxiter``, linear ``solver``, forward or adjoint ``gradient``): the
+one place those are given. The optimizer's settings are arguments of ``fit``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._validation import as_finite_array, as_operator
+from .gradients import choose_gradient
+
+__all__ = ["ReplicatedProblem", "SteadyProblem"]
+
+
+def _solve_options(tol, maxiter, solver):
+    """The given Newton/linear-solver settings (omitted ones keep the solver's defaults)."""
+    out = {"solver": solver}
+    if tol is not None:
+        out["tol"] = tol
+    if maxiter is not None:
+        out["maxiter"] = maxiter
+    return out
+
+
+class SteadyProblem:
+    """A steady model and one data set: :math:`v \\approx \\mathcal M\\,\\mathbb E[\\theta(\\epsilon)]`.
+
+    Parameters
+    ----------
+    system : GalerkinSystem
+        With ``Gamma`` (N, C) for the ECFM formulations.
+    M_obs : (C, N) array_like or scipy.sparse matrix
+        Measurement operator :math:`\\mathcal M`.
+    v : (C,) array_like
+        Observations.
+    tol, maxiter : optional
+        Newton settings of every model solve (the solver's defaults when omitted).
+    solver : str, SolverOptions or dict
+        Linear solver of every model solve (:func:`ecfm_uq.system.solve_steady`).
+    gradient : {"auto", "forward", "adjoint"}
+        Gradients by forward sensitivities or one adjoint solve
+        (:func:`~ecfm_uq.inverse.gradients.choose_gradient`).
+
+    Raises
+    ------
+    ValueError, TypeError
+        On a misshaped or non-finite ``M_obs``/``v``.
+    """
+
+    def __init__(self, system, M_obs, v, *, tol=None, maxiter=None, solver="auto",
+                 gradient="auto"):  # fmt: skip
+        self.system = system
+        M_obs = as_operator("M_obs", M_obs)
+        if M_obs.shape[1] != system.N:
+            raise ValueError(f"`M_obs` must have {system.N} columns (N), got {M_obs.shape}")
+        self.M_obs = M_obs
+        self.v = as_finite_array("v", v, shape=(M_obs.shape[0],))
+        self.gradient = choose_gradient(gradient, system.n_eps)
+        self.solve_options = _solve_options(tol, maxiter, solver)
+
+    @property
+    def n_sensors(self):
+        """Number of measurements C."""
+        return self.v.size
+
+    def with_data(self, v):
+        """The same problem with other data ``v`` (C,) (for refits and simulations)."""
+        new = object.__new__(type(self))
+        new.__dict__.update(self.__dict__)
+        new.v = as_finite_array("v", v, shape=self.v.shape)
+        return new
+
+
+class ReplicatedProblem:
+    """A stochastic (chaos) model and replicated data, for the pseudo-likelihood fits.
+
+    Parameters
+    ----------
+    system : GalerkinSystem
+        Stochastic (``P >= 2``); with ``Gamma`` (N, C) for the force formulations.
+    M_obs : (C, N) array_like
+    v : (C, D) array_like
+        ``D >= 2`` replicates per sensor.
+    tol, maxiter, solver : optional
+        Settings of every model solve (see :class:`SteadyProblem`).
+    var_rtol, hessian, fd_step
+        Of the pseudo-likelihood (:class:`~ecfm_uq.inverse.pseudo_likelihood.PseudoLikelihood`).
+    """
+
+    def __init__(self, system, M_obs, v, *, tol=None, maxiter=None, solver="auto",
+                 var_rtol=1e-12, hessian="auto", fd_step=1e-5):  # fmt: skip
+        from .pseudo_likelihood import PseudoLikelihood
+
+        opts = _solve_options(tol, maxiter, solver)
+        if opts == {"solver": "auto"}:
+            opts = {}  # the pseudo-likelihood's own default: no override at all
+        self.likelihood = PseudoLikelihood(
+            system, M_obs, v, var_rtol=var_rtol, hessian=hessian, fd_step=fd_step,
+            solve_options=opts,
+        )  # fmt: skip
+        self.system = system
+        self.M_obs = self.likelihood.M_obs
+        self.v = self.likelihood.v
+
+    @property
+    def n_sensors(self):
+        """Number of sensors C."""
+        return self.v.shape[0]
+
+    @property
+    def n_replicates(self):
+        """Replicates per sensor D."""
+        return self.v.shape[1]
+
+
+def data_size(problem):
+    """Number of scalar data a problem's estimate is fitted to (for degrees of freedom)."""
+    return int(np.size(problem.v)) if hasattr(problem, "v") else int(np.size(problem.V[1:]))
