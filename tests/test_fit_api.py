@@ -1,0 +1,157 @@
+"""One inverse API (issue 23): ``fit(problem, eps0, ...)`` for every problem kind, one
+result class with status and a Verdict, one verdict rule, options checked by name, and
+the v0.2 entry points as thin aliases that warn once and give the same answers."""
+
+import warnings
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from ecfm_uq.inverse import (
+    DynamicInverseProblem,
+    FitStatus,
+    InverseResult,
+    ReplicatedProblem,
+    SteadyProblem,
+    Uncertainty,
+    Verdict,
+    fit,
+)
+from ecfm_uq.inverse import fitting as fitting_module
+from ecfm_uq.spectral import SineBasis, hat_forces, load, sensor_matrix, stiffness
+from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm, solve_steady
+
+B = SineBasis(16)
+K = stiffness(B)
+F = np.column_stack([load(B, np.ones_like), load(B, lambda x: x)])
+SENS = np.linspace(0.1, 0.9, 9)
+M_OBS = sensor_matrix(B, SENS)
+TRUE = np.array([3.0, -2.0])
+
+
+def heat():
+    """-w'' = eps0 + eps1 x on (0, 1), sine basis, hat forces on 9 sensors."""
+    return GalerkinSystem([LinearTerm(K), LoadTerm.linear(F)], 2, Gamma=hat_forces(B, SENS, 0.1))
+
+
+def data(sigma=0.0, seed=0):
+    system = heat()
+    v = M_OBS @ solve_steady(system, TRUE).Theta[:, 0]
+    return system, v + sigma * np.random.default_rng(seed).standard_normal(v.size)
+
+
+@pytest.mark.parametrize("formulation", ["standard", "ecfm"])
+def test_steady_fit_reports_status_counts_uncertainty_and_verdict(formulation):
+    system, v = data(0.01)
+    res = fit(SteadyProblem(system, M_OBS, v), [1.0, 1.0], formulation=formulation, sigma=0.01)
+    assert isinstance(res, InverseResult)
+    assert res.success and res.status is FitStatus.CONVERGED, res.message
+    assert res.nfev >= res.nit >= 1
+    assert isinstance(res.uncertainty, Uncertainty) and res.uncertainty.success
+    np.testing.assert_array_equal(res.eps_cov, res.uncertainty.cov)  # the v0.2 name
+    assert isinstance(res.verdict, Verdict) and res.extra["verdict"] is res.verdict
+    assert res.verdict.alpha == 0.05 and res.verdict.test == "chi2"
+
+
+def test_chi2_verdict_is_the_chi2_test_at_the_stated_size():
+    """p-value of ||e||^2 / sigma^2 on C - n_eps degrees of freedom, consistent iff p >=
+    alpha: a smaller alpha accepts what a larger one rejects."""
+    system, v = data()
+    v = v + 0.013 * np.array([1, -1, 1, -1, 1, -1, 1, -1, 1.0])  # a zig-zag the model can't fit
+    problem = SteadyProblem(system, M_OBS, v)
+    res = fit(problem, [1.0, 1.0], sigma=0.01)
+    e = v - M_OBS @ solve_steady(system, res.eps).Theta[:, 0]
+    p = stats.chi2.sf(e @ e / 0.01**2, v.size - 2)
+    assert res.verdict.p_value == pytest.approx(p, rel=1e-9)
+    assert res.verdict["dof"] == v.size - 2
+    for alpha in (p / 2, 2 * p):
+        r = fit(problem, [1.0, 1.0], sigma=0.01, alpha=alpha)
+        assert r.verdict.consistent == (p >= alpha)
+        assert r.verdict.alpha == alpha
+
+
+def test_noise_free_data_use_the_force_to_data_rule_without_a_size():
+    system, v = data()
+    res = fit(SteadyProblem(system, M_OBS, v), [1.0, 1.0], formulation="ecfm")
+    assert res.verdict.consistent and res.verdict.p_value is None and res.verdict.alpha is None
+    assert res.verdict["force_to_data"] < 1e-8
+
+
+def test_one_call_shape_for_dynamic_and_replicated_problems():
+    from ecfm_uq.problems.beam import BeamModel
+    from ecfm_uq.problems.burgers import BurgersModel
+
+    m = BurgersModel(n_modes=12, n_steps=15, T=0.6)
+    V = m.true_data([1.75, 1.0])
+    dyn = DynamicInverseProblem(m.system, m.Theta0, m.dt, m.n_steps, m.M_obs, V)
+    res = fit(dyn, [1.6, 0.8], formulation="ecfm", maxiter=200)
+    assert res.success, res.message
+    np.testing.assert_allclose(res.eps, [1.75, 1.0], atol=1e-6)
+    assert res.verdict.consistent and res.verdict.test.startswith("force-to-data")
+    adam = fit(dyn, [1.6, 0.8], method="adam", maxiter=3, options={"lr": 1e-2})
+    assert adam.optimizer == "adam" and adam.nit == 3
+
+    beam = BeamModel()
+    v = beam.sample_data(1.0, 25, rng=np.random.default_rng(0))
+    rep = ReplicatedProblem(beam.system, beam.M_obs, v)
+    res = fit(rep, [0.5], formulation="standard", bounds=[(0.0, 2.0)])
+    assert res.success and res.verdict.alpha == 0.05
+    assert res.verdict.test == "moments z (Bonferroni)" and 0 <= res.verdict.p_value <= 1
+
+
+def test_dynamic_verdict_flags_data_the_model_cannot_explain():
+    from ecfm_uq.problems.burgers import BurgersModel
+
+    m = BurgersModel(n_modes=12, n_steps=15, T=0.6)
+    V = m.true_data([1.75, 1.0])
+    noise = 1e-3 * np.random.default_rng(1).standard_normal(V.shape)
+    consistent = DynamicInverseProblem(m.system, m.Theta0, m.dt, m.n_steps, m.M_obs, V + noise)
+    res = fit(consistent, [1.7, 0.9], sigma=1e-3)
+    assert res.verdict.consistent, res.verdict.message
+    shifted = V + noise + 0.05 * np.sin(np.arange(V.shape[0]))[:, None]
+    wrong = DynamicInverseProblem(m.system, m.Theta0, m.dt, m.n_steps, m.M_obs, shifted)
+    res = fit(wrong, [1.7, 0.9], sigma=1e-3)
+    assert not res.verdict.consistent and res.verdict.p_value < 1e-6
+
+
+def test_aliases_warn_once_and_give_the_fit_answer():
+    from ecfm_uq.inverse import fit_steady
+
+    system, v = data(0.01)
+    fitting_module._WARNED.discard("fit_steady")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        old = fit_steady(system, M_OBS, v, [1.0, 1.0], "standard", sigma=0.01)
+        fit_steady(system, M_OBS, v, [1.0, 1.0], "standard", sigma=0.01)
+    deprecations = [w for w in caught if issubclass(w.category, DeprecationWarning)]
+    assert len(deprecations) == 1 and "fit(SteadyProblem" in str(deprecations[0].message)
+    new = fit(SteadyProblem(system, M_OBS, v), [1.0, 1.0], sigma=0.01)
+    np.testing.assert_array_equal(old.eps, new.eps)
+    np.testing.assert_array_equal(old.eps_cov, new.eps_cov)
+    assert old.status == new.status and old.verdict == new.verdict
+
+
+def test_unknown_options_and_bad_arguments_are_named():
+    system, v = data(0.01)
+    problem = SteadyProblem(system, M_OBS, v)
+    with pytest.raises(TypeError, match="unknown name.*'lr'.*known"):
+        fit(problem, [1.0, 1.0], formulation="noisy-ecfm", sigma=0.01, options={"lr": 0.1})
+    with pytest.raises(ValueError, match="alpha"):
+        fit(problem, [1.0, 1.0], alpha=1.5)
+    with pytest.raises(ValueError, match="tol"):
+        fit(problem, [1.0, 1.0], tol=0.0)
+    with pytest.raises(ValueError, match="maxiter"):
+        fit(problem, [1.0, 1.0], maxiter=0)
+    with pytest.raises(ValueError, match="sigma"):
+        fit(problem, [1.0, 1.0], sigma=-1.0)
+    with pytest.raises(ValueError, match="formulation"):
+        fit(problem, [1.0, 1.0], formulation="penalty")
+    with pytest.raises(ValueError, match="noisy-ecfm.*sigma"):
+        fit(problem, [1.0, 1.0], formulation="noisy-ecfm")
+    with pytest.raises(TypeError, match="SteadyProblem"):
+        fit((system, M_OBS, v), [1.0, 1.0])
+    with pytest.raises(ValueError, match="bounds"):
+        fit(problem, [1.0, 1.0], bounds=[(0, 1)])
+    with pytest.raises(TypeError, match="options"):
+        fit(problem, [1.0, 1.0], options=[("lr", 1)])
