@@ -24,6 +24,7 @@ import numpy as np
 
 from .._validation import as_finite_array, as_operator, check_int, check_positive
 from ..errors import ConvergenceError
+from .status import FitStatus
 
 __all__ = ["PosteriorResult", "sample_posterior", "uniform_box_prior"]
 
@@ -51,9 +52,13 @@ class PosteriorResult:
         Steps discarded (twice the largest tau).
     acceptance : float
         Mean acceptance fraction.
-    converged : bool
-        ``n_steps >= 50 * max(tau)``.
+    success : bool
+        The chain converged: ``n_steps >= 50 * max(tau)`` (``status`` CONVERGED; else
+        MAX_ITERATIONS, with the chain length needed in ``message``).
+    status : FitStatus
     message : str
+    nfev : int
+        Log-posterior evaluations (model solves inside the prior's support).
     """
 
     chain: np.ndarray
@@ -64,8 +69,15 @@ class PosteriorResult:
     ess: np.ndarray
     burn: int
     acceptance: float
-    converged: bool
+    success: bool
     message: str
+    status: FitStatus = FitStatus.CONVERGED
+    nfev: int = 0
+
+    @property
+    def converged(self):
+        """v0.2 name of ``success``."""
+        return self.success
 
 
 def uniform_box_prior(bounds):
@@ -175,11 +187,13 @@ def sample_posterior(
     n_steps = check_int("n_steps", n_steps, minimum=10)
     init_scale = check_positive("init_scale", init_scale)
     opts = dict(solve_options or {})
+    nfev = [0]
 
     def log_post(eps):
         lp = prior(eps)
         if not np.isfinite(lp):
             return -np.inf
+        nfev[0] += 1
         try:
             sol = solve_steady(system, eps, strict=True, **opts)
         except (ConvergenceError, ValueError):
@@ -220,6 +234,8 @@ def sample_posterior(
         ess=n_walkers * (n_steps - burn) / tau,
         burn=burn,
         acceptance=float(np.mean(sampler.acceptance_fraction)),
-        converged=converged,
+        success=converged,
         message=msg,
+        status=FitStatus.CONVERGED if converged else FitStatus.MAX_ITERATIONS,
+        nfev=nfev[0],
     )
