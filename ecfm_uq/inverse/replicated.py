@@ -44,12 +44,9 @@ is solved three ways by :func:`fit_pseudo_likelihood`:
 ``"standard"``
     maximum pseudo-likelihood over :math:`\\epsilon` with :math:`\\lambda = 0`.
 
-Second derivatives of :math:`\\Lambda` are analytic when the system is linear in
-:math:`\\Theta` (only :class:`LinearTerm` and :class:`LoadTerm`, as for the beam): then
-:math:`\\Theta` is affine in :math:`\\lambda` and
-:math:`\\partial^2\\Theta/\\partial\\lambda\\partial\\epsilon` solves
-:math:`J\\,\\Theta_{\\lambda\\epsilon} = -(\\partial J/\\partial\\epsilon)\\Theta_\\lambda`.
-For nonlinear systems they are central differences of the analytic gradient.
+The pieces: sensor moments and :math:`\\Lambda` of given moments in :mod:`.moments`,
+:math:`\\Lambda(\\epsilon, \\lambda)` and its derivatives in :mod:`.pseudo_likelihood`,
+the inner force solve in :mod:`.forces`.
 """
 
 from __future__ import annotations
