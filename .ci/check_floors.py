@@ -32,5 +32,8 @@ bad = [
     if name not in pins or release(pins[name]) != release(floor)
 ]
 if bad or set(pins) - set(floors):
-    sys.exit("min-versions.txt disagrees with pyproject.toml: " + "; ".join(bad or sorted(set(pins) - set(floors))))
+    sys.exit(
+        "min-versions.txt disagrees with pyproject.toml: "
+        + "; ".join(bad or sorted(set(pins) - set(floors)))
+    )
 print(f"floors checked: {', '.join(f'{n} {v}' for n, v in floors.items())}")

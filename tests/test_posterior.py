@@ -74,8 +74,7 @@ def test_bad_input_is_refused():
 
 
 def test_pair_plot(runs, tmp_path):
-    from ecfm_uq.plotting import pair_plot
-    from ecfm_uq.plotting import save_figure
+    from ecfm_uq.plotting import pair_plot, save_figure
 
     lap, post = runs
     fig = pair_plot(post.samples, laplace=(lap.eps, lap.eps_cov), truth=[3.0, -2.0])
