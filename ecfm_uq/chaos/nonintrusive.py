@@ -24,15 +24,14 @@ error; they stop after ``early_stop`` degrees without improvement.
 
 All return the same :class:`~ecfm_uq.chaos.PolynomialChaosExpansion` as the stochastic
 Galerkin solver, with ``.diagnostics`` saying what was done. Model evaluations go through
-:func:`ecfm_uq.mc.monte_carlo` (threads, processes or a ``dask.distributed`` client),
-with a progress bar on request.
+:func:`ecfm_uq.executor.evaluate_samples`, the executor path Monte Carlo uses too
+(threads, processes or a ``dask.distributed`` client), with a progress bar on request.
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-import re
 import time
 import warnings
 
@@ -40,9 +39,10 @@ import numpy as np
 import scipy.linalg as sla
 
 from .._validation import as_finite_array, check_choice, check_int
+from ..executor import NonFiniteOutputError, evaluate_samples
 from ._kernels import legendre_table
 from .basis import ChaosBasis
-from .pce import PolynomialChaosExpansion, _project, as_inputs
+from .pce import PolynomialChaosExpansion, as_inputs, project
 from .quadrature import gauss_legendre, tensor_gauss_legendre
 
 __all__ = ["fit_pce", "sample_design", "smolyak_rule"]
@@ -181,9 +181,7 @@ def smolyak_rule(level, dim, rule="gauss"):
 # model evaluations through the executor path
 # --------------------------------------------------------------------------------------
 def _evaluate(model, x, executor, workers, progress, label):
-    """``model`` at each row of ``x`` through :func:`ecfm_uq.mc.monte_carlo`."""
-    from ..mc import monte_carlo
-
+    """``model`` at each row of ``x`` through :func:`ecfm_uq.executor.evaluate_samples`."""
     if not callable(model):
         raise TypeError(f"`model` must be callable model(x) -> array, got {type(model).__name__}")
     bar, own_bar = None, False
@@ -194,26 +192,20 @@ def _evaluate(model, x, executor, workers, progress, label):
 
         bar, own_bar = tqdm(total=len(x), desc=f"fit_pce ({label})", leave=False), True
     try:
-        return monte_carlo(
+        return evaluate_samples(
             model,
             x,
             executor,
             workers=workers,
             callback=None if bar is None else bar.update,
+            name="model",
         )
-    except ValueError as e:
-        msg = str(e)
-        m = re.search(r"for sample (\d+)", msg)
-        if m:
-            i = int(m.group(1))
-            point = np.array2string(x[i], precision=6)
-            raise ValueError(
-                f"`model` returned NaN or inf at {label} point {i} (x={point}); check the "
-                "model there (a PCE cannot be fitted to non-finite outputs)"
-            ) from e
-        raise ValueError(msg.replace("`fn`", "`model`")) from e
-    except TypeError as e:
-        raise TypeError(str(e).replace("`fn`", "`model`")) from e
+    except NonFiniteOutputError as e:
+        point = np.array2string(x[e.index], precision=6)
+        raise ValueError(
+            f"`model` returned NaN or inf at {label} point {e.index} (x={point}); check the "
+            "model there (a PCE cannot be fitted to non-finite outputs)"
+        ) from e
     finally:
         if own_bar:
             bar.close()
@@ -266,7 +258,7 @@ def _fit_quadrature(model, inputs, order, n_points, index_set, ev):
     basis = ChaosBasis(order, dim, index_set=index_set or "tensor")
     nodes, w = tensor_gauss_legendre(n_points, dim)
     y = ev(inputs.from_germ(nodes), "Gauss")
-    pce = PolynomialChaosExpansion(basis, _project(basis, nodes, w, y), inputs)
+    pce = PolynomialChaosExpansion(basis, project(basis, nodes, w, y), inputs)
     pce.diagnostics.update(n_points=n_points, rule="tensor Gauss-Legendre")
     return pce, len(nodes)
 

@@ -23,7 +23,7 @@ from .._validation import as_finite_array, check_choice, check_int
 from .basis import ChaosBasis
 from .inputs import UniformInputs
 
-__all__ = ["PolynomialChaosExpansion", "as_inputs"]
+__all__ = ["PolynomialChaosExpansion", "as_inputs", "project"]
 
 # Rows of the (n, P) basis matrix formed at once when evaluating many points.
 _EVAL_BLOCK_ENTRIES = 4_000_000
@@ -211,7 +211,7 @@ class PolynomialChaosExpansion:
         vals = poly(**{n: x[:, int(n[1:])] for n in names})
         vals = np.broadcast_to(np.asarray(vals, dtype=float), (*poly.shape, len(w)))
         y = np.moveaxis(vals, -1, 0)
-        return cls(basis, _project(basis, nodes, w, y), inputs)
+        return cls(basis, project(basis, nodes, w, y), inputs)
 
     # -- shapes ------------------------------------------------------------------------
     @property
@@ -577,17 +577,45 @@ class PolynomialChaosExpansion:
         return poly.reshape(self.output_shape)
 
 
-def _project(basis, nodes, weights, y):
-    """Discrete projection :math:`c_k = \\sum_q w_q y_q \\Psi_k(\\omega_q) / n_k`.
+def project(basis, nodes, weights, values):
+    """Pseudo-spectral projection :math:`c_k = \\sum_q w_q y_q \\Psi_k(\\omega_q) / n_k`.
+
+    The one discrete projection of the package: ``fit_pce(method="quadrature")``,
+    :meth:`PolynomialChaosExpansion.from_chaospy` and
+    :func:`ecfm_uq.mc.pseudospectral_projection` all call it.
 
     Parameters
     ----------
-    nodes : (n, dim), weights : (n,), y : (n, *output_shape)
+    basis : ChaosBasis
+        With P terms and :math:`n_k = \\mathbb E[\\Psi_k^2]` (``basis.norms2``).
+    nodes : (n, dim) array_like
+        Germ points of a quadrature rule.
+    weights : (n,) array_like
+        Its probability weights.
+    values : (n, *output_shape) array_like
+        Model outputs at the nodes.
 
     Returns
     -------
     (P, *output_shape) ndarray
+        Exact coefficients when the rule integrates :math:`y\\,\\Psi_k` exactly.
+
+    Examples
+    --------
+    >>> basis = ChaosBasis(2)
+    >>> nodes, w = basis.quadrature(3)
+    >>> project(basis, nodes, w, nodes[:, 0] ** 2).round(6).tolist()  # w^2 = 1/3 + ...
+    [0.333333, 0.288675, 0.074536]
     """
+    if not isinstance(basis, ChaosBasis):
+        raise TypeError(f"`basis` must be a ChaosBasis, got {type(basis).__name__}")
+    weights = as_finite_array("weights", weights, ndim=1)
+    y = as_finite_array("values", values)
+    if y.ndim == 0 or y.shape[0] != len(weights):
+        raise ValueError(
+            f"`values` must have shape (n, *output_shape) with n = {len(weights)} rows, one "
+            f"per node, got {y.shape}"
+        )
     Psi = basis.evaluate(nodes)
     yf = y.reshape(len(weights), -1)
     c = (Psi * weights[:, None]).T @ yf / np.asarray(basis.norms2)[:, None]

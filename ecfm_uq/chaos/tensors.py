@@ -20,7 +20,13 @@ import numpy as np
 
 from .._validation import as_finite_array, check_choice, check_int
 from ..memory import check_allocation
-from ._kernels import triple_1d, triple_dense, triple_sparse
+from ._kernels import (
+    triple_1d,
+    triple_dense,
+    triple_dense_mixed,
+    triple_sparse,
+    triple_sparse_mixed,
+)
 from .basis import ChaosBasis
 
 __all__ = [
@@ -219,6 +225,11 @@ def expectation_tensor(basis, rank, *, sparse=False):
     :math:`|i - j| \\le k \\le i + j`; both the dense zeros and the sparse pattern
     follow from this rule.
 
+    Other germs (``basis.germs``) use their own exact 1-D tables
+    (:meth:`~ecfm_uq.chaos.Germ.triple`: the Hermite closed form, the Jacobi-matrix
+    linearisation for Laguerre and Jacobi); the sparse pattern keeps the triangle rule for
+    every germ and the parity rule for symmetric ones (Legendre, Hermite, Jacobi a = b).
+
     Examples
     --------
     >>> T = expectation_tensor(ChaosBasis(3), 3)
@@ -246,8 +257,10 @@ def expectation_tensor(basis, rank, *, sparse=False):
         )
         return np.diag(np.asarray(basis.norms2, dtype=float))
 
-    t = triple_product_1d(basis.order, basis.normalized)
     alpha = np.ascontiguousarray(basis.indices)
+    if not basis.is_legendre:
+        return _triple_mixed(basis, alpha, sparse)
+    t = triple_product_1d(basis.order, basis.normalized)
     if sparse:
         idx, val = triple_sparse(alpha, t)
         return SparseTensor3(idx, val, (P, P, P))
@@ -259,6 +272,26 @@ def expectation_tensor(basis, rank, *, sparse=False):
     return triple_dense(alpha, t)
 
 
+def _triple_mixed(basis, alpha, sparse):
+    """E[Psi_a Psi_b Psi_c] with one exact 1-D table per germ (Hermite, Laguerre, Jacobi)."""
+    P = basis.size
+    cache = {}
+    for g in basis.germs:
+        if g not in cache:
+            cache[g] = g.triple(basis.order)
+    tables = np.stack([cache[g] for g in basis.germs])
+    if sparse:
+        parity = np.array([g.symmetric for g in basis.germs])
+        idx, val = triple_sparse_mixed(alpha, tables, parity)
+        return SparseTensor3(idx, val, (P, P, P))
+    check_allocation(
+        8.0 * P**3,
+        f"the dense (P, P, P) tensor E[Psi_a Psi_b Psi_c] at P={P}",
+        "pass sparse=True for a SparseTensor3, or lower the chaos `order` or `dim`",
+    )
+    return triple_dense_mixed(alpha, tables)
+
+
 def weighted_gram(basis, g, n_points=None):
     """Germ-weighted Gram matrix :math:`\\mathbb{E}[g(\\omega)\\, \\Psi_k \\Psi_l]`.
 
@@ -268,8 +301,9 @@ def weighted_gram(basis, g, n_points=None):
         The chaos basis, with P terms.
     g : callable or (n,) array_like
         Either a function of the germ, called as ``g(omega)`` with ``omega`` of shape
-        (n,) for ``dim == 1`` and (n, dim) otherwise, returning n finite values; or the
-        values of g at the nodes of ``basis.quadrature(n_points)``, in that order.
+        (n, dim) for every ``dim`` (so ``lambda w: w[:, 0]`` is the first germ whatever
+        the dimension), returning n finite values (shape (n,), or (n, 1)); or the values
+        of g at the nodes of ``basis.quadrature(n_points)``, in that order.
     n_points : int, optional
         Gauss-Legendre nodes per variable. Default as in :meth:`ChaosBasis.quadrature`,
         exact for polynomial g of degree <= order + 2 per variable; raise it for
@@ -304,12 +338,14 @@ def weighted_gram(basis, g, n_points=None):
         "pass a smaller `n_points`, or lower the chaos `order` or `dim`",
     )
     if callable(g):
-        arg = nodes[:, 0] if basis.dim == 1 else nodes
+        arg = nodes
         out = g(arg.copy())
         try:
             vals = np.asarray(out, dtype=float)
         except (TypeError, ValueError) as e:
             raise TypeError(f"`g` must return real numbers, got {type(out).__name__}") from e
+        if vals.shape == (n, 1):
+            vals = vals[:, 0]  # e.g. ``lambda w: w`` for one germ
         if vals.shape != (n,):
             raise ValueError(
                 f"`g` must return an array of shape ({n},) for omega of shape {arg.shape}, "
@@ -392,7 +428,8 @@ class GaussNodes:
     Attributes
     ----------
     nodes, weights : (P,) ndarray
-        Gauss-Legendre nodes on [0, 1] and probability weights.
+        Gauss nodes of the germ (Gauss-Legendre on [0, 1] for the uniform germ) and
+        probability weights.
     Phi : (P, P) ndarray
         ``Phi[k, b]`` = :math:`\\Psi_b(\\omega_k)`; node values of a state ``Theta``
         (N, P) are ``Theta @ Phi.T``.
@@ -406,8 +443,6 @@ class GaussNodes:
     """
 
     def __init__(self, basis):
-        from .quadrature import gauss_legendre
-
         _check_basis(basis)
         if basis.dim != 1 or basis.size != basis.order + 1:
             raise ValueError(
@@ -415,7 +450,7 @@ class GaussNodes:
                 "node-wise form of a multi-germ basis has more nodes than terms"
             )
         P = basis.size
-        self.nodes, self.weights = gauss_legendre(P)
+        self.nodes, self.weights = basis.germs[0].gauss(P)
         self.Phi = basis.evaluate(self.nodes)
         dinv = 1.0 / np.asarray(basis.norms2, dtype=float)
         self.to_nodes = np.ascontiguousarray(dinv[:, None] * self.Phi.T)
