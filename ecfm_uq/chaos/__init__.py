@@ -17,6 +17,7 @@ weighted_gram        E[g(omega) Psi_k Psi_l]
 GaussNodes           a one-germ basis at its P-node Gauss rule (node-wise solvers)
 SparseTensor3        coordinate-form third-order tensor with contractions
 PolynomialChaosExpansion  a PCE as an object: moments, Sobol indices, sampling, chaospy export
+Inputs               any continuous marginals, independent or joined by a Gaussian copula
 UniformInputs        independent uniform inputs on their own ranges, mapped to the germ
 project              pseudo-spectral projection of node values onto the basis
 fit_pce              non-intrusive PCE of a black-box model (quadrature, Smolyak, OLS, LARS)
@@ -24,7 +25,7 @@ fit_pce              non-intrusive PCE of a black-box model (quadrature, Smolyak
 
 from .basis import ChaosBasis
 from .germs import Germ
-from .inputs import UniformInputs
+from .inputs import Inputs, UniformInputs
 from .nonintrusive import fit_pce, sample_design, smolyak_rule
 from .pce import PolynomialChaosExpansion, project
 from .quadrature import gauss_legendre
@@ -41,6 +42,7 @@ __all__ = [
     "ChaosBasis",
     "Germ",
     "PolynomialChaosExpansion",
+    "Inputs",
     "UniformInputs",
     "fit_pce",
     "project",

@@ -2,7 +2,8 @@
 
 One entry point, :func:`fit_pce`, dispatches on ``method`` to
 
-* ``"quadrature"``: pseudo-spectral projection on a tensor Gauss-Legendre rule,
+* ``"quadrature"``: pseudo-spectral projection on a tensor Gauss rule of the germs
+  (Gauss-Legendre for uniform inputs, Gauss-Hermite for normal ones, ...),
   :math:`c_k = \\sum_q w_q\\, y(x_q)\\,\\Psi_k(\\omega_q) / \\mathbb E[\\Psi_k^2]`;
 * ``"smolyak"``: the Smolyak combination of tensor pseudo-spectral projections
   (Conrad & Marzouk 2013), on non-nested Gauss-Legendre rules (``rule="gauss"``, linear
@@ -42,8 +43,9 @@ from .._validation import as_finite_array, check_choice, check_int
 from ..executor import NonFiniteOutputError, evaluate_samples
 from ._kernels import legendre_table
 from .basis import ChaosBasis
+from .germs import as_germs
 from .pce import PolynomialChaosExpansion, as_inputs, project
-from .quadrature import gauss_legendre, tensor_gauss_legendre
+from .quadrature import gauss_legendre
 
 __all__ = ["fit_pce", "sample_design", "smolyak_rule"]
 
@@ -93,6 +95,15 @@ def sample_design(n, dim, design="lhs", seed=None):
         return qmc.Sobol(dim, rng=rng).random(n)
 
 
+def _design_to_germ(u, germs):
+    """Design points in [0, 1]^dim to germ points: each germ's inverse CDF (uniform: as is)."""
+    for d, g in enumerate(germs):
+        if g.family != "legendre":
+            ud = np.clip(u[:, d], np.finfo(float).tiny, 1.0 - np.finfo(float).epsneg)
+            u[:, d] = g.ppf(ud)
+    return u
+
+
 def _clenshaw_curtis(n):
     """Clenshaw-Curtis nodes on [0, 1] and probability weights (exact to degree n - 1)."""
     if n == 1:
@@ -131,7 +142,7 @@ def _smolyak_levels(level, dim):
     return out
 
 
-def smolyak_rule(level, dim, rule="gauss"):
+def smolyak_rule(level, dim, rule="gauss", germs=None):
     """Distinct nodes of a Smolyak sparse grid and the tensor rules that make it.
 
     Parameters
@@ -142,6 +153,9 @@ def smolyak_rule(level, dim, rule="gauss"):
     rule : {"gauss", "clenshaw-curtis"}
         1-D rules: Gauss-Legendre with ``l`` points at level ``l`` (not nested; only the
         midpoint is shared) or Clenshaw-Curtis with :math:`2^{l-1} + 1` points (nested).
+    germs : sequence of Germ, optional
+        The germ of each variable (default uniform). A non-uniform germ uses its own
+        ``l``-point Gauss rule at level ``l`` and needs ``rule="gauss"``.
 
     Returns
     -------
@@ -154,18 +168,32 @@ def smolyak_rule(level, dim, rule="gauss"):
     level = check_int("order", level, minimum=0)
     dim = check_int("dim", dim, minimum=1)
     rule = check_choice("rule", rule, RULES)
-    rules = {l: _rule_1d(rule, l) for l in range(1, level + 2)}
+    germs = as_germs(germs, dim)
+    if rule != "gauss" and any(g.family != "legendre" for g in germs):
+        raise ValueError(
+            f"`rule`={rule!r} (nested Clenshaw-Curtis on [0, 1]) is for uniform inputs; the "
+            f"germs {list(germs)} need rule='gauss' (each germ's own Gauss rule)"
+        )
+    shared = {l: _rule_1d(rule, l) for l in range(1, level + 2)}
+
+    def germ_rule(g, l):
+        if g.family == "legendre":
+            return shared[l]
+        x, w = g.gauss(l)
+        return x, w, l - 1
+
+    rules = [{l: germ_rule(g, l) for l in range(1, level + 2)} for g in germs]
     keys = {}
     all_nodes = []
     parts = []
     for l, coef in _smolyak_levels(level, dim):
         if coef == 0:
             continue
-        grids = np.meshgrid(*[rules[li][0] for li in l], indexing="ij")
+        grids = np.meshgrid(*[rules[d][li][0] for d, li in enumerate(l)], indexing="ij")
         pts = np.stack([g.ravel() for g in grids], axis=1)
         w = np.ones(1)
-        for li in l:
-            w = np.outer(w, rules[li][1]).ravel()
+        for d, li in enumerate(l):
+            w = np.outer(w, rules[d][li][1]).ravel()
         idx = np.empty(len(pts), dtype=np.int64)
         for j, p in enumerate(np.round(pts, 13)):
             key = tuple(p.tolist())
@@ -173,7 +201,7 @@ def smolyak_rule(level, dim, rule="gauss"):
                 keys[key] = len(all_nodes)
                 all_nodes.append(pts[j])
             idx[j] = keys[key]
-        parts.append((coef, l, idx, w, tuple(rules[li][2] for li in l)))
+        parts.append((coef, l, idx, w, tuple(rules[d][li][2] for d, li in enumerate(l))))
     return np.array(all_nodes).reshape(-1, dim), parts
 
 
@@ -255,11 +283,12 @@ def _fit_quadrature(model, inputs, order, n_points, index_set, ev):
     dim = inputs.dim
     order = check_int("order", 3 if order is None else order, minimum=0)
     n_points = order + 1 if n_points is None else check_int("n_points", n_points, minimum=1)
-    basis = ChaosBasis(order, dim, index_set=index_set or "tensor")
-    nodes, w = tensor_gauss_legendre(n_points, dim)
+    basis = ChaosBasis(order, dim, index_set=index_set or "tensor", germ=inputs.germs)
+    nodes, w = basis.quadrature(n_points)
     y = ev(inputs.from_germ(nodes), "Gauss")
     pce = PolynomialChaosExpansion(basis, project(basis, nodes, w, y), inputs)
-    pce.diagnostics.update(n_points=n_points, rule="tensor Gauss-Legendre")
+    rule = "tensor Gauss-Legendre" if basis.is_legendre else "tensor Gauss (germ rules)"
+    pce.diagnostics.update(n_points=n_points, rule=rule)
     return pce, len(nodes)
 
 
@@ -267,17 +296,17 @@ def _fit_smolyak(model, inputs, order, rule, ev):
     dim = inputs.dim
     level = check_int("order", 3 if order is None else order, minimum=0)
     rule = check_choice("rule", rule, RULES)
-    nodes, parts = smolyak_rule(level, dim, rule)
+    nodes, parts = smolyak_rule(level, dim, rule, inputs.germs)
     y = ev(inputs.from_germ(nodes), "sparse-grid")
     out_shape = y.shape[1:]
     # the union of the tensor sets, inside the smallest total-degree basis holding it
     max_total = max(sum(deg) for _, _, _, _, deg in parts)
-    basis = ChaosBasis(max_total, dim, index_set="total")
+    basis = ChaosBasis(max_total, dim, index_set="total", germ=inputs.germs)
     lookup = {tuple(a): k for k, a in enumerate(basis.indices.tolist())}
     c = np.zeros((basis.size, int(np.prod(out_shape, dtype=int))))
     yf = y.reshape(len(nodes), -1)
     for coef, _, idx, w, deg in parts:
-        tb = ChaosBasis(max(deg), dim, index_set="tensor")
+        tb = ChaosBasis(max(deg), dim, index_set="tensor", germ=inputs.germs)
         keep = np.all(tb.indices <= np.array(deg), axis=1)
         Psi = tb.evaluate(nodes[idx])[:, keep]
         ck = (Psi * w[:, None]).T @ yf[idx]
@@ -305,7 +334,7 @@ def _regression_data(model, inputs, n_samples, samples, evaluations, design, see
         name = "samples"
     else:
         n = 2 * P if n_samples is None else check_int("n_samples", n_samples, minimum=1)
-        omega = sample_design(n, dim, design, seed)
+        omega = _design_to_germ(sample_design(n, dim, design, seed), inputs.germs)
         x = inputs.from_germ(omega)
         name = "n_samples"
     if evaluations is not None:
@@ -323,7 +352,7 @@ def _regression_data(model, inputs, n_samples, samples, evaluations, design, see
 def _fit_lstsq(model, inputs, order, index_set, data, ev):
     dim = inputs.dim
     order = check_int("order", 3 if order is None else order, minimum=0)
-    basis = ChaosBasis(order, dim, index_set=index_set or "total")
+    basis = ChaosBasis(order, dim, index_set=index_set or "total", germ=inputs.germs)
     P = basis.size
     omega, x, y, name = data(P)
     n = len(omega)
@@ -427,7 +456,7 @@ def _fit_sparse(model, inputs, order, index_set, data, ev, q_norm, early_stop, s
     if y is None:
         y = ev(x, "regression")
     yf = y.reshape(n, -1)
-    basis = ChaosBasis(order, dim)
+    basis = ChaosBasis(order, dim, germ=inputs.germs)
     Psi = basis.evaluate(omega)
     alpha = np.asarray(basis.indices, dtype=float)
     qn = (np.sum(alpha**q_norm, axis=1)) ** (1.0 / q_norm)
@@ -459,7 +488,7 @@ def _fit_sparse(model, inputs, order, index_set, data, ev, q_norm, early_stop, s
         errors.append(err)
         n_terms.append(len(cols))
     top = max(max(chosen_deg), 1)
-    basis_out = ChaosBasis(top, dim)
+    basis_out = ChaosBasis(top, dim, germ=inputs.germs)
     c = coeffs[: basis_out.size].reshape((basis_out.size, *y.shape[1:]))
     pce = PolynomialChaosExpansion(basis_out, c, inputs)
     shape = y.shape[1:]
@@ -506,8 +535,13 @@ def fit_pce(
         processes (a module-level function or ``functools.partial`` of one). May be
         ``None`` when ``evaluations`` are given.
     inputs : UniformInputs, (dim, 2) bounds or chaospy distribution
-        Independent uniform inputs :math:`x_k \\sim \\mathcal U(a_k, b_k)`; a chaospy
-        joint distribution must be made of ``chaospy.Uniform`` s.
+        Independent uniform inputs :math:`x_k \\sim \\mathcal U(a_k, b_k)` as bounds;
+        any continuous inputs as an :class:`~ecfm_uq.chaos.Inputs` (marginals and an
+        optional Gaussian-copula correlation), a list of scipy.stats frozen distributions,
+        a chaospy distribution (``J``, ``Iid``, ``MvNormal``) or a
+        ``scipy.stats.multivariate_normal``. The design is drawn (and the quadrature rule
+        built) in the germ variables: each input's Askey germ, or standard normals for
+        transformed and dependent inputs.
     method : {"lars", "omp", "lstsq", "quadrature", "smolyak"}
         See the module docstring. Default ``"lars"``.
     order : int, optional
@@ -562,7 +596,7 @@ def fit_pce(
         ``n_samples`` or ``samples``), a model output that is NaN or inf (naming the
         point), outputs of different shapes, ``evaluations`` not matching ``samples``.
     TypeError
-        ``model`` not callable; a non-uniform chaospy distribution.
+        ``model`` not callable; a discrete input distribution.
 
     Examples
     --------

@@ -21,7 +21,7 @@ import scipy.sparse as sp
 
 from .._validation import as_finite_array, check_choice, check_int
 from .basis import ChaosBasis
-from .inputs import UniformInputs
+from .inputs import Inputs, UniformInputs, draw_germs
 
 __all__ = ["PolynomialChaosExpansion", "as_inputs", "project"]
 
@@ -30,22 +30,51 @@ _EVAL_BLOCK_ENTRIES = 4_000_000
 _KINDS = ("interaction", "closed", "total")
 
 
+def _is_distribution(obj):
+    return type(obj).__module__.startswith("chaospy") or (
+        hasattr(obj, "dist") and hasattr(obj, "ppf") and hasattr(obj, "cdf")
+    )
+
+
 def as_inputs(inputs, dim=None):
-    """``None``, a :class:`UniformInputs`, bounds, or a chaospy distribution → inputs.
+    """``None``, :class:`Inputs`, bounds, distributions or a chaospy joint → inputs.
 
     Parameters
     ----------
-    inputs : None, UniformInputs, (dim, 2) array_like or chaospy.Distribution
+    inputs : None, Inputs, UniformInputs, (dim, 2) array_like, chaospy.Distribution,
+        scipy.stats frozen distribution (1-D, or ``multivariate_normal``) or a sequence
+        of 1-D distributions
     dim : int, optional
         Required number of inputs.
     """
-    if inputs is None or isinstance(inputs, UniformInputs):
+    if inputs is None or isinstance(inputs, Inputs):
         out = inputs
     elif type(inputs).__module__.startswith("chaospy"):
-        try:
-            out = UniformInputs.from_chaospy(inputs)
-        except TypeError as e:
-            raise TypeError(str(e).replace("`dist`", "`inputs`")) from e
+        import chaospy
+
+        parts = [inputs] if isinstance(inputs, chaospy.Uniform) else None
+        if parts is None and not isinstance(inputs, chaospy.MvNormal):
+            try:
+                parts = list(inputs)
+            except TypeError:
+                parts = [inputs]
+        if parts is not None and all(isinstance(d, chaospy.Uniform) for d in parts):
+            out = UniformInputs.from_chaospy(inputs)  # the uniform-only path, unchanged
+        else:
+            out = _named(Inputs.from_chaospy, inputs)
+    elif hasattr(inputs, "cov") and hasattr(inputs, "mean") and hasattr(inputs, "rvs"):
+        # scipy.stats.multivariate_normal(mean, cov)
+        from scipy import stats
+
+        mu = np.atleast_1d(np.asarray(inputs.mean, dtype=float))
+        C = np.atleast_2d(np.asarray(inputs.cov, dtype=float))
+        s = np.sqrt(np.diag(C))
+        marg = [stats.norm(m, sk) for m, sk in zip(mu, s, strict=True)]
+        out = _named(Inputs, marg, correlation=C / np.outer(s, s))
+    elif _is_distribution(inputs):
+        out = _named(Inputs, [inputs])
+    elif isinstance(inputs, list | tuple) and inputs and any(_is_distribution(d) for d in inputs):
+        out = _named(Inputs, list(inputs))
     else:
         try:
             out = UniformInputs(inputs)
@@ -54,6 +83,14 @@ def as_inputs(inputs, dim=None):
     if out is not None and dim is not None and out.dim != dim:
         raise ValueError(f"`inputs` has {out.dim} variables but the basis has dim={dim}")
     return out
+
+
+def _named(build, *args, **kwargs):
+    """Build inputs, prefixing errors with the argument name ``inputs``."""
+    try:
+        return build(*args, **kwargs)
+    except (TypeError, ValueError) as e:
+        raise type(e)(f"`inputs`: {e}") from e
 
 
 class PolynomialChaosExpansion:
@@ -67,15 +104,17 @@ class PolynomialChaosExpansion:
         :math:`c_k`, one row per basis term; ``output_shape`` is ``()`` for a scalar
         output, ``(C,)`` for sensors, any shape for a field. (A Galerkin state
         :math:`\\Theta` is ``(N, P)``: pass ``Theta.T`` or use :meth:`from_galerkin`.)
-    inputs : UniformInputs, (dim, 2) bounds or chaospy distribution, optional
-        The model inputs :math:`x_k \\sim \\mathcal U(a_k, b_k)` that the germ stands for
-        (:math:`x = a + (b - a)\\omega`). ``None``: the inputs are the germ itself.
+    inputs : Inputs, UniformInputs, (dim, 2) bounds or distributions, optional
+        The model inputs that the germ stands for, e.g. :math:`x_k \\sim \\mathcal U(a_k,
+        b_k)` with :math:`x = a + (b - a)\\omega`, or any :class:`~ecfm_uq.chaos.Inputs`
+        whose germs are the basis's (``basis.germs == inputs.germs``). ``None``: the
+        inputs are the germ itself.
 
     Attributes
     ----------
     basis : ChaosBasis
     coefficients : (P, *output_shape) ndarray
-    inputs : UniformInputs or None
+    inputs : Inputs, UniformInputs or None
     output_shape : tuple
     diagnostics : dict
         Set by :func:`~ecfm_uq.chaos.fit_pce` (method, evaluations, errors); empty else.
@@ -127,6 +166,11 @@ class PolynomialChaosExpansion:
             )
         self.coefficients = c
         self.inputs = as_inputs(inputs, basis.dim)
+        if self.inputs is not None and tuple(self.inputs.germs) != tuple(basis.germs):
+            raise ValueError(
+                f"`inputs` are expanded on the germs {list(self.inputs.germs)} but the basis "
+                f"has {list(basis.germs)}; build the basis with germ=inputs.germs"
+            )
         self.diagnostics = {}
 
     # -- construction ------------------------------------------------------------------
@@ -205,7 +249,8 @@ class PolynomialChaosExpansion:
             )
         degree = int(poly.exponents.sum(axis=1).max()) if poly.exponents.size else 0
         order = degree if order is None else check_int("order", order, minimum=0)
-        basis = ChaosBasis(order, dim, index_set=index_set)
+        germ = None if inputs is None else inputs.germs
+        basis = ChaosBasis(order, dim, index_set=index_set, germ=germ)
         nodes, w = basis.quadrature(max(order, degree) + 1)
         x = nodes if inputs is None else inputs.from_germ(nodes)
         vals = poly(**{n: x[:, int(n[1:])] for n in names})
@@ -320,7 +365,37 @@ class PolynomialChaosExpansion:
 
     @property
     def _support(self):
+        if self.inputs is not None and self.inputs.dependent:
+            raise ValueError(
+                "Sobol indices are not defined for dependent `inputs` (a Gaussian copula): "
+                "the variance of y has no unique split among correlated inputs, and the "
+                "indices of the chaos variables are those of independent normal scores "
+                "(the inputs decorrelated in one order), not of the inputs. Mean, variance, "
+                "quantiles and densities are exact; for sensitivities fit with independent "
+                "inputs or use sobol_germ()"
+            )
         return np.asarray(self.basis.indices) > 0
+
+    def sobol_germ(self, kind="first", zero_variance="raise"):
+        """First-order or total indices of the chaos (germ) variables, shape (dim, ...).
+
+        For independent inputs these are :meth:`first_order` and :meth:`total`. For
+        dependent inputs they are the indices of the independent standard normals
+        :math:`\\xi = L^{-1}z` behind the Gaussian copula, variable k being the part of
+        normal score :math:`z_k` not explained by :math:`z_0..z_{k-1}` (Cholesky order):
+        the "full and independent" indices of Mara & Tarantola (2012) for one ordering,
+        not Sobol indices of the inputs.
+
+        Parameters
+        ----------
+        kind : {"first", "total"}
+        zero_variance : "raise" or float
+        """
+        kind = check_choice("kind", kind, ("first", "total"))
+        s = np.asarray(self.basis.indices) > 0
+        if kind == "first":
+            s = s & (s.sum(axis=1) == 1)[:, None]
+        return self._normalize(s.T.astype(float) @ self._contributions(), zero_variance)
 
     def first_order(self, zero_variance="raise"):
         """First-order Sobol indices :math:`S_i`, shape ``(dim, *output_shape)``.
@@ -471,7 +546,7 @@ class PolynomialChaosExpansion:
         x : (n, dim) ndarray, only with ``return_inputs``
         """
         n = check_int("n", n, minimum=1)
-        omega = np.random.default_rng(seed).random((n, self.dim))
+        omega = draw_germs(self.basis.germs, n, seed)
         y = self.evaluate(omega)
         if not return_inputs:
             return y
@@ -538,7 +613,10 @@ class PolynomialChaosExpansion:
 
         The variables ``q0, ..., q{d-1}`` are the inputs on their own ranges (the germ
         when ``inputs`` is ``None``), so ``chaospy.E(poly, inputs.to_chaospy())`` and
-        ``chaospy.Sens_m`` work on it, and ``poly(*x.T)`` evaluates it.
+        ``chaospy.Sens_m`` work on it, and ``poly(*x.T)`` evaluates it. Inputs must be
+        affine images of their germs (independent uniform, normal, gamma or beta); a
+        lognormal or other transformed input makes the expansion non-polynomial in it
+        (ValueError).
 
         Returns
         -------
@@ -551,13 +629,40 @@ class PolynomialChaosExpansion:
         """
         import numpoly
 
+        if self.inputs is not None and not self.inputs.affine:
+            raise ValueError(
+                "to_chaospy needs inputs that are affine images of their germs (uniform, "
+                f"normal, gamma, beta, independent); these are {self.inputs!r}, so the "
+                "expansion is not a polynomial in the inputs. Evaluate it with pce(x), or "
+                "export it in the germ variables: PolynomialChaosExpansion(pce.basis, "
+                "pce.coefficients).to_chaospy()"
+            )
         q = numpoly.variable(self.dim)
         if self.dim == 1:
             q = numpoly.polynomial([q])
         p = self.basis.order
         univariate = []
         for d in range(self.dim):
-            a, b = (0.0, 1.0) if self.inputs is None else self.inputs.bounds[d]
+            germ = self.basis.germs[d]
+            if germ.family != "legendre":
+                m_d = None if self.inputs is None else self.inputs.marginals[d]
+                g = q[d] if m_d is None else (q[d] - m_d.loc) / m_d.scale
+                ra, rb = germ.recurrence(p + 1)
+                sb = np.sqrt(rb)
+                P = [numpoly.polynomial(1.0)]
+                prev = numpoly.polynomial(0.0)
+                for m in range(p):
+                    P.append(((g - ra[m]) * P[m] - sb[m] * prev) / sb[m + 1])
+                    prev = P[m]
+                univariate.append(P)
+                continue
+            if self.inputs is None:
+                a, b = 0.0, 1.0
+            elif isinstance(self.inputs, UniformInputs):
+                a, b = self.inputs.bounds[d]
+            else:
+                m_d = self.inputs.marginals[d]
+                a, b = m_d.loc, m_d.loc + m_d.scale
             t = 2.0 * (q[d] - a) / (b - a) - 1.0
             P = [numpoly.polynomial(1.0), t]
             for m in range(1, p):
