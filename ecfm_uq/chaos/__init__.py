@@ -27,7 +27,8 @@ from .basis import ChaosBasis
 from .germs import Germ
 from .inputs import Inputs, UniformInputs
 from .nonintrusive import fit_pce, sample_design, smolyak_rule
-from .pce import PolynomialChaosExpansion, project
+from .pce import PolynomialChaosExpansion
+from .projection import project
 from .quadrature import gauss_legendre
 from .tensors import (
     GaussNodes,

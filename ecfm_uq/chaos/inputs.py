@@ -29,7 +29,7 @@ from .._validation import as_finite_array
 from .germs import LEGENDRE, Germ
 from .marginals import as_marginal
 
-__all__ = ["Inputs", "UniformInputs"]
+__all__ = ["Inputs", "UniformInputs", "as_inputs", "draw_germs"]
 
 
 class Inputs:
@@ -432,3 +432,66 @@ class UniformInputs(Inputs):
         import chaospy
 
         return chaospy.J(*[chaospy.Uniform(float(a), float(b)) for a, b in self.bounds])
+
+
+def _is_distribution(obj):
+    return type(obj).__module__.startswith("chaospy") or (
+        hasattr(obj, "dist") and hasattr(obj, "ppf") and hasattr(obj, "cdf")
+    )
+
+
+def as_inputs(inputs, dim=None):
+    """``None``, :class:`Inputs`, bounds, distributions or a chaospy joint → inputs.
+
+    Parameters
+    ----------
+    inputs : None, Inputs, UniformInputs, (dim, 2) array_like, chaospy.Distribution,
+        scipy.stats frozen distribution (1-D, or ``multivariate_normal``) or a sequence
+        of 1-D distributions
+    dim : int, optional
+        Required number of inputs.
+    """
+    if inputs is None or isinstance(inputs, Inputs):
+        out = inputs
+    elif type(inputs).__module__.startswith("chaospy"):
+        import chaospy
+
+        parts = [inputs] if isinstance(inputs, chaospy.Uniform) else None
+        if parts is None and not isinstance(inputs, chaospy.MvNormal):
+            try:
+                parts = list(inputs)
+            except TypeError:
+                parts = [inputs]
+        if parts is not None and all(isinstance(d, chaospy.Uniform) for d in parts):
+            out = UniformInputs.from_chaospy(inputs)  # the uniform-only path, unchanged
+        else:
+            out = _named(Inputs.from_chaospy, inputs)
+    elif hasattr(inputs, "cov") and hasattr(inputs, "mean") and hasattr(inputs, "rvs"):
+        # scipy.stats.multivariate_normal(mean, cov)
+        from scipy import stats
+
+        mu = np.atleast_1d(np.asarray(inputs.mean, dtype=float))
+        C = np.atleast_2d(np.asarray(inputs.cov, dtype=float))
+        s = np.sqrt(np.diag(C))
+        marg = [stats.norm(m, sk) for m, sk in zip(mu, s, strict=True)]
+        out = _named(Inputs, marg, correlation=C / np.outer(s, s))
+    elif _is_distribution(inputs):
+        out = _named(Inputs, [inputs])
+    elif isinstance(inputs, list | tuple) and inputs and any(_is_distribution(d) for d in inputs):
+        out = _named(Inputs, list(inputs))
+    else:
+        try:
+            out = UniformInputs(inputs)
+        except ValueError as e:
+            raise ValueError(f"`inputs`: {e}") from e
+    if out is not None and dim is not None and out.dim != dim:
+        raise ValueError(f"`inputs` has {out.dim} variables but the basis has dim={dim}")
+    return out
+
+
+def _named(build, *args, **kwargs):
+    """Build inputs, prefixing errors with the argument name ``inputs``."""
+    try:
+        return build(*args, **kwargs)
+    except (TypeError, ValueError) as e:
+        raise type(e)(f"`inputs`: {e}") from e

@@ -44,7 +44,9 @@ from ..executor import NonFiniteOutputError, evaluate_samples
 from ._kernels import legendre_table
 from .basis import ChaosBasis
 from .germs import as_germs
-from .pce import PolynomialChaosExpansion, as_inputs, project
+from .inputs import as_inputs
+from .pce import PolynomialChaosExpansion
+from .projection import project
 from .quadrature import gauss_legendre
 
 __all__ = ["fit_pce", "sample_design", "smolyak_rule"]

@@ -21,76 +21,14 @@ import scipy.sparse as sp
 
 from .._validation import as_finite_array, check_choice, check_int
 from .basis import ChaosBasis
-from .inputs import Inputs, UniformInputs, draw_germs
+from .inputs import UniformInputs, as_inputs, draw_germs
+from .projection import project
 
-__all__ = ["PolynomialChaosExpansion", "as_inputs", "project"]
+__all__ = ["PolynomialChaosExpansion"]
 
 # Rows of the (n, P) basis matrix formed at once when evaluating many points.
 _EVAL_BLOCK_ENTRIES = 4_000_000
 _KINDS = ("interaction", "closed", "total")
-
-
-def _is_distribution(obj):
-    return type(obj).__module__.startswith("chaospy") or (
-        hasattr(obj, "dist") and hasattr(obj, "ppf") and hasattr(obj, "cdf")
-    )
-
-
-def as_inputs(inputs, dim=None):
-    """``None``, :class:`Inputs`, bounds, distributions or a chaospy joint → inputs.
-
-    Parameters
-    ----------
-    inputs : None, Inputs, UniformInputs, (dim, 2) array_like, chaospy.Distribution,
-        scipy.stats frozen distribution (1-D, or ``multivariate_normal``) or a sequence
-        of 1-D distributions
-    dim : int, optional
-        Required number of inputs.
-    """
-    if inputs is None or isinstance(inputs, Inputs):
-        out = inputs
-    elif type(inputs).__module__.startswith("chaospy"):
-        import chaospy
-
-        parts = [inputs] if isinstance(inputs, chaospy.Uniform) else None
-        if parts is None and not isinstance(inputs, chaospy.MvNormal):
-            try:
-                parts = list(inputs)
-            except TypeError:
-                parts = [inputs]
-        if parts is not None and all(isinstance(d, chaospy.Uniform) for d in parts):
-            out = UniformInputs.from_chaospy(inputs)  # the uniform-only path, unchanged
-        else:
-            out = _named(Inputs.from_chaospy, inputs)
-    elif hasattr(inputs, "cov") and hasattr(inputs, "mean") and hasattr(inputs, "rvs"):
-        # scipy.stats.multivariate_normal(mean, cov)
-        from scipy import stats
-
-        mu = np.atleast_1d(np.asarray(inputs.mean, dtype=float))
-        C = np.atleast_2d(np.asarray(inputs.cov, dtype=float))
-        s = np.sqrt(np.diag(C))
-        marg = [stats.norm(m, sk) for m, sk in zip(mu, s, strict=True)]
-        out = _named(Inputs, marg, correlation=C / np.outer(s, s))
-    elif _is_distribution(inputs):
-        out = _named(Inputs, [inputs])
-    elif isinstance(inputs, list | tuple) and inputs and any(_is_distribution(d) for d in inputs):
-        out = _named(Inputs, list(inputs))
-    else:
-        try:
-            out = UniformInputs(inputs)
-        except ValueError as e:
-            raise ValueError(f"`inputs`: {e}") from e
-    if out is not None and dim is not None and out.dim != dim:
-        raise ValueError(f"`inputs` has {out.dim} variables but the basis has dim={dim}")
-    return out
-
-
-def _named(build, *args, **kwargs):
-    """Build inputs, prefixing errors with the argument name ``inputs``."""
-    try:
-        return build(*args, **kwargs)
-    except (TypeError, ValueError) as e:
-        raise type(e)(f"`inputs`: {e}") from e
 
 
 class PolynomialChaosExpansion:
@@ -680,48 +618,3 @@ class PolynomialChaosExpansion:
         c = self._flat()
         poly = numpoly.sum(psi.reshape(-1, 1) * c, axis=0)
         return poly.reshape(self.output_shape)
-
-
-def project(basis, nodes, weights, values):
-    """Pseudo-spectral projection :math:`c_k = \\sum_q w_q y_q \\Psi_k(\\omega_q) / n_k`.
-
-    The one discrete projection of the package: ``fit_pce(method="quadrature")``,
-    :meth:`PolynomialChaosExpansion.from_chaospy` and
-    :func:`ecfm_uq.mc.pseudospectral_projection` all call it.
-
-    Parameters
-    ----------
-    basis : ChaosBasis
-        With P terms and :math:`n_k = \\mathbb E[\\Psi_k^2]` (``basis.norms2``).
-    nodes : (n, dim) array_like
-        Germ points of a quadrature rule.
-    weights : (n,) array_like
-        Its probability weights.
-    values : (n, *output_shape) array_like
-        Model outputs at the nodes.
-
-    Returns
-    -------
-    (P, *output_shape) ndarray
-        Exact coefficients when the rule integrates :math:`y\\,\\Psi_k` exactly.
-
-    Examples
-    --------
-    >>> basis = ChaosBasis(2)
-    >>> nodes, w = basis.quadrature(3)
-    >>> project(basis, nodes, w, nodes[:, 0] ** 2).round(6).tolist()  # w^2 = 1/3 + ...
-    [0.333333, 0.288675, 0.074536]
-    """
-    if not isinstance(basis, ChaosBasis):
-        raise TypeError(f"`basis` must be a ChaosBasis, got {type(basis).__name__}")
-    weights = as_finite_array("weights", weights, ndim=1)
-    y = as_finite_array("values", values)
-    if y.ndim == 0 or y.shape[0] != len(weights):
-        raise ValueError(
-            f"`values` must have shape (n, *output_shape) with n = {len(weights)} rows, one "
-            f"per node, got {y.shape}"
-        )
-    Psi = basis.evaluate(nodes)
-    yf = y.reshape(len(weights), -1)
-    c = (Psi * weights[:, None]).T @ yf / np.asarray(basis.norms2)[:, None]
-    return c.reshape((basis.size, *y.shape[1:]))
