@@ -48,16 +48,13 @@ from .inputs import as_inputs
 from .pce import PolynomialChaosExpansion
 from .projection import project
 from .quadrature import gauss_legendre
+from .sparse import _fit_sparse, _loo_nested  # noqa: F401  (tests import _loo_nested here)
 
 __all__ = ["fit_pce", "sample_design", "smolyak_rule"]
 
 METHODS = ("quadrature", "smolyak", "lstsq", "lars", "omp")
 DESIGNS = ("lhs", "sobol", "halton", "random")
 RULES = ("gauss", "clenshaw-curtis")
-# Sparse regression: largest candidate basis per model run, and the highest degree tried
-# (the degree loop stops earlier when the corrected LOO error stops improving).
-_CANDIDATES_PER_RUN = 10
-_MAX_DEGREE = 30
 
 
 # --------------------------------------------------------------------------------------
@@ -242,43 +239,6 @@ def _evaluate(model, x, executor, workers, progress, label):
 
 
 # --------------------------------------------------------------------------------------
-# leave-one-out errors
-# --------------------------------------------------------------------------------------
-def _loo_nested(Q, R, y):
-    """Corrected LOO errors of the OLS fits on the first k = 1..s columns, all at once.
-
-    With :math:`X = QR` (economic), the fit on the first k columns uses :math:`Q_k`, so the
-    hat diagonals and residuals of all nested fits are cumulative sums:
-    :math:`h^{(k)}_i = \\sum_{j<k} Q_{ij}^2`, :math:`r^{(k)} = y - \\sum_{j<k} Q_j (Q_j^T y)`.
-    The LOO residual is :math:`r_i / (1 - h_i)` (no refits), normalised by the sample
-    variance, and multiplied by Chapelle's correction (Blatman & Sudret 2011)
-
-    .. math:: T(k, n) = \\frac{n}{n - k}\\Bigl(1 + \\operatorname{tr}(C^{-1})/n\\Bigr),
-              \\qquad C = X_k^T X_k / n,\\quad \\operatorname{tr}(C^{-1})/n = \\|R_k^{-1}\\|_F^2.
-
-    Returns
-    -------
-    loo, corrected : (s,) ndarray
-    """
-    n, s = Q.shape
-    z = Q.T @ y
-    fitted = np.cumsum(Q * z[None, :], axis=1)
-    h = np.cumsum(Q**2, axis=1)
-    resid = y[:, None] - fitted
-    one_h = 1.0 - h
-    with np.errstate(divide="ignore", invalid="ignore"):
-        e = np.where(one_h > 1e-10, resid / one_h, np.inf)
-    var = np.var(y) if np.var(y) > 0 else 1.0
-    loo = np.mean(e**2, axis=0) / var
-    Rinv = sla.solve_triangular(R, np.eye(s))
-    trace = np.cumsum(np.sum(np.triu(Rinv) ** 2, axis=0))
-    k = np.arange(1, s + 1)
-    with np.errstate(divide="ignore"):
-        T = np.where(k < n, n / np.maximum(n - k, 1) * (1.0 + trace), np.inf)
-    return loo, loo * T
-
-
-# --------------------------------------------------------------------------------------
 # methods
 # --------------------------------------------------------------------------------------
 def _fit_quadrature(model, inputs, order, n_points, index_set, ev):
@@ -388,118 +348,6 @@ def _fit_lstsq(model, inputs, order, index_set, data, ev):
         design=None if name == "samples" else data.design,
         loo_error=loo.reshape(y.shape[1:]),
         corrected_loo_error=(loo * corr).reshape(y.shape[1:]),
-    )
-    return pce, n
-
-
-def _path_order(X, y, max_steps, solver):
-    """Order in which the columns of ``X`` enter a LARS or OMP path (nested active sets)."""
-    from sklearn.exceptions import ConvergenceWarning
-    from sklearn.linear_model import lars_path, orthogonal_mp
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        warnings.simplefilter("ignore", RuntimeWarning)
-        if solver == "lars":
-            _, active, _ = lars_path(X, y, method="lar", max_iter=max_steps, return_path=False)
-            return list(active)[:max_steps]
-        path = orthogonal_mp(X, y, n_nonzero_coefs=max_steps, return_path=True)
-    path = path.reshape(X.shape[1], -1)
-    # OMP only adds: the first nonzero step of each column gives its entry order
-    nz = path != 0
-    first = np.where(nz.any(axis=1), np.argmax(nz, axis=1), path.shape[1])
-    entered = np.flatnonzero(first < path.shape[1])
-    return entered[np.argsort(first[entered], kind="stable")].tolist()
-
-
-def _sparse_select(Psi, y, candidates, n, solver):
-    """Hybrid LARS/OMP on the candidate columns: (columns, coefficients, corrected LOO).
-
-    The path is computed on centred, unit-norm candidate columns (the constant term is
-    always kept); every nested active set along it is then refitted by OLS, and the one
-    with the smallest corrected leave-one-out error wins (Blatman & Sudret 2011).
-    """
-    X = Psi[:, candidates]
-    Xc = X - X.mean(axis=0)
-    scale = np.linalg.norm(Xc, axis=0)
-    scale[scale == 0] = 1.0
-    # beyond n / 2 terms the LOO correction factor exceeds 2: such fits never win
-    max_steps = min(len(candidates), max(n // 2, 2))
-    active = _path_order(Xc / scale, y - y.mean(), max_steps, solver)
-    cols = [0] + [int(candidates[j]) for j in active]
-    Q, R = sla.qr(Psi[:, cols], mode="economic")
-    d = np.abs(np.diag(R))
-    # stop at the first column that is numerically dependent on the earlier ones
-    bad = np.flatnonzero(d < 1e-10 * d[0])
-    s = int(bad[0]) if bad.size else len(cols)
-    Q, R, cols = Q[:, :s], R[:s, :s], cols[:s]
-    _, corrected = _loo_nested(Q, R, y)
-    k = int(np.argmin(corrected)) + 1
-    coef = sla.solve_triangular(R[:k, :k], Q[:, :k].T @ y)
-    return cols[:k], coef, float(corrected[k - 1])
-
-
-def _fit_sparse(model, inputs, order, index_set, data, ev, q_norm, early_stop, solver):
-    dim = inputs.dim
-    if index_set not in (None, "total"):
-        raise ValueError(
-            f"`index_set` must be 'total' for method={solver!r} (candidate sets are graded)"
-        )
-    omega, x, y, name = data(None)
-    n = len(omega)
-    if n < 4:
-        raise ValueError(f"too few regression samples: `{name}` gives {n} points; pass at least 4")
-    if order is None:
-        # candidate degrees while the candidate set stays below _CANDIDATES_PER_RUN * n
-        order = 1
-        while math.comb(order + 1 + dim, dim) <= _CANDIDATES_PER_RUN * n and order < _MAX_DEGREE:
-            order += 1
-    order = check_int("order", order, minimum=1)
-    if y is None:
-        y = ev(x, "regression")
-    yf = y.reshape(n, -1)
-    basis = ChaosBasis(order, dim, germ=inputs.germs)
-    Psi = basis.evaluate(omega)
-    alpha = np.asarray(basis.indices, dtype=float)
-    qn = (np.sum(alpha**q_norm, axis=1)) ** (1.0 / q_norm)
-    coeffs = np.zeros((basis.size, yf.shape[1]))
-    chosen_deg, errors, n_terms = [], [], []
-    for j in range(yf.shape[1]):
-        if np.all(yf[:, j] == yf[0, j]):
-            # a constant output component: the mean term alone, exactly
-            coeffs[0, j] = yf[0, j]
-            chosen_deg.append(0)
-            errors.append(0.0)
-            n_terms.append(1)
-            continue
-        best = None
-        worse = 0
-        for p in range(1, order + 1):
-            candidates = np.flatnonzero((qn <= p + 1e-12) & (qn > 0))
-            cols, coef, err = _sparse_select(Psi, yf[:, j], candidates, n, solver)
-            if best is None or err < best[2]:
-                best = (cols, coef, err, p)
-                worse = 0
-            else:
-                worse += 1
-                if worse >= early_stop:
-                    break
-        cols, coef, err, p = best
-        coeffs[cols, j] = coef
-        chosen_deg.append(p)
-        errors.append(err)
-        n_terms.append(len(cols))
-    top = max(max(chosen_deg), 1)
-    basis_out = ChaosBasis(top, dim, germ=inputs.germs)
-    c = coeffs[: basis_out.size].reshape((basis_out.size, *y.shape[1:]))
-    pce = PolynomialChaosExpansion(basis_out, c, inputs)
-    shape = y.shape[1:]
-    pce.diagnostics.update(
-        design=None if name == "samples" else data.design,
-        degree=np.array(chosen_deg).reshape(shape),
-        n_terms=np.array(n_terms).reshape(shape),
-        corrected_loo_error=np.array(errors).reshape(shape),
-        q_norm=q_norm,
     )
     return pce, n
 
