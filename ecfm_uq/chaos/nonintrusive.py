@@ -370,6 +370,8 @@ def fit_pce(
     rule="gauss",
     q_norm=1.0,
     early_stop=2,
+    compress=None,
+    compress_tol=1e-6,
     executor=None,
     workers=1,
     seed=None,
@@ -421,6 +423,16 @@ def fit_pce(
         (1 = total degree; smaller keeps fewer interactions).
     early_stop : int
         Sparse methods: stop raising the degree after this many degrees without improvement.
+    compress : bool, optional
+        Sparse methods on a field output: select on the leading principal components of
+        the evaluations instead of on every component (PCA-PCE, Blatman & Sudret 2013),
+        so a 10 000-value field costs about what a scalar does. Default: for outputs of
+        more than 64 components. ``diagnostics`` then holds ``n_components``,
+        ``compression_error`` (per output component, its discarded variance over its
+        variance) beside ``corrected_loo_error`` (per component, the scores' errors
+        mapped onto it plus the compression's).
+    compress_tol : float
+        Largest share of any component's variance the compression may discard.
     executor : object with ``map``, optional
         As in :func:`ecfm_uq.mc.monte_carlo`: a ``ThreadPoolExecutor``,
         ``ProcessPoolExecutor`` or ``dask.distributed.Client``.
@@ -501,8 +513,22 @@ def fit_pce(
         if isinstance(q_norm, bool) or not 0 < float(q_norm) <= 1:
             raise ValueError(f"`q_norm` must lie in (0, 1], got {q_norm!r}")
         early_stop = check_int("early_stop", early_stop, minimum=1)
+        if compress is not None and not isinstance(compress, bool | np.bool_):
+            raise TypeError(f"`compress` must be None, True or False, got {compress!r}")
+        if isinstance(compress_tol, bool) or not 0 <= float(compress_tol) < 1:
+            raise ValueError(f"`compress_tol` must lie in [0, 1), got {compress_tol!r}")
         pce, n_eval = _fit_sparse(
-            model, inputs, order, index_set, data, ev, float(q_norm), early_stop, method
+            model,
+            inputs,
+            order,
+            index_set,
+            data,
+            ev,
+            float(q_norm),
+            early_stop,
+            method,
+            compress,
+            float(compress_tol),
         )
     pce.diagnostics.update(
         method=method,

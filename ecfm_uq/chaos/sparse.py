@@ -25,12 +25,14 @@ from .._validation import check_int
 from .basis import ChaosBasis
 from .pce import PolynomialChaosExpansion
 
-__all__ = []
+__all__ = ["compress_outputs"]
 
 # Sparse regression: largest candidate basis per model run, and the highest degree tried
 # (the degree loop stops earlier when the corrected LOO error stops improving).
 _CANDIDATES_PER_RUN = 10
 _MAX_DEGREE = 30
+# Field outputs: above this many components the evaluations are compressed by default.
+_COMPRESS_ABOVE = 64
 
 
 # --------------------------------------------------------------------------------------
@@ -117,7 +119,82 @@ def _sparse_select(Psi, y, candidates, n, solver):
     return cols[:k], coef, float(corrected[k - 1])
 
 
-def _fit_sparse(model, inputs, order, index_set, data, ev, q_norm, early_stop, solver):
+def _select_columns(Psi, Y, qn, order, n, solver, early_stop):
+    """Degree-adaptive sparse selection for each column of Y (n, m) on the candidates Psi."""
+    coeffs = np.zeros((Psi.shape[1], Y.shape[1]))
+    chosen_deg, errors, n_terms = [], [], []
+    for j in range(Y.shape[1]):
+        if np.all(Y[:, j] == Y[0, j]):
+            # a constant output component: the mean term alone, exactly
+            coeffs[0, j] = Y[0, j]
+            chosen_deg.append(0)
+            errors.append(0.0)
+            n_terms.append(1)
+            continue
+        best = None
+        worse = 0
+        for p in range(1, order + 1):
+            candidates = np.flatnonzero((qn <= p + 1e-12) & (qn > 0))
+            cols, coef, err = _sparse_select(Psi, Y[:, j], candidates, n, solver)
+            if best is None or err < best[2]:
+                best = (cols, coef, err, p)
+                worse = 0
+            else:
+                worse += 1
+                if worse >= early_stop:
+                    break
+        cols, coef, err, p = best
+        coeffs[cols, j] = coef
+        chosen_deg.append(p)
+        errors.append(err)
+        n_terms.append(len(cols))
+    return coeffs, np.array(chosen_deg), np.array(errors), np.array(n_terms)
+
+
+def compress_outputs(Y, tol):
+    """Principal components of the evaluations, enough for every component to ``tol``.
+
+    Parameters
+    ----------
+    Y : (n, m) ndarray
+        Evaluations, one row per run.
+    tol : float
+        Largest discarded share of any component's own variance.
+
+    Returns
+    -------
+    Z : (n, K) ndarray
+        Scores :math:`U_K S_K` (centred columns).
+    V : (K, m) ndarray
+        Principal directions, :math:`Y \\approx \\bar y + Z V`.
+    ybar : (m,) ndarray
+    error : (m,) ndarray
+        Discarded variance of each component over its variance (0 for a constant one).
+
+    Notes
+    -----
+    With :math:`Y - \\bar y = USV^T`, component m's variance is
+    :math:`\\sum_j S_j^2 V_{jm}^2`; keeping K directions discards
+    :math:`\\sum_{j \\ge K} S_j^2 V_{jm}^2` of it, exactly.
+    """
+    ybar = Y.mean(axis=0)
+    Yc = Y - ybar
+    U, S, Vt = np.linalg.svd(Yc, full_matrices=False)
+    energy = S[:, None] ** 2 * Vt**2  # (r, m): component m's variance along direction j
+    total = energy.sum(axis=0)
+    scale = np.maximum(np.abs(ybar), np.sqrt(total / len(Y)))
+    const = total <= (1e-13 * scale) ** 2 * len(Y)
+    tail = np.cumsum(energy[::-1], axis=0)[::-1]  # tail[k] = discarded when keeping k
+    rel = np.where(const, 0.0, tail / np.where(const, 1.0, total))
+    rel = np.vstack([rel, np.zeros((1, rel.shape[1]))])
+    ok = np.flatnonzero(rel.max(axis=1) <= tol)
+    K = max(int(ok[0]) if ok.size else len(S), 1)
+    return U[:, :K] * S[:K], Vt[:K], ybar, rel[K]
+
+
+def _fit_sparse(
+    model, inputs, order, index_set, data, ev, q_norm, early_stop, solver, compress, tol
+):
     dim = inputs.dim
     if index_set not in (None, "total"):
         raise ValueError(
@@ -140,43 +217,53 @@ def _fit_sparse(model, inputs, order, index_set, data, ev, q_norm, early_stop, s
     Psi = basis.evaluate(omega)
     alpha = np.asarray(basis.indices, dtype=float)
     qn = (np.sum(alpha**q_norm, axis=1)) ** (1.0 / q_norm)
-    coeffs = np.zeros((basis.size, yf.shape[1]))
-    chosen_deg, errors, n_terms = [], [], []
-    for j in range(yf.shape[1]):
-        if np.all(yf[:, j] == yf[0, j]):
-            # a constant output component: the mean term alone, exactly
-            coeffs[0, j] = yf[0, j]
-            chosen_deg.append(0)
-            errors.append(0.0)
-            n_terms.append(1)
-            continue
-        best = None
-        worse = 0
-        for p in range(1, order + 1):
-            candidates = np.flatnonzero((qn <= p + 1e-12) & (qn > 0))
-            cols, coef, err = _sparse_select(Psi, yf[:, j], candidates, n, solver)
-            if best is None or err < best[2]:
-                best = (cols, coef, err, p)
-                worse = 0
-            else:
-                worse += 1
-                if worse >= early_stop:
-                    break
-        cols, coef, err, p = best
-        coeffs[cols, j] = coef
-        chosen_deg.append(p)
-        errors.append(err)
-        n_terms.append(len(cols))
+    m = yf.shape[1]
+    shape = y.shape[1:]
+    extra = {}
+    if compress is None:
+        compress = m > _COMPRESS_ABOVE
+    if compress:
+        Z, V, ybar, comp_err = compress_outputs(yf, tol)
+        cz, deg, err, nt = _select_columns(Psi, Z, qn, order, n, solver, early_stop)
+        # only the terms up to the highest selected degree are nonzero (graded order)
+        P_top = ChaosBasis(max(int(deg.max()), 1), dim).size
+        coeffs = cz[:P_top] @ V
+        coeffs[0] += ybar
+        chosen_deg = deg
+        # component LOO error: the scores' (relative to their variances), mapped through
+        # V onto each component's variance, plus what the compression discarded
+        var_z = Z.var(axis=0)
+        var_y = np.maximum(yf.var(axis=0), np.finfo(float).tiny)
+        errors = (err * var_z) @ V**2 / var_y + comp_err
+        errors = np.where(yf.var(axis=0) > 0, errors, 0.0)
+        extra = dict(
+            n_components=V.shape[0],
+            compression_error=comp_err.reshape(shape),
+            component_loo_error=err,
+            component_degree=deg,
+            component_n_terms=nt,
+        )
+        n_terms = np.count_nonzero(coeffs, axis=0)
+    else:
+        coeffs, chosen_deg, errors, n_terms = _select_columns(
+            Psi, yf, qn, order, n, solver, early_stop
+        )
     top = max(max(chosen_deg), 1)
     basis_out = ChaosBasis(top, dim, germ=inputs.germs)
     c = coeffs[: basis_out.size].reshape((basis_out.size, *y.shape[1:]))
     pce = PolynomialChaosExpansion(basis_out, c, inputs)
-    shape = y.shape[1:]
+    if compress:
+        # each component uses the union of the scores' terms
+        degree = np.full(m, int(top))
+    else:
+        degree = np.array(chosen_deg)
     pce.diagnostics.update(
         design=None if name == "samples" else data.design,
-        degree=np.array(chosen_deg).reshape(shape),
+        degree=degree.reshape(shape),
         n_terms=np.array(n_terms).reshape(shape),
         corrected_loo_error=np.array(errors).reshape(shape),
         q_norm=q_norm,
+        compressed=bool(compress),
+        **extra,
     )
     return pce, n
