@@ -14,6 +14,8 @@ Germ                 one germ variable of the Askey scheme (uniform, normal, gam
 gauss_legendre       Gauss-Legendre nodes and probability weights on [0, 1]
 expectation_tensor   E[Psi_k], E[Psi_i Psi_j], E[Psi_i Psi_j Psi_k] (dense or sparse)
 weighted_gram        E[g(omega) Psi_k Psi_l]
+coupling_tensor      E[phi_a Psi_i Psi_j]: a coefficient's own chaos against the basis
+lognormal_coefficients  exact Hermite chaos of exp(m + b . xi) (lognormal fields)
 GaussNodes           a one-germ basis at its P-node Gauss rule (node-wise solvers)
 SparseTensor3        coordinate-form third-order tensor with contractions
 PolynomialChaosExpansion  a PCE as an object: moments, Sobol indices, sampling, chaospy export
@@ -34,7 +36,9 @@ from .tensors import (
     GaussNodes,
     SparseTensor3,
     common_eigenbasis,
+    coupling_tensor,
     expectation_tensor,
+    lognormal_coefficients,
     triple_product_1d,
     weighted_gram,
 )
@@ -52,6 +56,8 @@ __all__ = [
     "GaussNodes",
     "SparseTensor3",
     "common_eigenbasis",
+    "coupling_tensor",
+    "lognormal_coefficients",
     "expectation_tensor",
     "gauss_legendre",
     "triple_product_1d",

@@ -300,3 +300,19 @@ def triple_sparse_mixed(alpha, tables, parity):
                     val[m] = v
                     m += 1
     return idx, val
+
+
+@numba.njit(cache=True)
+def triple_cross(alpha_a, alpha, tables):
+    """T[a, i, j] = prod_d tables[d][alpha_a[a, d], alpha[i, d], alpha[j, d]]."""
+    Pa, dim = alpha_a.shape
+    P = alpha.shape[0]
+    T = np.empty((Pa, P, P))
+    for a in range(Pa):
+        for i in range(P):
+            for j in range(P):
+                v = 1.0
+                for d in range(dim):
+                    v *= tables[d, alpha_a[a, d], alpha[i, d], alpha[j, d]]
+                T[a, i, j] = v
+    return T

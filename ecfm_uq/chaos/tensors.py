@@ -16,12 +16,15 @@ of 1-D factors over the variables, :math:`T_{abc} = \\prod_d t_{\\alpha_d \\beta
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .._validation import as_finite_array, check_choice, check_int
 from ..memory import check_allocation
 from ._kernels import (
     triple_1d,
+    triple_cross,
     triple_dense,
     triple_dense_mixed,
     triple_sparse,
@@ -33,7 +36,9 @@ __all__ = [
     "GaussNodes",
     "SparseTensor3",
     "common_eigenbasis",
+    "coupling_tensor",
     "expectation_tensor",
+    "lognormal_coefficients",
     "weighted_gram",
 ]
 
@@ -290,6 +295,95 @@ def _triple_mixed(basis, alpha, sparse):
         "pass sparse=True for a SparseTensor3, or lower the chaos `order` or `dim`",
     )
     return triple_dense_mixed(alpha, tables)
+
+
+def coupling_tensor(coef_basis, basis):
+    """:math:`\\mathbb E[\\phi_a \\Psi_i \\Psi_j]`: a coefficient's chaos terms against the basis.
+
+    A random coefficient expanded on its own chaos, :math:`a(\\xi) = \\sum_a a_a
+    \\phi_a(\\xi)` (e.g. a lognormal field in Hermite chaos, which needs about twice the
+    order of the solution), enters the Galerkin system through
+    :math:`\\mathbb E[a\\,\\Psi\\Psi^T] = \\sum_a a_a\\, T[a]`; each slice ``T[a]`` is the
+    coupling ``G`` of one term :math:`K_a \\otimes G_a`.
+
+    Parameters
+    ----------
+    coef_basis : ChaosBasis
+        The coefficient's basis (same dim and germs as ``basis``, any order), Pa terms.
+    basis : ChaosBasis
+        The solution's basis, P terms.
+
+    Returns
+    -------
+    T : (Pa, P, P) ndarray
+        Exact (the germs' closed-form or Jacobi-matrix triple products), symmetric in the
+        last two indices.
+    """
+    coef_basis = _check_basis(coef_basis)
+    basis = _check_basis(basis)
+    if coef_basis.germs != basis.germs or not (coef_basis.normalized and basis.normalized):
+        raise ValueError(
+            "`coef_basis` and `basis` must share dim and germs and be orthonormal; got "
+            f"{coef_basis!r} and {basis!r}"
+        )
+    Pa, P = coef_basis.size, basis.size
+    check_allocation(
+        8.0 * Pa * P * P,
+        f"the (Pa, P, P) coupling tensor at Pa={Pa}, P={P}",
+        "lower the coefficient's or the solution's order",
+    )
+    p = max(coef_basis.order, basis.order)
+    cache = {}
+    for g in basis.germs:
+        if g not in cache:
+            cache[g] = g.triple(p)
+    tables = np.stack([cache[g] for g in basis.germs])
+    return triple_cross(
+        np.ascontiguousarray(coef_basis.indices), np.ascontiguousarray(basis.indices), tables
+    )
+
+
+def lognormal_coefficients(coef_basis, b, mean=0.0):
+    """Hermite chaos coefficients of :math:`\\exp(m + b\\cdot\\xi)`, exactly.
+
+    Parameters
+    ----------
+    coef_basis : ChaosBasis
+        With Hermite germs only (:math:`\\xi \\sim N(0, I)`), Pa terms.
+    b : (..., dim) array_like
+        Loadings, e.g. :math:`\\sqrt{\\lambda_k}\\,\\phi_k(x)` of a Karhunen-Loeve
+        expansion at points x (leading axes).
+    mean : float or (...) array_like
+        :math:`m`, e.g. the Gaussian field's mean at those points.
+
+    Returns
+    -------
+    (..., Pa) ndarray
+        :math:`a_\\alpha = e^{m + |b|^2/2} \\prod_k b_k^{\\alpha_k} / \\sqrt{\\alpha_k!}`.
+
+    Notes
+    -----
+    From the generating function :math:`e^{b\\xi - b^2/2} = \\sum_n b^n He_n(\\xi)/n!` and
+    :math:`\\psi_n = He_n/\\sqrt{n!}`; the truncation at total order p leaves out
+    :math:`e^{2m + |b|^2}\\sum_{|\\alpha| > p} \\prod_k b_k^{2\\alpha_k}/\\alpha_k!` of the
+    second moment.
+    """
+    coef_basis = _check_basis(coef_basis)
+    if any(g.family != "hermite" for g in coef_basis.germs) or not coef_basis.normalized:
+        raise ValueError(
+            f"`coef_basis` must be an orthonormal Hermite basis (germ='hermite'), got {coef_basis!r}"
+        )
+    b = as_finite_array("b", b)
+    if b.ndim == 0 or b.shape[-1] != coef_basis.dim:
+        raise ValueError(f"`b` must have shape (..., {coef_basis.dim}), got {b.shape}")
+    mean = as_finite_array("mean", mean)
+    alpha = np.asarray(coef_basis.indices)
+    log_fact = np.array([math.lgamma(k + 1.0) for k in range(coef_basis.order + 1)])
+    out = np.exp(mean + 0.5 * np.sum(b**2, axis=-1))[..., None] * np.ones(coef_basis.size)
+    for d in range(coef_basis.dim):
+        powers = b[..., d, None] ** alpha[:, d]  # 0 ** 0 = 1
+        out = out * powers * np.exp(-0.5 * log_fact[alpha[:, d]])
+    return out
 
 
 def weighted_gram(basis, g, n_points=None):
