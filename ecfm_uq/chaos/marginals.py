@@ -112,6 +112,17 @@ class Marginal:
     __hash__ = None
 
     @property
+    def finite_variance(self):
+        """The law has a finite variance (False for Cauchy, Student t with 2 dof, ...)."""
+        if self.affine or self.kind == "lognormal":
+            return True
+        try:
+            v = float(self.law.var())
+        except Exception:  # a law without a variance method: assume finite
+            return True
+        return bool(np.isfinite(v))
+
+    @property
     def support(self):
         return tuple(float(v) for v in self.law.support())
 
@@ -309,6 +320,9 @@ class _ChaospyLaw:
 
     def support(self):
         return (-np.inf, np.inf)
+
+    def var(self):
+        return float(self.d.mom(2)) - float(self.d.mom(1)) ** 2
 
 
 def as_marginal(dist, name="x"):

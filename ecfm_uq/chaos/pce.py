@@ -312,7 +312,27 @@ class PolynomialChaosExpansion:
                 "quantiles and densities are exact; for sensitivities fit with independent "
                 "inputs or use sobol_germ()"
             )
-        return np.asarray(self.basis.indices) > 0
+        support = np.asarray(self.basis.indices) > 0
+        self._check_finite_variance(support)
+        return support
+
+    def _check_finite_variance(self, support):
+        """Refuse indices when the output depends on an input without finite variance."""
+        if self.inputs is None or isinstance(self.inputs, UniformInputs):
+            return
+        contrib = self._contributions()
+        # a variable carrying less than 1e-12 of every component's variance is round-off
+        share = contrib / np.maximum(contrib.sum(axis=0), np.finfo(float).tiny)
+        used = support[np.any(share > 1e-12, axis=1)].any(axis=0)
+        for k, m in enumerate(self.inputs.marginals):
+            if used[k] and not m.finite_variance:
+                raise ValueError(
+                    f"input {self.inputs.names[k]!r} ({m!r}) has no finite variance, so the "
+                    "output's variance may not exist and its Sobol indices with it; the "
+                    "expansion only has the variance of its truncated polynomial. If the "
+                    f"model is bounded in {self.inputs.names[k]!r}, read the indices of the "
+                    "germ: PolynomialChaosExpansion(pce.basis, pce.coefficients).first_order()"
+                )
 
     def sobol_germ(self, kind="first", zero_variance="raise"):
         """First-order or total indices of the chaos (germ) variables, shape (dim, ...).

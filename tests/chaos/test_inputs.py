@@ -375,3 +375,15 @@ def test_inputs_docs_page_example_runs_and_matches_closed_forms():
     np.testing.assert_allclose(ns["pce"].first_order(), S, atol=1e-4)
     assert ns["pce2"].mean == pytest.approx(2.2, rel=1e-14)
     assert ns["pce3"].mean == pytest.approx(-0.7, rel=1e-12)
+
+
+def test_sobol_indices_of_an_output_without_finite_variance_are_refused_naming_the_input():
+    laws = [stats.norm(), stats.t(2.0)]  # Student t with 2 degrees of freedom: Var = inf
+    pce = fit_pce(lambda x: x[0] + x[1], Inputs(laws, names=["a", "heavy"]), "quadrature", order=3)
+    with pytest.raises(ValueError, match="input 'heavy'.*no finite variance"):
+        pce.first_order()
+    with pytest.raises(ValueError, match="input 'heavy'"):
+        pce.total()
+    # an output that does not depend on the heavy-tailed input keeps its indices
+    pce2 = fit_pce(lambda x: x[0] ** 2, Inputs(laws), "quadrature", order=3)
+    np.testing.assert_allclose(pce2.first_order(), [1.0, 0.0], atol=1e-12)
