@@ -82,7 +82,15 @@ class Inputs:
     """
 
     def __init__(self, marginals, correlation=None, names=None):
-        if hasattr(marginals, "dist") or type(marginals).__module__.startswith("chaospy"):
+        if type(marginals).__module__.startswith("chaospy") and len(marginals) > 1:
+            if getattr(marginals, "stochastic_dependent", False):
+                raise TypeError(
+                    f"`marginals` is a dependent chaospy distribution ({type(marginals).__name__}); "
+                    "build its inputs with Inputs.from_chaospy(dist) (MvNormal), or give the "
+                    "marginals and a `correlation`"
+                )
+            marginals = list(marginals)  # a chaospy.J / Iid of 1-D laws
+        elif hasattr(marginals, "dist") or type(marginals).__module__.startswith("chaospy"):
             marginals = [marginals]
         try:
             items = list(marginals)
@@ -240,6 +248,11 @@ class Inputs:
 
             marg = [stats.norm(m, sk) for m, sk in zip(mu, s, strict=True)]
             return cls(marg, correlation=C / np.outer(s, s), names=names)
+        if getattr(dist, "stochastic_dependent", False):
+            raise TypeError(
+                f"`dist` is a dependent chaospy distribution ({type(dist).__name__}) other than "
+                "MvNormal; give the marginals and the Gaussian copula's `correlation` to Inputs"
+            )
         parts = [dist] if len(dist) == 1 and not isinstance(dist, chaospy.J) else list(dist)
         return cls(parts, names=names)
 

@@ -270,6 +270,8 @@ def test_bad_correlation_matrices_are_refused(R, match):
 
 
 def test_other_bad_inputs():
+    with pytest.raises(TypeError, match="dependent chaospy.*from_chaospy"):
+        Inputs(chaospy.MvNormal([0, 1], [[1, 0.5], [0.5, 1]]))
     with pytest.raises(TypeError, match="input 'x0'.*scipy.stats frozen"):
         Inputs(["normal"])
     with pytest.raises(ValueError, match="germs.*germ=inputs.germs"):
