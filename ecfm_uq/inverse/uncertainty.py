@@ -93,7 +93,7 @@ def check_identifiable(info, rcond=IDENTIFIABILITY_RCOND, names=None):
     rcond : float
         Singular when ``s_min <= rcond * s_max`` for ``info`` scaled to unit diagonal
         (:math:`D^{-1}AD^{-1}`, :math:`D = \\sqrt{|\\operatorname{diag} A|}`: unit-free in
-        the parameters), or when a diagonal entry is zero.
+        the parameters) when ``info`` is symmetric with a positive diagonal.
     names : list of str, optional
         Parameter names for the message (default ``eps[k]``).
 
@@ -107,13 +107,16 @@ def check_identifiable(info, rcond=IDENTIFIABILITY_RCOND, names=None):
     # the test is on the matrix scaled to unit diagonal, so that it does not depend on
     # the parameters' units (a parameter of size 1e-4 beside one of size 1e2 is not a
     # singularity); a zero diagonal entry is a parameter the data do not see at all
-    d = np.sqrt(np.abs(np.diag(A)))
-    if np.all(d > 0):
+    # (for a symmetric matrix with a positive diagonal, an information matrix; a general
+    # one, e.g. a KKT matrix with its zero blocks, is tested as it is)
+    d = np.sqrt(np.abs(np.diag(A))) if A.shape[0] == A.shape[1] else np.zeros(0)
+    symmetric = d.size and np.allclose(A, A.T, rtol=1e-6, atol=0)
+    if symmetric and np.all(np.diag(A) > 0):
         As = A / np.outer(d, d)
     else:
-        As, d = A, np.ones_like(d)
+        As, d = A, np.ones(A.shape[1])
     _, s, Vt = np.linalg.svd(As)
-    if s[0] > 0 and s[-1] > rcond * s[0] and np.all(np.diag(A) != 0):
+    if s[0] > 0 and s[-1] > rcond * s[0]:
         return
     ratio = s[-1] / s[0] if s[0] > 0 else 0.0
     u = Vt[-1] / d
