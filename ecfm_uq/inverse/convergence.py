@@ -169,9 +169,9 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
         msg = f"Gauss-Newton step {step:.1e} > {xtol:.0e} relative: not at the optimum"
     if not rank_ok:
         msg += " (the Jacobian is rank-deficient there)"
-    elif step > 1.0:
+    elif step > 1e3:
         msg += (
-            " (the Gauss-Newton step is larger than the parameters: the minimum may lie at "
+            " (the Gauss-Newton step is over 1000 times the parameters: the minimum may lie at "
             "infinity, where the model flattens out)"
         )
     return Optimality(False, value, test, t, msg)
