@@ -33,8 +33,10 @@ General objectives (:func:`gradient_optimality`)
     :math:`H` is positive definite: an indefinite or singular Hessian is not a minimum.
 
 Defaults (documented floors): relative offset ``OFFSET_TOL = 1e-6`` (Bates and Watts
-suggest 1e-3 for statistical purposes; the estimate then sits within 1e-6 standard errors
-of the optimum), Gauss-Newton step ``XTOL = 1e-9`` relative.
+suggest 1e-3 for statistical purposes; the Gauss-Newton step is then below
+:math:`10^{-6}\\sqrt p` standard errors), Gauss-Newton step ``XTOL = 1e-8`` relative (the default ``xtol`` of
+``scipy.optimize.least_squares``; a model solved by Newton to 1e-10 puts round-off of
+about that size into the parameters of an exact-data fit).
 
 References: Bates, D. M. and Watts, D. G. (1981), A relative offset orthogonality
 convergence criterion for nonlinear least squares, Technometrics 23, 179-183.
@@ -61,7 +63,7 @@ __all__ = [
 #: relative-offset tolerance of the least-squares test
 OFFSET_TOL = 1e-6
 #: Gauss-Newton step tolerance, relative to the parameters (exact-fit problems)
-XTOL = 1e-9
+XTOL = 1e-8
 #: Newton-decrement tolerance of the general test (relative to max(|z|, 1))
 DECREMENT_TOL = 1e-10
 
