@@ -194,3 +194,21 @@ def test_the_dynamic_default_converges(burgers, formulation):
     assert res.optimizer == "least-squares"
     assert res.success, res.message
     np.testing.assert_allclose(res.eps, [1.75, 1.0], rtol=1e-8)
+
+
+@pytest.mark.parametrize("method", ["auto", "BFGS"])
+def test_no_failure_among_fits_at_their_optimum(method):
+    """Issue 20: a two-parameter model with the conductivity in the operator, 2 % noise of
+    known sigma: every fit ends at its optimum (checked independently: the refit from the
+    estimate does not move) and says so, whatever BFGS's line search reported."""
+    system = two_parameter_model()
+    M = sensor_matrix(BASIS, np.linspace(0.1, 0.9, 6))
+    v0 = M @ solve_steady(system, [0.2, 3.0]).Theta[:, 0]
+    sigma = 0.02 * np.abs(v0).mean()
+    for seed in range(12):
+        v = v0 + sigma * np.random.default_rng(seed).standard_normal(v0.size)
+        problem = SteadyProblem(system, M, v)
+        res = fit(problem, [0.0, 1.0], sigma=sigma, method=method, uncertainty=False)
+        assert res.success, (seed, res.message)
+        again = fit(problem, res.eps, sigma=sigma, uncertainty=False)
+        np.testing.assert_allclose(again.eps, res.eps, rtol=1e-6)

@@ -165,7 +165,10 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
                           f"Gauss-Newton step {step:.1e} <= {xtol:.0e} relative")  # fmt: skip
     if np.isfinite(offset):
         value, test, t = offset, "relative offset", tol
-        msg = f"relative offset {offset:.1e} > {tol:.0e}: not at a least-squares optimum"
+        msg = (
+            f"relative offset {offset:.1e} > {tol:.0e} and Gauss-Newton step {step:.1e} > "
+            f"{xtol:.0e} relative: not at a least-squares optimum"
+        )
     else:
         value, test, t = step, "gauss-newton step", xtol
         msg = f"Gauss-Newton step {step:.1e} > {xtol:.0e} relative: not at the optimum"
