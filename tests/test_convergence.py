@@ -212,3 +212,24 @@ def test_no_failure_among_fits_at_their_optimum(method):
         assert res.success, (seed, res.message)
         again = fit(problem, res.eps, sigma=sigma, uncertainty=False)
         np.testing.assert_allclose(again.eps, res.eps, rtol=1e-6)
+
+
+def test_dynamic_gauss_newton_covariance_is_sigma2_inverse_gtg(burgers):
+    """Noisy trajectory data, sigma known: the default covariance of a dynamic fit is
+    sigma^2 (G^T G)^-1 with G the sensor-trajectory sensitivity, here by central
+    differences of the forward model (independent of the sensitivity equations)."""
+    p = burgers()
+    V = p.V.copy()
+    V[1:] += 0.01 * np.random.default_rng(3).standard_normal(V[1:].shape)
+    p.V = V
+    res = fit(p, [1.6, 0.8], sigma=0.01)
+    assert res.success and res.uncertainty.method == "gauss-newton", res.message
+
+    def pred(e):
+        return p.predictions(p.solve(e, "standard"))[1:].ravel()
+
+    h = 1e-6
+    G = np.column_stack([(pred(res.eps + d) - pred(res.eps - d)) / (2 * h) for d in h * np.eye(2)])
+    np.testing.assert_allclose(res.eps_cov, 0.01**2 * np.linalg.inv(G.T @ G), rtol=1e-5)
+    sand = fit(p, [1.6, 0.8], sigma=0.01, options={"covariance": "sandwich"})
+    assert sand.uncertainty.method == "implicit"

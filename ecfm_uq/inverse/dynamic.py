@@ -36,6 +36,8 @@ which is also what the ECFM data constraint acts on.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from .._validation import as_dense_rows, as_finite_array, check_choice, check_int, check_positive
@@ -338,8 +340,14 @@ class DynamicInverseProblem:
             options=options, uncertainty=uncertainty,
         )  # fmt: skip
 
-    def uncertainty(self, eps, formulation="ecfm", sigma=None):
+    def uncertainty(self, eps, formulation="ecfm", sigma=None, covariance="implicit"):
         """Delta-method uncertainty of an estimate of ``eps`` from the data ``V``.
+
+        ``covariance="implicit"`` (this method's default; the full Hessian, the sandwich
+        :math:`H^{-1}J^TJH^{-1}s^2` for the standard formulation) or ``"gauss-newton"``
+        (the curvature taken as :math:`J^TJ` with :math:`J` the stacked residual's
+        Jacobian, :meth:`residual`; :math:`s^2(J^TJ)^{-1}` for the standard formulation,
+        the default of :func:`~ecfm_uq.inverse.fit`).
 
         The estimate is defined by :math:`\\nabla_\\epsilon z(\\epsilon; V) = 0` (Eq.
         grad, or Eq. ecfm_grad); :func:`~ecfm_uq.inverse.uncertainty.implicit_covariance`
@@ -372,6 +380,10 @@ class DynamicInverseProblem:
                     raise ValueError("the residual is zero (noise-free data): pass `sigma`")
         except (ConvergenceError, ValueError) as e:
             return {"uncertainty_message": f"uncertainty not computed: {e}"}
+        if covariance not in ("implicit", "gauss-newton"):
+            raise ValueError(
+                f"`covariance` must be 'implicit' or 'gauss-newton', got {covariance!r}"
+            )
         other = copy.copy(self)  # the same problem with perturbed data
         other._last = dict(self._last)
 
@@ -379,7 +391,27 @@ class DynamicInverseProblem:
             other.V = np.vstack([self.V[:1], w.reshape(self.n_steps, -1)])
             return other.objective(formulation)(e)[1]
 
-        return estimate_uncertainty(grad, eps, self.V[1:].ravel(), s2, model, dof=dof)
+        data = self.V[1:].ravel()
+        if covariance == "implicit":
+            return estimate_uncertainty(grad, eps, data, s2, model, dof=dof)
+        from ..errors import NonIdentifiableError
+        from .uncertainty import least_squares_jacobian
+
+        saved = dict(self._last)
+        try:
+            _, J, _ = self.residual(eps, formulation)
+        except ConvergenceError as e:
+            return {"uncertainty_message": f"uncertainty not computed: {e}"}
+        finally:
+            self._last = saved
+        if formulation == "standard":
+            # r = sqrt(dt) (M theta - V): d eps_hat / dV = sqrt(dt) J^+
+            try:
+                D = np.sqrt(self.dt) * least_squares_jacobian(J)
+            except NonIdentifiableError as e:
+                return {"uncertainty_message": f"uncertainty not computed: {e}"}
+            return estimate_uncertainty(None, eps, data, s2, model, dof=dof, deps_dv=D)
+        return estimate_uncertainty(grad, eps, data, s2, model, dof=dof, hessian=J.T @ J)
 
 
 #: defaults of the dynamic fits: Adam's epochs (the paper's 250), the relative gradient
@@ -411,6 +443,12 @@ def fit_dynamic_problem(problem, eps0, s):
     eps0 = problem.system.check_eps(eps0)
     n_eps = problem.system.n_eps
     method = s.method
+    covariance = s.options.get("covariance", "gauss-newton")
+    if covariance not in ("gauss-newton", "sandwich"):
+        raise ValueError(
+            f"options['covariance'] must be 'gauss-newton' or 'sandwich', got {covariance!r}"
+        )
+    s = dataclasses.replace(s, options={k: w for k, w in s.options.items() if k != "covariance"})
     if method == "auto":
         method = "least-squares" if n_eps <= _LSQ_MAX_EPS else "L-BFGS-B"
 
@@ -465,7 +503,8 @@ def fit_dynamic_problem(problem, eps0, s):
         traj = traj if traj is not None else problem.solve(res.eps, "ecfm")
         res.extra["lam"] = traj.lam
     if s.uncertainty and res.success:
-        for key, value in problem.uncertainty(res.eps, formulation, s.sigma).items():
+        conv = "implicit" if covariance == "sandwich" else covariance
+        for key, value in problem.uncertainty(res.eps, formulation, s.sigma, conv).items():
             setattr(res, key, value)
     elif s.uncertainty:
         res.uncertainty_message = "uncertainty not computed: the fit did not succeed"
