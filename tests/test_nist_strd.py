@@ -64,12 +64,17 @@ def test_complex_step_derivatives_match_central_differences():
         np.testing.assert_allclose(J[:, k], fd, rtol=1e-6, atol=1e-9 * np.abs(fd).max())
 
 
+@pytest.mark.parametrize("method", ["auto", "BFGS"])
 @pytest.mark.parametrize(("name", "start"), CASES)
-def test_certified_values_or_an_honest_failure(name, start):
+def test_certified_values_or_an_honest_failure(name, start, method):
+    """The default (least squares) and BFGS, judged by the same optimality test: BFGS
+    stops short on many (honest failures) and twice at a point where the model is flat in
+    a parameter (BoxBOD start 2, Rat43 start 1: the Jacobian is rank-deficient there),
+    which the test refuses."""
     P = load(name)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # overflow at rejected trial points
-        res = fit(nist_problem(P), P.starts[start], formulation="standard")
+        res = fit(nist_problem(P), P.starts[start], formulation="standard", method=method)
     if not res.success:  # an honest failure is allowed; a wrong success is not
         assert res.status is not FitStatus.CONVERGED
         pytest.xfail(f"{name} start {start + 1}: {res.status.name}: {res.message}")

@@ -23,9 +23,12 @@ Least squares, :math:`z = \\tfrac12\\|r(\\epsilon)\\|^2` with Jacobian :math:`J`
     still along :math:`J`). With no residual left to compare with (exact data, ``n == p``)
     the test is the **Gauss-Newton step** relative to the parameters,
     :math:`|\\delta_k| \\le` ``xtol`` :math:`|\\epsilon_k|` for every :math:`k` (a
-    parameter at exactly zero: relative to the largest one). On bounds, parameters held at a bound by a gradient pointing out
-    of the box (a Karush-Kuhn-Tucker multiplier of the right sign) are dropped from
-    :math:`J` first (the projected problem).
+    parameter at exactly zero: relative to the largest one). Neither test passes where
+    :math:`J` (its columns scaled to unit norm) is rank-deficient to ``RANK_RCOND =
+    1e-10``: a model flat in some direction has no point estimate there. On bounds,
+    parameters held at a bound by a gradient pointing out of the box (a
+    Karush-Kuhn-Tucker multiplier of the right sign) are dropped from :math:`J` first
+    (the projected problem).
 
 General objectives (:func:`gradient_optimality`)
     The **Newton decrement** :math:`\\tfrac12 g^TH^{-1}g` (the decrease a Newton step
@@ -64,6 +67,9 @@ __all__ = [
 OFFSET_TOL = 1e-6
 #: Gauss-Newton step tolerance, relative to the parameters (exact-fit problems)
 XTOL = 1e-8
+#: a Jacobian whose columns, scaled to unit norm, have smallest/largest singular value
+#: below this is rank-deficient: no point estimate there
+RANK_RCOND = 1e-10
 #: Newton-decrement tolerance of the general test (relative to max(|z|, 1))
 DECREMENT_TOL = 1e-10
 
@@ -142,12 +148,6 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
     Q, R = np.linalg.qr(Jf)
     qr = Q.T @ r
     orth = r - Q @ qr
-    # the Gauss-Newton step (minimum norm on a rank-deficient J)
-    delta = np.linalg.lstsq(Jf, -r, rcond=None)[0]
-    # relative to each parameter (a parameter at exactly 0: to the largest, else 1)
-    ref = np.abs(eps[free])
-    ref[ref == 0] = np.abs(eps).max() or 1.0
-    step = float(np.max(np.abs(delta) / ref))
     norm_orth = float(np.linalg.norm(orth))
     if n > p and norm_orth > 0:
         offset = (np.linalg.norm(qr) / np.sqrt(p)) / (norm_orth / np.sqrt(n - p))
@@ -156,11 +156,27 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
     else:
         offset = np.inf  # nothing to compare with: the step test decides
     offset = float(offset)
-    rank_ok = np.linalg.matrix_rank(Jf) == p
+    # rank on the columns scaled to unit norm (parameters' units do not matter); on a
+    # rank-deficient J neither test means anything: the minimum-norm step ignores the
+    # directions the model does not see (e.g. a rate gone to infinity, the model flat)
+    norms = np.linalg.norm(Jf, axis=0)
+    if np.all(norms > 0):
+        sv = np.linalg.svd(Jf / norms, compute_uv=False)
+        rank_ok = bool(sv[-1] > RANK_RCOND * sv[0])
+        # the Gauss-Newton step, on the scaled columns too (an unscaled least-squares
+        # solve would drop a column of tiny norm as if it were zero)
+        delta = np.linalg.lstsq(Jf / norms, -r, rcond=None)[0] / norms
+    else:
+        rank_ok = False
+        delta = np.full(p, np.inf)
+    # relative to each parameter (a parameter at exactly 0: to the largest, else 1)
+    ref = np.abs(eps[free])
+    ref[ref == 0] = np.abs(eps).max() or 1.0
+    step = float(np.max(np.abs(delta) / ref))
     if offset <= tol and rank_ok:
         return Optimality(True, offset, "relative offset", tol,
                           f"relative offset {offset:.1e} <= {tol:.0e}")  # fmt: skip
-    if step <= xtol:
+    if step <= xtol and rank_ok:
         return Optimality(True, step, "gauss-newton step", xtol,
                           f"Gauss-Newton step {step:.1e} <= {xtol:.0e} relative")  # fmt: skip
     if np.isfinite(offset):
@@ -173,7 +189,10 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
         value, test, t = step, "gauss-newton step", xtol
         msg = f"Gauss-Newton step {step:.1e} > {xtol:.0e} relative: not at the optimum"
     if not rank_ok:
-        msg += " (the Jacobian is rank-deficient there)"
+        msg += (
+            " (the Jacobian is rank-deficient there: some parameter combination has no "
+            "effect on the residuals, e.g. a rate gone to infinity)"
+        )
     elif step > 1e3:
         msg += (
             " (the Gauss-Newton step is over 1000 times the parameters: the minimum may lie at "
