@@ -68,9 +68,10 @@ def test_complex_step_derivatives_match_central_differences():
 @pytest.mark.parametrize(("name", "start"), CASES)
 def test_certified_values_or_an_honest_failure(name, start, method):
     """The default (least squares) and BFGS, judged by the same optimality test: BFGS
-    stops short on many (honest failures) and twice at a point where the model is flat in
-    a parameter (BoxBOD start 2, Rat43 start 1: the Jacobian is rank-deficient there),
-    which the test refuses."""
+    stops short on many (honest failures), twice reporting success where the model has
+    gone flat in a parameter (BoxBOD start 2, Rat43 start 1: a rate at +inf, a column of
+    J at 1e-88), which the test refuses (the Gauss-Newton step on the scaled columns is
+    huge there)."""
     P = load(name)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # overflow at rejected trial points

@@ -23,9 +23,10 @@ Least squares, :math:`z = \\tfrac12\\|r(\\epsilon)\\|^2` with Jacobian :math:`J`
     still along :math:`J`). With no residual left to compare with (exact data, ``n == p``)
     the test is the **Gauss-Newton step** relative to the parameters,
     :math:`|\\delta_k| \\le` ``xtol`` :math:`|\\epsilon_k|` for every :math:`k` (a
-    parameter at exactly zero: relative to the largest one). Neither test passes where
-    :math:`J` (its columns scaled to unit norm) is rank-deficient to ``RANK_RCOND =
-    1e-10``: a model flat in some direction has no point estimate there. On bounds,
+    parameter at exactly zero: relative to the largest one). The step is computed on the
+    columns of :math:`J` scaled to unit norm, so a parameter the model has become flat in
+    (a rate gone to infinity) keeps its huge step and is refused; the offset test needs
+    :math:`J` of full rank (scaled, to ``RANK_RCOND = 1e-10``). On bounds,
     parameters held at a bound by a gradient pointing out of the box (a
     Karush-Kuhn-Tucker multiplier of the right sign) are dropped from :math:`J` first
     (the projected problem).
@@ -156,9 +157,11 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
     else:
         offset = np.inf  # nothing to compare with: the step test decides
     offset = float(offset)
-    # rank on the columns scaled to unit norm (parameters' units do not matter); on a
-    # rank-deficient J neither test means anything: the minimum-norm step ignores the
-    # directions the model does not see (e.g. a rate gone to infinity, the model flat)
+    # rank on the columns scaled to unit norm (parameters' units do not matter): the
+    # offset needs a full-rank J (its Q1 would hold arbitrary directions); the step is
+    # the minimum-norm one on the scaled columns, so a column of tiny norm (a rate gone
+    # to infinity, the model flat in it) still counts, and only exactly parallel columns
+    # (a combination the data cannot see) are left out
     norms = np.linalg.norm(Jf, axis=0)
     if np.all(norms > 0):
         sv = np.linalg.svd(Jf / norms, compute_uv=False)
@@ -176,9 +179,12 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
     if offset <= tol and rank_ok:
         return Optimality(True, offset, "relative offset", tol,
                           f"relative offset {offset:.1e} <= {tol:.0e}")  # fmt: skip
-    if step <= xtol and rank_ok:
+    if step <= xtol:
+        # on exactly parallel (scaled) columns this is a point of a whole set of optima:
+        # first-order optimal, not unique; the uncertainty names the free combination
+        note = "" if rank_ok else " (the Jacobian is rank-deficient: not a unique optimum)"
         return Optimality(True, step, "gauss-newton step", xtol,
-                          f"Gauss-Newton step {step:.1e} <= {xtol:.0e} relative")  # fmt: skip
+                          f"Gauss-Newton step {step:.1e} <= {xtol:.0e} relative{note}")  # fmt: skip
     if np.isfinite(offset):
         value, test, t = offset, "relative offset", tol
         msg = (
