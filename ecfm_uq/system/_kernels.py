@@ -1,20 +1,28 @@
-"""Compiled backward-Euler march and its adjoint for small deterministic systems (private).
+"""Compiled backward-Euler marches and their adjoint (private; paper Eqs. backward_euler,
+ecfm_solve, discrete_sens, discrete_sens_ecfm).
 
-The whole step loop of :func:`ecfm_uq.system.march` for ``P = 1`` systems made of dense
-linear terms, a quadratic term given by its folded tensor in compressed rows and precomputed loads, with the
-optional ECFM data constraint, forward sensitivities and the discrete adjoint, in numba
-kernels: no Python work per step or per Newton iteration. The maths is the generic
-path's (Eqs. backward_euler, ecfm_solve, discrete_sens, discrete_sens_ecfm); inputs are
-prepared and validated by the caller (``solvers._compiled_march``).
+Two numba kernels run the whole step loop of :func:`ecfm_uq.system.march` with no Python
+work per step or per Newton iteration; :mod:`.plan` decides when, :mod:`.compiled`
+prepares and validates their inputs and translates their status codes (:class:`.plan.SolveStatus`).
 
-Linear algebra: each Newton iteration factorizes the step Jacobian with LAPACK's
-``dgetrf`` (the routine ``numpy.linalg.solve`` uses, reached through numba's own LAPACK
-binding so the kernels stay cacheable); the triangular solves are short loops here. The
-factors at the converged state carry the final Newton correction and the sensitivity
-right-hand sides, as in the generic march, and are kept per step for the adjoint, whose
-transposed solves then cost two triangular sweeps each. The quadratic term is evaluated
-from its folded tensor in compressed rows: ``S = dq/dtheta`` by one sparse pass and
-``q = S theta / 2`` (Euler's identity for a form homogeneous of degree 2).
+:func:`march_p1`
+    ``P = 1`` systems of dense linear terms, at most one quadratic term (its folded
+    tensor in compressed rows) and precomputed loads, with the optional ECFM data
+    constraint, forward sensitivities and the discrete adjoint (:func:`adjoint_p1`).
+    Each Newton iteration factorizes the step Jacobian with LAPACK's ``dgetrf`` (the
+    routine ``numpy.linalg.solve`` uses, reached through numba's own LAPACK binding so
+    the kernels stay cacheable); the triangular solves are short loops here. The factors
+    at the converged state carry the final Newton correction and the sensitivity
+    right-hand sides, as in the generic march, and are kept per step for the adjoint,
+    whose transposed solves then cost two triangular sweeps each. The quadratic term is
+    evaluated from its folded tensor: ``S = dq/dtheta`` by one sparse pass and
+    ``q = S theta / 2`` (Euler's identity for a form homogeneous of degree 2).
+:func:`march_sg`
+    ``P > 1`` one-germ systems (no data constraint, no kept factors): a chord iteration
+    with the node-wise preconditioner (the deterministic Jacobians at the germ's Gauss
+    nodes, ``P`` dense LUs), handing over to Newton-Krylov (right-preconditioned GMRES,
+    :func:`_sg_gmres`) when it converges slowly; sensitivities are GMRES solves with the
+    same preconditioner.
 """
 
 from __future__ import annotations
