@@ -32,6 +32,15 @@ import numpy as np
 from numba import types
 from numba.np.linalg import ensure_lapack
 
+from .plan import (
+    KRYLOV_ACCEPT,
+    NEWTON_ETA_FACTOR,
+    NEWTON_ETA_MAX,
+    NEWTON_ETA_MIN,
+    SINGULAR_PIVOT,
+    SolveStatus,
+)
+
 ensure_lapack()  # scipy's LAPACK behind numba's binding (raises if scipy is missing)
 # numba's LU binding: info = getrf(kind, m, n, a, lda, ipiv), column-major a, 'd' = 100
 _getrf = types.ExternalFunction(
@@ -45,8 +54,13 @@ _getrf = types.ExternalFunction(
         types.CPointer(types.int32),
     ),
 )
-# a pivot below this fraction of the largest is treated as singular (as dense_lu does)
-_SINGULAR = 1e-14
+# the plan's thresholds and status codes, frozen into the kernels as integer constants
+_SINGULAR = SINGULAR_PIVOT  # a pivot below this fraction of the largest: singular
+_OK = int(SolveStatus.CONVERGED)
+_MAX_ITERATIONS = int(SolveStatus.MAX_ITERATIONS)
+_SINGULAR_JACOBIAN = int(SolveStatus.SINGULAR_JACOBIAN)
+_KRYLOV_FAILED = int(SolveStatus.KRYLOV_FAILED)
+_NON_FINITE = int(SolveStatus.NON_FINITE)
 
 
 @numba.njit(cache=True)
@@ -183,8 +197,9 @@ def march_p1(
     Returns
     -------
     Th (n_t, N), lam (n_t, C), dTh (n_t, N, n_eps), dlam (n_t, C, n_eps), nits (n_t - 1,),
-    failed (index of the failed step or -1), rnorm at failure (-1: singular Jacobian),
-    LUs, pivs (the converged step Jacobians' factors, kept for the adjoint).
+    failed (index of the failed step or -1), status (a :class:`.plan.SolveStatus` code),
+    rnorm at failure, LUs, pivs (the converged step Jacobians' factors, kept for the
+    adjoint).
     """
     n_t = F.shape[0]
     N = theta0.shape[0]
@@ -235,7 +250,7 @@ def march_p1(
             J[:N, :N] = base + cq * S
             nits[s] = k
             if not _lu_factor(J, lu, piv):
-                return Th, lam, dTh, dlam, nits, s, -1.0, LUs, pivs
+                return Th, lam, dTh, dlam, nits, s, _SINGULAR_JACOBIAN, rnorm, LUs, pivs
             if rnorm < tol:
                 # the last Newton correction is taken with the converged Jacobian, whose
                 # factors give the sensitivities (Eqs. discrete_sens / discrete_sens_ecfm)
@@ -252,7 +267,8 @@ def march_p1(
             if converged:
                 break
         if not converged:
-            return Th, lam, dTh, dlam, nits, s, rnorm, LUs, pivs
+            status = _MAX_ITERATIONS if np.isfinite(rnorm) else _NON_FINITE
+            return Th, lam, dTh, dlam, nits, s, status, rnorm, LUs, pivs
         if keep:
             LUs[s] = lu
             pivs[s] = piv
@@ -265,7 +281,7 @@ def march_p1(
                 dlam[t1, :, j] = x[N:]
         Th[t1] = z[:N]
         lam[t1] = z[N:]
-    return Th, lam, dTh, dlam, nits, -1, 0.0, LUs, pivs
+    return Th, lam, dTh, dlam, nits, -1, _OK, 0.0, LUs, pivs
 
 
 @numba.njit(cache=True)
@@ -518,8 +534,10 @@ def march_sg(
     per cent for a smooth random input); if the residual falls by less than a factor
     ``chord_rate`` per iteration the rest of the step is Newton-Krylov (GMRES
     preconditioned by ``B`` refreshed every Newton step, linear tolerance
-    ``min(1e-4, 0.05 tol / ||R||)``). Sensitivities (Eq. discrete_sens) are GMRES
-    solves to ``sens_rtol``. ``chord_rate <= 0``: Newton-Krylov from the first iteration.
+    the plan's forcing term, :func:`.plan.newton_rtol`). Sensitivities (Eq. discrete_sens)
+    are GMRES solves to ``sens_rtol``; every GMRES answer is accepted by the plan's rule
+    (true relative residual within ``KRYLOV_ACCEPT * rtol``). ``chord_rate <= 0``:
+    Newton-Krylov from the first iteration.
 
     Parameters (shapes)
     -------------------
@@ -539,7 +557,7 @@ def march_sg(
     -------
     Th (n_t, N, P), dTh (n_t, N, P, n_eps), nits (n_t - 1,) iterations per step,
     kits (n_t - 1,) GMRES iterations per step (sensitivities included), failed step
-    (-1: none), rnorm at failure (-1: a singular node Jacobian, -2: GMRES stalled).
+    (-1: none), status (a :class:`.plan.SolveStatus` code), rnorm at failure.
     """
     n_t = F.shape[0]
     N, P = theta0.shape
@@ -595,23 +613,24 @@ def march_sg(
                 krylov = True
             if krylov or not factored:
                 if not _sg_factor_nodes(Mdt, Kc, cq_eff, Sf, PhiT, mnode, gnode, LUs, pivs):
-                    return Th, dTh, nits, kits, s, -1.0
+                    return Th, dTh, nits, kits, s, _SINGULAR_JACOBIAN, rnorm
                 factored = True
             if krylov:
-                eta = min(1e-4, max(0.05 * tol / rnorm, 1e-13))
+                eta = min(NEWTON_ETA_MAX, max(NEWTON_ETA_FACTOR * tol / rnorm, NEWTON_ETA_MIN))
                 its, rel = _sg_gmres(
                     R, Mdt, E2, e2_eye, Kc, Gs, cq_eff, Sf, E3m, Tn, Tb, LUs, pivs, eta,
                     restart, lin_maxiter, X,
                 )  # fmt: skip
                 kits[s] += its
-                if not rel <= eta:
-                    return Th, dTh, nits, kits, s, -2.0
+                if not rel <= KRYLOV_ACCEPT * eta:
+                    return Th, dTh, nits, kits, s, _KRYLOV_FAILED, rnorm
             else:
                 _sg_precond(R, Tn, Tb, LUs, pivs, X)
             Z -= X
             prev = rnorm
         if not converged:
-            return Th, dTh, nits, kits, s, rnorm
+            status = _MAX_ITERATIONS if np.isfinite(rnorm) else _NON_FINITE
+            return Th, dTh, nits, kits, s, status, rnorm
         Th[t1] = Z
         if not sens:
             continue
@@ -619,7 +638,7 @@ def march_sg(
         # converged state (Sf is), preconditioned by this step's node factors
         if not factored:
             if not _sg_factor_nodes(Mdt, Kc, cq_eff, Sf, PhiT, mnode, gnode, LUs, pivs):
-                return Th, dTh, nits, kits, s, -1.0
+                return Th, dTh, nits, kits, s, _SINGULAR_JACOBIAN, rnorm
         Wq = 0.5 * _sg_quadratic(Z, Sf, E3m) if has_quad else np.zeros((N, P))
         rhs = np.empty((N, P))
         for e in range(n_eps):
@@ -635,7 +654,7 @@ def march_sg(
                 restart, lin_maxiter, X,
             )  # fmt: skip
             kits[s] += its
-            if not rel <= sens_rtol:
-                return Th, dTh, nits, kits, s, -2.0
+            if not rel <= KRYLOV_ACCEPT * sens_rtol:
+                return Th, dTh, nits, kits, s, _KRYLOV_FAILED, rnorm
             dTh[t1, :, :, e] = X
-    return Th, dTh, nits, kits, -1, 0.0
+    return Th, dTh, nits, kits, -1, _OK, 0.0

@@ -14,6 +14,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..errors import SingularSystemError
+from .plan import pivots_singular
 
 
 def dense_lu(J):
@@ -21,9 +22,9 @@ def dense_lu(J):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", sla.LinAlgWarning)
         lu = sla.lu_factor(J, check_finite=False)
-    # lu_factor only warns on exact singularity; detect it ourselves
+    # lu_factor only warns on exact singularity; detect it ourselves (the plan's threshold)
     d = np.abs(np.diag(lu[0]))
-    if not np.all(np.isfinite(d)) or d.min() <= 1e-14 * max(d.max(), 1e-300):
+    if pivots_singular(d):
         return None
     return lu
 
@@ -39,7 +40,7 @@ def sparse_lu(A):
         return None
     # like dense_lu: a pivot at round-off of the largest is singular in practice
     d = np.abs(lu.U.diagonal())
-    if not np.all(np.isfinite(d)) or d.min() <= 1e-14 * max(d.max(), 1e-300):
+    if pivots_singular(d):
         return None
     return lu
 

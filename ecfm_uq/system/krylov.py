@@ -8,6 +8,7 @@ import numpy as np
 import scipy.sparse.linalg as spla
 
 from ..errors import KrylovError
+from .plan import krylov_accepts
 
 
 def _pcg(op, b, precond, rtol, maxiter):
@@ -111,8 +112,8 @@ class KrylovFactor:
             bnorm = np.linalg.norm(b)
             res = np.linalg.norm(B - self.op.apply(X)) / bnorm if bnorm > 0 else 0.0
         self.record.add(nit, res)
-        # GMRES stops on its preconditioned residual; accept the true one within 10x
-        if not np.isfinite(res) or res > (rtol if self.method == "cg" else 10 * rtol):
+        # one rule for every Krylov solve (the plan's): the true residual within 10 rtol
+        if not krylov_accepts(res, rtol):
             raise KrylovError(
                 f"{self.method} did not reach rtol={rtol:.1e}: relative residual {res:.3e} "
                 f"after {nit} iterations (raise maxiter, or try another preconditioner)"

@@ -13,15 +13,16 @@ from .linear import (
     dense_lu,
 )
 from .operator import AugmentedOperator
+from .plan import SolveStatus, failure_message
 
 
 @dataclass
 class NewtonInfo:
     """Outcome of one Newton solve.
 
-    ``solver`` names the linear solver used (e.g. ``"dense"``, ``"cg+mean"``) and
+    ``solver`` names the linear solver used (e.g. ``"dense"``, ``"cg+mean"``),
     ``linear_iterations`` the Krylov iterations of each linear solve (empty for direct
-    solvers).
+    solvers) and ``status`` why the iteration stopped (:class:`.plan.SolveStatus`).
     """
 
     success: bool
@@ -30,6 +31,7 @@ class NewtonInfo:
     message: str
     solver: str = "dense"
     linear_iterations: tuple = ()
+    status: SolveStatus = SolveStatus.CONVERGED
 
 
 def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None):
@@ -62,18 +64,23 @@ def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None):
     rnorm = np.inf
     label = "dense" if linear_solver is None else linear_solver.record.solver
 
-    def info(success, k, message):
+    def info(status, k, message):
         its = () if linear_solver is None else tuple(linear_solver.record.iterations)
-        return NewtonInfo(success, k, rnorm, message, label, its)
+        ok = status == SolveStatus.CONVERGED
+        return NewtonInfo(ok, k, rnorm, message, label, its, status)
 
     for k in range(maxiter + 1):
         try:
             r, J = fun(z)
         except ModelEvaluationError as e:
-            return z, None, info(False, k, f"model evaluation failed: {e}")
+            return z, None, info(SolveStatus.MODEL_FAILURE, k, f"model evaluation failed: {e}")
         rnorm = float(np.linalg.norm(r))
         if not np.isfinite(rnorm):
-            return z, None, info(False, k, "residual became non-finite")
+            return (
+                z,
+                None,
+                info(SolveStatus.NON_FINITE, k, failure_message(SolveStatus.NON_FINITE, maxiter)),
+            )
         if linear_solver is None:
             lu = dense_lu(J)
             factor = None if lu is None else DenseFactor(lu)
@@ -82,26 +89,38 @@ def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None):
             factor = linear_solver.factorize(J)
             rtol = linear_solver.newton_rtol(rnorm, tol)
         if factor is None:
-            return z, None, info(False, k, "Jacobian is singular or not finite")
+            message = failure_message(SolveStatus.SINGULAR_JACOBIAN, maxiter)
+            return z, None, info(SolveStatus.SINGULAR_JACOBIAN, k, message)
         try:
             dz = factor.solve(r, rtol=rtol)
         except KrylovError as e:
-            return z, None, info(False, k, f"linear solve of Newton step {k} failed: {e}")
+            message = f"linear solve of Newton step {k} failed: {e}"
+            return z, None, info(SolveStatus.KRYLOV_FAILED, k, message)
         z = z - dz
         if rnorm < tol:
-            return z, factor, info(True, k, "converged")
-    return z, None, info(False, maxiter, f"no convergence in {maxiter} iterations")
+            return z, factor, info(SolveStatus.CONVERGED, k, "converged")
+    message = failure_message(SolveStatus.MAX_ITERATIONS, maxiter)
+    return z, None, info(SolveStatus.MAX_ITERATIONS, maxiter, message)
 
 
-def _bordered(J, Jl, Cth):
-    """The ECFM bordered operator of ``J``; the same object for the same (linear) ``J``,
-    so the linear solver reuses its factors (Schur complement included) across steps."""
-    cached = getattr(J, "_bordered", None)
-    if cached is None or cached.Jl is not Jl or cached.Cth is not Cth:
-        cached = AugmentedOperator(J, Jl, Cth)
-        if J.is_linear:
-            J._bordered = cached
-    return cached
+class Bordered:
+    """The ECFM bordered operators of one constrained solve.
+
+    ``Bordered(Jl, Cth)(J)`` wraps ``J`` with the constraint blocks; for a linear ``J``
+    the same object comes back for the same ``J``, so the linear solver reuses its factors
+    (Schur complement included) across steps. The cache lives here, with the solve.
+    """
+
+    def __init__(self, Jl, Cth):
+        self.Jl, self.Cth = Jl, Cth
+        self._last = None
+
+    def __call__(self, J):
+        if self._last is not None and self._last.J is J:
+            return self._last
+        op = AugmentedOperator(J, self.Jl, self.Cth)
+        self._last = op if J.is_linear else None
+        return op
 
 
 def _check_constraint(system, constraint, n_rows=None):

@@ -70,7 +70,7 @@ class _QuadraticLinearization:
 
     def apply_transpose(self, Y):
         # (J^T Y)[j, b] = sum_k sum_a E3[a, b, k] (S_k^T Y)[j, a]
-        E3 = self.term._E3
+        E3 = self.term.E3
         out = np.zeros_like(Y)
         for k, Sk in enumerate(self.term.matrices(self.Theta)):
             Ek = E3[:, :, k]
@@ -84,13 +84,13 @@ class _QuadraticLinearization:
         if P == 1:
             return self.coef * S[0]
         S = np.stack(S)  # (P, N, N)
-        E3 = self.term._E3
+        E3 = self.term.E3
         # J[i, a, j, b] = sum_k E3[a, b, k] S_k[i, j], as one matrix product
         T = (E3.reshape(P * P, P) @ S.reshape(P, N * N)).reshape(P, P, N, N)
         return self.coef * T.transpose(2, 0, 3, 1).reshape(N * P, N * P)
 
     def sparse(self):
-        E3 = self.term._E3
+        E3 = self.term.E3
         out = None
         for k, Sk in enumerate(self.term.matrices(self.Theta)):
             Ek = E3[:, :, k]
@@ -102,7 +102,7 @@ class _QuadraticLinearization:
 
     def mean_block(self, E2_00):
         """The (0, 0) chaos block divided by :math:`\\mathbb E[\\Psi_0^2]`."""
-        E3 = self.term._E3
+        E3 = self.term.E3
         S = None
         for k in np.nonzero(E3[0, 0, :])[0]:
             Sk = E3[0, 0, k] * self.term.form.matrix(self.Theta[:, k])
@@ -217,12 +217,7 @@ class GalerkinOperator:
         for part in self.parts:
             J += part.dense()
         if self.dt is not None:
-            # M (x) E2 / dt is fixed during a march: divide once, not per Newton step
-            cache = self.system.__dict__.setdefault("_mass_dt_cache", {})
-            if self.dt not in cache:
-                cache.clear()
-                cache[self.dt] = self.system.mass_matrix() / self.dt
-            J = cache[self.dt] + J
+            J = self.system.structure.mass_over_dt(self.dt) + J
         return J
 
     def to_sparse(self):

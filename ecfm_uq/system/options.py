@@ -5,7 +5,8 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from .._validation import check_choice, check_int, check_positive
+from .._validation import check_choice, check_int, check_positive, check_real
+from .plan import CHORD_RATE
 
 __all__ = ["SOLVERS", "PRECONDITIONERS", "SolverOptions", "solver_options"]
 
@@ -38,6 +39,20 @@ class SolverOptions:
         Krylov iterations per solve.
     restart : int
         GMRES restart length.
+    compiled : {"auto", True, False}
+        Marches only: run a compiled kernel when one takes the system (``"auto"``),
+        demand it (``True``: ``ValueError`` saying why none does) or take the generic
+        Python path (``False``); see :mod:`.plan`.
+    chord_rate : float in [0, 1]
+        The compiled ``P > 1`` march iterates each step with the node-wise preconditioner
+        as a chord method and switches to Newton-Krylov once the residual falls by less
+        than this factor per iteration; ``0``: Newton-Krylov from the first iteration.
+
+    Notes
+    -----
+    Which path, solver and preconditioner run, and every threshold they share (the
+    singular pivot, the inexact-Newton forcing term, the Krylov acceptance rule), are
+    decided in one place, :mod:`ecfm_uq.system.plan`.
     """
 
     solver: str = "auto"
@@ -45,6 +60,8 @@ class SolverOptions:
     rtol: float = 1e-10
     maxiter: int = 500
     restart: int = 50
+    compiled: str | bool = "auto"
+    chord_rate: float = CHORD_RATE
 
     def __post_init__(self):
         check_choice("solver", self.solver, SOLVERS)
@@ -52,6 +69,13 @@ class SolverOptions:
         check_positive("rtol", self.rtol)
         check_int("maxiter", self.maxiter, minimum=1)
         check_int("restart", self.restart, minimum=1)
+        if not (self.compiled == "auto" or self.compiled is True or self.compiled is False):
+            raise ValueError(f"`compiled` must be 'auto', True or False, got {self.compiled!r}")
+        rate = check_real("chord_rate", self.chord_rate)
+        if not 0.0 <= rate <= 1.0:
+            raise ValueError(
+                f"`chord_rate` must lie in [0, 1] (0: Newton-Krylov throughout), got {rate}"
+            )
 
 
 def _options(**kw):

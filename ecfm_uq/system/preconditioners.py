@@ -14,6 +14,7 @@ import scipy.sparse as sp
 
 from ..errors import SingularSystemError
 from .factors import _lu_any
+from .plan import VANISHING_BLOCK
 
 
 class MeanPreconditioner:
@@ -31,7 +32,7 @@ class MeanPreconditioner:
         K = op.mean_block()
         self.kind = kind
         scale = sum(abs(p.coef) * abs(p.term.K).max() for p in op.parts if not p.is_quadratic)
-        if scale > 0 and abs(K).max() <= 1e-12 * scale:
+        if scale > 0 and abs(K).max() <= VANISHING_BLOCK * scale:
             raise SingularSystemError(
                 f"`preconditioner`='{kind}': the mean block of the Jacobian (sum_q E[g_q] "
                 "c_q K_q) vanishes: the random coefficients have zero mean, so the mean "
@@ -236,7 +237,7 @@ class DecoupledPreconditioner(_ChaosBlockDiagonal):
             weight += np.abs(D[-1]) * abs(shared).max()
         self.factors = []
         for k in range(Q.shape[0]):
-            if weight[k] <= 1e-12 * weight.max():
+            if weight[k] <= VANISHING_BLOCK * weight.max():
                 raise SingularSystemError(
                     f"`preconditioner`='decoupled': chaos mode {k} of the decoupled operator "
                     "vanishes (every coupling's eigenvalue is zero there), so the Galerkin "
@@ -259,7 +260,7 @@ class DecoupledPreconditioner(_ChaosBlockDiagonal):
             self.factors.append(factor)
 
 
-def _make_preconditioner(op, kind):
+def make_preconditioner(op, kind):
     """The Krylov preconditioner of ``kind`` for ``op`` (``None`` for ``"none"``)."""
     if kind is None:
         return None

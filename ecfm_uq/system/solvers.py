@@ -1,7 +1,6 @@
 """The nonlinear solvers (compatibility module): see :mod:`.nonlinear`, :mod:`.steady`,
 :mod:`.stepping`, :mod:`.trajectory` and :mod:`.compiled`."""
 
-from .compiled import _CHORD_RATE, _COMPILED, _compiled_kernels, _compiled_march  # noqa: F401
 from .nonlinear import NewtonInfo, newton
 from .steady import SteadySolution, solve_continuation, solve_steady
 from .stepping import march

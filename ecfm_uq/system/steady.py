@@ -13,7 +13,8 @@ from .linear import (
     LinearSolver,
     solver_options,
 )
-from .nonlinear import _bordered, _check_constraint, newton
+from .nonlinear import Bordered, _check_constraint, newton
+from .plan import SolveStatus
 
 
 @dataclass
@@ -33,6 +34,9 @@ class SteadySolution:
     linear_iterations : list of int
         Krylov iterations of every linear solve so far (Newton steps, then sensitivities);
         empty for direct solvers.
+    status : SolveStatus
+        Why Newton stopped (:class:`.plan.SolveStatus`: ``CONVERGED``, ``MAX_ITERATIONS``,
+        ``SINGULAR_JACOBIAN``, ``KRYLOV_FAILED``, ``NON_FINITE``, ``MODEL_FAILURE``).
     """
 
     system: object
@@ -45,6 +49,7 @@ class SteadySolution:
     message: str
     constrained: bool = False
     solver: str = "dense"
+    status: SolveStatus = SolveStatus.CONVERGED
     _lu: object = field(default=None, repr=False)
     _M_obs: object = field(default=None, repr=False)
     _linear: object = field(default=None, repr=False)
@@ -235,11 +240,12 @@ def solve_steady(
     else:
         Cth = system.constraint_jacobian(M_obs)
         Jl = system.lam_jacobian()
+        bordered = Bordered(Jl, Cth)
 
         def fun(z):
             Th, lm = z[:n].reshape(N, P), z[n:]
             r = np.concatenate([system.residual(Th, eps, lm).ravel(), Cth @ z[:n] - v])
-            return r, _bordered(system.jacobian_operator(Th, eps), Jl, Cth)
+            return r, bordered(system.jacobian_operator(Th, eps))
 
         z0 = np.concatenate([Theta0.ravel(), np.zeros(system.n_forces)])
         z, factor, info = newton(fun, z0, tol, maxiter, linear_solver=linear)
@@ -258,6 +264,7 @@ def solve_steady(
         message,
         constrained=M_obs is not None,
         solver=linear.record.solver,
+        status=info.status,
         _lu=factor,
         _M_obs=M_obs,
         _linear=linear,

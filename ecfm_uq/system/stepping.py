@@ -23,12 +23,10 @@ import numpy as np
 
 from .._validation import as_finite_array, check_int, check_positive
 from ..errors import ConvergenceError
-from .compiled import _compiled_march
-from .linear import (
-    LinearSolver,
-    solver_options,
-)
-from .nonlinear import _bordered, _check_constraint, newton
+from .compiled import compiled_march
+from .linear import LinearSolver
+from .nonlinear import Bordered, _check_constraint, newton
+from .options import solver_options
 from .trajectory import Trajectory, _generic_adjoint
 
 
@@ -84,10 +82,12 @@ def march(
 
     Notes
     -----
-    Small deterministic systems (``P = 1``, dense solver, at most one quadratic term,
-    ``N <= 128``) are marched by one compiled kernel (:mod:`._kernels`) with the same
-    maths and no Python work per step; ``Trajectory.solver`` then reads
-    ``"dense (compiled)"``.
+    Small systems are marched by a compiled kernel (:mod:`._kernels`) with the same
+    maths and no Python work per step when the solve plan (:mod:`.plan`) says so:
+    ``P = 1`` with the dense solver (``Trajectory.solver`` then reads
+    ``"dense (compiled)"``), or a nonlinear one-germ ``P > 1`` system with GMRES and the
+    nodal preconditioner (``"gmres+nodal (compiled)"``). ``solver={"compiled": False}``
+    takes the generic path, ``True`` demands a kernel.
 
     Returns
     -------
@@ -110,13 +110,9 @@ def march(
     C = system.n_forces if constrained else 0
     if system.M is None:
         system.mass_matrix()  # raises the "no mass matrix" error
-    linear = LinearSolver(
-        system,
-        solver_options(solver),
-        constrained=constrained,
-        steady=False,
-        keep_factors=keep_factors,
-    )
+    opts = solver_options(solver)
+    plan = dict(constrained=constrained, steady=False, keep_factors=keep_factors)
+    linear = LinearSolver(system, opts, **plan)
     if guess is not None:
         if not isinstance(guess, Trajectory) or guess.Theta.shape != (n_steps + 1, N, P):
             raise ValueError(
@@ -126,11 +122,14 @@ def march(
         if constrained and guess.lam.shape != (n_steps + 1, C):
             raise ValueError("`guess` must come from a march under the same data constraint")
     args = (system, eps, Theta0, dt, n_steps, t0, M_obs, V, sensitivities, tol, maxiter)
-    traj = _compiled_march(linear, *args, keep_factors, guess)
-    if traj is not None:
-        if strict and not traj.success:
-            raise ConvergenceError(traj.message)
-        return traj
+    if linear.plan.path != "generic":
+        traj = compiled_march(linear, *args, keep_factors, guess)
+        if traj is not None:
+            if strict and not traj.success:
+                raise ConvergenceError(traj.message)
+            return traj
+        # the kernel did not compile with this numba: the same solve on the generic path
+        linear = LinearSolver(system, solver_options(opts, compiled=False), **plan)
     if linear.name == "dense":
         Mdt = system.mass_matrix() / dt
 
@@ -152,6 +151,7 @@ def march(
     if constrained:
         Cth = system.constraint_jacobian(M_obs)
         Jl = system.lam_jacobian()
+        bordered = Bordered(Jl, Cth)
 
     times = t0 + dt * np.arange(n_steps + 1)
     Th = np.zeros((n_steps + 1, N, P))
@@ -172,7 +172,7 @@ def march(
             def fun(z, prev=prev, t1=t1, v1=v1):
                 T1, l1 = z[:n].reshape(N, P), z[n:]
                 r1 = mass(z[:n] - prev) + system.residual(T1, eps, l1, t1).ravel()
-                J = _bordered(system.jacobian_operator(T1, eps, t1, dt=dt), Jl, Cth)
+                J = bordered(system.jacobian_operator(T1, eps, t1, dt=dt))
                 return np.concatenate([r1, Cth @ z[:n] - v1]), J
 
             z0 = np.concatenate([prev, lam[s]])
@@ -208,6 +208,7 @@ def march(
                 nits[: s + 1],
                 linear.record.solver,
                 list(linear.record.iterations),
+                status=info.status,
             )
         Th[s + 1] = z[:n].reshape(N, P)
         if keep_factors:

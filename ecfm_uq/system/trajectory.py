@@ -8,6 +8,7 @@ import numpy as np
 
 from .._validation import as_finite_array
 from ..errors import ConvergenceError
+from .plan import SolveStatus
 
 
 @dataclass
@@ -35,6 +36,9 @@ class Trajectory:
         The linear solver used.
     linear_iterations : list of int
         Krylov iterations of every linear solve (empty for direct solvers).
+    status : SolveStatus
+        ``CONVERGED``, or why the failed step stopped (:class:`.plan.SolveStatus`; the
+        same codes whichever path marched).
     """
 
     times: np.ndarray
@@ -49,6 +53,7 @@ class Trajectory:
     solver: str = "dense"
     linear_iterations: list = field(default_factory=list)
     _adjoint: object = field(default=None, repr=False)
+    status: SolveStatus = SolveStatus.CONVERGED
 
     def adjoint_gradient(self, g_theta, g_lam=None):
         """Gradient in :math:`\\epsilon` of :math:`z = \\sum_t z_t(\\Theta_t, \\lambda_t)` by the
