@@ -1,6 +1,6 @@
 """Benchmark: the solver and preconditioner choices of ``solver="auto"``, side by side.
 
-The claims behind the ``"auto"`` rules of :mod:`ecfm_uq.system.linear`, each measured in
+The claims behind the ``"auto"`` rules of :mod:`ecfm_uq.system.plan`, each measured in
 this one run (BLAS on one thread, best of ``--repeats``):
 
 1. **Sparse LU of the chaos-coupled block matrix vs mean-preconditioned CG** on the

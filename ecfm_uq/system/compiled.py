@@ -52,14 +52,16 @@ def compiled_march(linear, system, eps, Theta0, dt, n_steps, t0, M_obs, V, sens,
             dF += dFt
     Mdt = system.mass_matrix() / dt if P == 1 else system.M / dt
     quad = (rows, ptr, idx, val, float(cq), gq)
-    args = (system, eps, Theta0, times, M_obs, V, sens, tol, maxiter, keep, guess)
+    args = (system, eps, Theta0, times, sens, tol, maxiter, guess)
     from numba.core.errors import NumbaError
 
     try:
         with np.errstate(all="ignore"):
             if P == 1:
                 F1, dF1 = np.ascontiguousarray(F[:, :, 0]), np.ascontiguousarray(dF[:, :, 0])
-                return _march_p1(_kernels, linear, *args, lin, Ks, quad, F1, dF1, Mdt)
+                return _march_p1(
+                    _kernels, linear, *args, M_obs, V, keep, lin, Ks, quad, F1, dF1, Mdt
+                )
             return _march_sg(_kernels, linear, *args, lin, Ks, quad, F, dF, Mdt)
     except NumbaError:  # the kernel does not compile with this numba: use the generic march
         _plan.kernels_failed()
@@ -79,8 +81,8 @@ def _failed_trajectory(system, times, failed, status, rnorm, maxiter, Theta, lam
     )  # fmt: skip
 
 
-def _march_sg(_kernels, linear, system, eps, Theta0, times, M_obs, V, sens, tol, maxiter, keep,
-              guess, lin, Ks, quad, F, dF, Mdt):  # fmt: skip
+def _march_sg(_kernels, linear, system, eps, Theta0, times, sens, tol, maxiter, guess, lin, Ks,
+              quad, F, dF, Mdt):  # fmt: skip
     """The ``P > 1`` compiled march (:func:`_kernels.march_sg`)."""
     N, P = system.shape
     n_eps = system.n_eps
@@ -110,8 +112,8 @@ def _march_sg(_kernels, linear, system, eps, Theta0, times, M_obs, V, sens, tol,
     )  # fmt: skip
 
 
-def _march_p1(_kernels, linear, system, eps, Theta0, times, M_obs, V, sens, tol, maxiter, keep,
-              guess, lin, Ks, quad, F, dF, Mdt):  # fmt: skip
+def _march_p1(_kernels, linear, system, eps, Theta0, times, sens, tol, maxiter, guess, M_obs, V,
+              keep, lin, Ks, quad, F, dF, Mdt):  # fmt: skip
     """The ``P = 1`` compiled march (:func:`_kernels.march_p1`) and its adjoint."""
     N = system.N
     n_eps = system.n_eps

@@ -138,26 +138,9 @@ class GalerkinOperator:
         return self.shape[0]
 
     @property
-    def sparse_input(self):
-        """True when any spatial operator (or the mass matrix) is ``scipy.sparse``."""
-        mass_sparse = self.dt is not None and sp.issparse(self.system.M)
-        return mass_sparse or any(part.term.sparse for part in self.parts if not part.is_quadratic)
-
-    @property
     def is_linear(self):
         """No quadratic term: the operator does not depend on the state."""
         return not any(part.is_quadratic for part in self.parts)
-
-    def asymmetry(self):
-        """``None`` if the operator is symmetric, else what breaks the symmetry."""
-        for part in self.parts:
-            if part.is_quadratic:
-                return f"the quadratic term {part.term.name!r} is not symmetric"
-            if not part.term.is_symmetric():
-                return f"term {part.term.name!r} has a non-symmetric K or G"
-        if self.dt is not None and not self.system.mass_is_symmetric():
-            return "the mass matrix M is not symmetric"
-        return None
 
     # -- action ----------------------------------------------------------------------
     def apply(self, X):
@@ -185,10 +168,6 @@ class GalerkinOperator:
     def rmatvec(self, y):
         """:math:`J^T y` for a flat ``y`` of length NP."""
         return self.apply_transpose(np.reshape(y, (self.N, self.P))).ravel()
-
-    def matmat(self, X):
-        """:math:`J X` for ``X`` of shape (NP, m)."""
-        return np.column_stack([self.matvec(X[:, j]) for j in range(X.shape[1])])
 
     def as_linear_operator(self):
         """A ``scipy.sparse.linalg.LinearOperator`` applying :math:`J` matrix-free."""

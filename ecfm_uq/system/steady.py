@@ -3,6 +3,7 @@ constraint (paper Eqs. ecfm, ecfm_solve), with forward and adjoint sensitivities
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -51,7 +52,6 @@ class SteadySolution:
     solver: str = "dense"
     status: SolveStatus = SolveStatus.CONVERGED
     _lu: object = field(default=None, repr=False)
-    _M_obs: object = field(default=None, repr=False)
     _linear: object = field(default=None, repr=False)
 
     @property
@@ -204,12 +204,12 @@ def solve_steady(
         Raise :class:`ConvergenceError` instead of returning ``success=False``.
     solver : str, SolverOptions or dict
         Linear solver: ``"auto"`` (default), ``"dense"``, ``"decoupled"``,
-        ``"sparse-direct"``, ``"cg"`` or ``"gmres"`` (see :mod:`ecfm_uq.system.linear`);
+        ``"sparse-direct"``, ``"cg"`` or ``"gmres"`` (see :mod:`ecfm_uq.system.plan`);
         a :class:`~ecfm_uq.system.SolverOptions` or dict also sets the preconditioner,
         Krylov tolerance and iteration limits. A linear system is solved by Newton too:
         one step, plus refinement steps until ``tol`` is met.
     structure : {"auto", "dense"}, optional
-        Older name for ``solver`` (``"auto"`` or ``"dense"`` only).
+        Deprecated older name for ``solver`` (``"auto"`` or ``"dense"`` only); warns.
 
     Returns
     -------
@@ -221,6 +221,11 @@ def solve_steady(
     tol = check_positive("tol", tol)
     maxiter = check_int("maxiter", maxiter, minimum=1)
     if structure is not None:
+        warnings.warn(
+            "solve_steady(structure=) is deprecated; pass solver='auto' or 'dense'",
+            DeprecationWarning,
+            stacklevel=2,
+        )
         solver = check_choice("structure", structure, ("auto", "dense"))
     opts = solver_options(solver)
     M_obs, v = _check_constraint(system, constraint)
@@ -266,7 +271,6 @@ def solve_steady(
         solver=linear.record.solver,
         status=info.status,
         _lu=factor,
-        _M_obs=M_obs,
         _linear=linear,
     )
     if strict and not sol.success:
