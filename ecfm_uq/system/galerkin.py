@@ -191,6 +191,31 @@ class GalerkinSystem:
                 R -= np.outer(self.Gamma @ np.asarray(lam, dtype=float), self.E1)
         return R
 
+    def residual_scale(self, Theta, eps, lam=None, t=None):
+        """The magnitude of the terms that :meth:`residual` adds up, a float.
+
+        :math:`\\sum \\| |c|\\,|K||\\Theta||G| \\| + \\| |c|\\,|A|:|\\Theta||\\Theta| \\|
+        + \\|F\\| + \\|\\Gamma\\lambda\\|`: floating point cannot evaluate :math:`R` (nor
+        drive it) below a small multiple of the unit round-off times this, whatever the
+        model's units (:func:`.plan.residual_floor`).
+        """
+        s = 0.0
+        for term in self.terms:
+            if isinstance(term, LinearTerm | QuadraticTerm):
+                c = abs(float(term.coef.value(eps)))
+                s += c * float(np.linalg.norm(term.magnitude(Theta)))
+            else:
+                s += float(np.linalg.norm(term.apply(Theta, eps, t)))
+        if lam is not None and self.Gamma is not None:
+            s += float(np.linalg.norm(self.Gamma @ np.asarray(lam, dtype=float)))
+        return s
+
+    def mass_scale(self, X):
+        """:math:`\\| |M|\\,|X|\\,|\\mathbb E[\\Psi\\Psi^T]| \\|` for ``X`` (N, P): the round-off
+        scale of the mass term (see :meth:`residual_scale`)."""
+        absM = abs(self.M)
+        return float(np.linalg.norm(np.asarray(absM @ np.abs(X)) @ np.abs(self.E2)))
+
     def jacobian_operator(self, Theta, eps, t=None, dt=None):
         """The Jacobian at ``Theta`` as a structured :class:`~.operator.GalerkinOperator`.
 

@@ -8,7 +8,7 @@ import numpy as np
 import scipy.sparse.linalg as spla
 
 from ..errors import KrylovError
-from .plan import krylov_accepts
+from .plan import ROUNDOFF_FACTOR, UNIT_ROUNDOFF, krylov_accepts
 
 
 def _pcg(op, b, precond, rtol, maxiter):
@@ -112,8 +112,14 @@ class KrylovFactor:
             bnorm = np.linalg.norm(b)
             res = np.linalg.norm(B - self.op.apply(X)) / bnorm if bnorm > 0 else 0.0
         self.record.add(nit, res)
-        # one rule for every Krylov solve (the plan's): the true residual within 10 rtol
-        if not krylov_accepts(res, rtol):
+        # one rule for every Krylov solve (the plan's): the true residual within 10 rtol,
+        # or at the round-off floor of |J||x| (whatever the model's units)
+        floor = 0.0
+        if not krylov_accepts(res, rtol) and np.isfinite(res):
+            bnorm = np.linalg.norm(b)
+            if bnorm > 0:
+                floor = ROUNDOFF_FACTOR * UNIT_ROUNDOFF * (self.op.magnitude(X) + bnorm) / bnorm
+        if not krylov_accepts(res, rtol, floor):
             raise KrylovError(
                 f"{self.method} did not reach rtol={rtol:.1e}: relative residual {res:.3e} "
                 f"after {nit} iterations (raise maxiter, or try another preconditioner)"

@@ -13,7 +13,7 @@ from .linear import (
     dense_lu,
 )
 from .operator import AugmentedOperator
-from .plan import SolveStatus, failure_message
+from .plan import SolveStatus, failure_message, newton_converged, residual_floor
 
 
 @dataclass
@@ -34,7 +34,7 @@ class NewtonInfo:
     status: SolveStatus = SolveStatus.CONVERGED
 
 
-def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None):
+def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None, scale=None):
     """Newton's method on ``fun(z) -> (r, J)``.
 
     Parameters
@@ -45,11 +45,17 @@ def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None):
         handled by ``linear_solver``.
     z0 : (n,) array_like
     tol : float
-        Convergence when :math:`\\|r\\|_2 < \\mathrm{tol}`.
+        Convergence when :math:`\\|r\\|_2 < \\mathrm{tol}`, or (with ``scale``) when
+        :math:`\\|r\\|_2` is at the round-off floor of the model's scale, if that floor is
+        above ``tol`` (:func:`.plan.newton_converged`).
     maxiter : int
     linear_solver : LinearSolver, optional
         How the Jacobians are factorized (dense LU when omitted). With a Krylov solver
         each step is an inexact Newton step (:meth:`LinearSolver.newton_rtol`).
+    scale : callable, optional
+        ``scale(z) -> float``, the magnitude of the terms the residual sums at ``z``
+        (:meth:`GalerkinSystem.residual_scale`); evaluated only while
+        :math:`\\|r\\| \\ge` ``tol``.
 
     Returns
     -------
@@ -72,9 +78,12 @@ def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None):
     for k in range(maxiter + 1):
         try:
             r, J = fun(z)
+            rnorm = float(np.linalg.norm(r))
+            floor = 0.0
+            if scale is not None and rnorm >= tol and np.isfinite(rnorm):
+                floor = residual_floor(scale(z), tol)
         except ModelEvaluationError as e:
             return z, None, info(SolveStatus.MODEL_FAILURE, k, f"model evaluation failed: {e}")
-        rnorm = float(np.linalg.norm(r))
         if not np.isfinite(rnorm):
             return (
                 z,
@@ -87,7 +96,7 @@ def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None):
             rtol = None
         else:
             factor = linear_solver.factorize(J)
-            rtol = linear_solver.newton_rtol(rnorm, tol)
+            rtol = linear_solver.newton_rtol(rnorm, tol, floor)
         if factor is None:
             message = failure_message(SolveStatus.SINGULAR_JACOBIAN, maxiter)
             return z, None, info(SolveStatus.SINGULAR_JACOBIAN, k, message)
@@ -97,7 +106,7 @@ def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None):
             message = f"linear solve of Newton step {k} failed: {e}"
             return z, None, info(SolveStatus.KRYLOV_FAILED, k, message)
         z = z - dz
-        if rnorm < tol:
+        if newton_converged(rnorm, tol, floor):
             return z, factor, info(SolveStatus.CONVERGED, k, "converged")
     message = failure_message(SolveStatus.MAX_ITERATIONS, maxiter)
     return z, None, info(SolveStatus.MAX_ITERATIONS, maxiter, message)
@@ -121,6 +130,11 @@ class Bordered:
         op = AugmentedOperator(J, self.Jl, self.Cth)
         self._last = op if J.is_linear else None
         return op
+
+
+def _constraint_scale(Cth, theta, v):
+    """The round-off scale of the data-constraint rows :math:`C\\theta - v`."""
+    return float(np.linalg.norm(abs(Cth) @ np.abs(theta)) + np.linalg.norm(v))
 
 
 def _check_constraint(system, constraint, n_rows=None):

@@ -56,6 +56,9 @@ class _LinearPart:
     def mean_block(self, E2_00):
         return (self.coef * self.term.G[0, 0] / E2_00) * self.term.K
 
+    def magnitude(self, X):
+        return abs(self.coef) * self.term.magnitude(X)
+
 
 class _QuadraticLinearization:
     """The Jacobian of one quadratic term at a fixed state."""
@@ -67,6 +70,9 @@ class _QuadraticLinearization:
 
     def apply(self, X):
         return self.coef * self.term.linear_action(self.Theta, X)
+
+    def magnitude(self, X):
+        return abs(self.coef) * self.term.magnitude(self.Theta, X)
 
     def apply_transpose(self, Y):
         # (J^T Y)[j, b] = sum_k sum_a E3[a, b, k] (S_k^T Y)[j, a]
@@ -151,6 +157,18 @@ class GalerkinOperator:
         if self.dt is not None:
             Y += self.system.apply_mass(X) / self.dt
         return Y
+
+    def magnitude(self, X):
+        """:math:`\\| |J|\\,|\\mathrm{vec}X| \\|` (a float): the round-off scale of :meth:`apply`
+        at ``X`` (N, P), against which a Krylov answer's residual is judged
+        (:func:`.plan.krylov_accepts`)."""
+        Y = np.zeros((self.N, self.P))
+        for part in self.parts:
+            Y += part.magnitude(X)
+        s = float(np.linalg.norm(Y))
+        if self.dt is not None:
+            s += self.system.mass_scale(X) / self.dt
+        return s
 
     def apply_transpose(self, Y):
         """:math:`J^T\\,\\mathrm{vec}(Y)` reshaped (the adjoint action), matrix-free."""
@@ -238,6 +256,10 @@ class _Transposed:
 
     def apply(self, Y):
         return self.op.apply_transpose(Y)
+
+    def magnitude(self, Y):
+        # |J^T| |y| is estimated by |J| |y|: the same entries, the scale is what matters
+        return self.op.magnitude(Y)
 
     def matvec(self, y):
         return self.op.rmatvec(y)

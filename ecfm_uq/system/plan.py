@@ -63,6 +63,17 @@ Shared thresholds and the Krylov acceptance rule
     GMRES, which stops on the preconditioned residual; CG and the kernel's
     right-preconditioned GMRES monitor the true residual and so meet ``rtol`` itself
     unless they run out of iterations.
+:func:`residual_floor`
+    Newton stops when :math:`\\|R\\| <` ``tol`` (absolute, the default ``1e-10``) **or**
+    when :math:`\\|R\\|` is at the round-off floor of the model's own scale,
+    :data:`ROUNDOFF_FACTOR` unit round-offs of :meth:`GalerkinSystem.residual_scale`
+    (the size of the terms the residual sums, e.g. :math:`\\| |K||\\Theta| \\|`), when
+    that floor is above ``tol``: a model in units where ``1e-10`` is below round-off
+    (a finite-difference Laplacian with entries :math:`1/h^2`) converges as one in
+    well-scaled units does. The floor also bounds the forcing term from below, and a
+    Krylov answer whose residual is at the round-off floor of :math:`|J||x|` is accepted
+    (:func:`krylov_accepts`). The generic path only: the compiled kernels still stop on
+    the absolute ``tol``.
 :data:`CHORD_RATE`
     Default of ``SolverOptions.chord_rate``: the ``P > 1`` kernel's chord iteration hands
     a step to Newton-Krylov once the residual falls by less than this factor per
@@ -79,6 +90,8 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..memory import check_allocation, memory_budget
 
 __all__ = [
@@ -92,6 +105,8 @@ __all__ = [
     "choose_solver",
     "failure_message",
     "krylov_accepts",
+    "newton_converged",
+    "residual_floor",
     "newton_rtol",
     "plan_solve",
 ]
@@ -102,6 +117,9 @@ NEWTON_ETA_MAX = 1e-4
 NEWTON_ETA_FACTOR = 0.05
 NEWTON_ETA_MIN = 1e-13
 KRYLOV_ACCEPT = 10.0
+# round-off floors: ROUNDOFF_FACTOR unit round-offs of the magnitude of what is summed
+UNIT_ROUNDOFF = float(np.finfo(float).eps)
+ROUNDOFF_FACTOR = 10.0
 CHORD_RATE = 0.25
 # a chaos block (mean block, decoupled mode) below this fraction of the operator's scale
 # vanishes: the Galerkin operator is singular whatever the spatial operators are
@@ -149,21 +167,46 @@ def failure_message(status, maxiter):
     }[status]
 
 
-def newton_rtol(rnorm, tol):
-    """The relative tolerance of a Newton step's Krylov solve (the forcing term)."""
+def residual_floor(scale, tol):
+    """The round-off floor of a residual of magnitude ``scale`` when it exceeds ``tol``, else 0.
+
+    ``scale`` is :meth:`GalerkinSystem.residual_scale` (the size of the terms the
+    residual adds up): floating point cannot evaluate, let alone reduce, the residual
+    below about :data:`ROUNDOFF_FACTOR` unit round-offs of it. Only a floor above the
+    absolute ``tol`` matters (the model's units make ``tol`` unreachable); below it the
+    absolute test decides alone, as before.
+    """
+    floor = ROUNDOFF_FACTOR * UNIT_ROUNDOFF * scale
+    return float(floor) if floor > tol else 0.0
+
+
+def newton_converged(rnorm, tol, floor=0.0):
+    """Newton's termination: ``||R|| < tol`` (absolute), or ``||R||`` at the round-off
+    floor of the model's own scale (:func:`residual_floor`)."""
+    return bool(rnorm < tol or (floor > 0.0 and rnorm <= floor))
+
+
+def newton_rtol(rnorm, tol, floor=0.0):
+    """The relative tolerance of a Newton step's Krylov solve (the forcing term), never
+    below what floating point can reach (``floor / ||R||``)."""
     eta = max(NEWTON_ETA_FACTOR * tol / max(rnorm, 1e-300), NEWTON_ETA_MIN)
+    if floor > 0.0:
+        eta = max(eta, floor / max(rnorm, 1e-300))
     return float(min(NEWTON_ETA_MAX, eta))
 
 
-def krylov_accepts(res, rtol):
-    """Whether a Krylov answer with true relative residual ``res`` is accepted at ``rtol``."""
-    return bool(res == res and res <= KRYLOV_ACCEPT * rtol)  # NaN refused
+def krylov_accepts(res, rtol, floor=0.0):
+    """Whether a Krylov answer with true relative residual ``res`` is accepted at ``rtol``.
+
+    ``floor``: the relative round-off floor of that residual
+    (:data:`ROUNDOFF_FACTOR` unit round-offs of :math:`\\| |J||x| \\| + \\|b\\|`, over
+    :math:`\\|b\\|`); an answer at it is as good as the arithmetic allows.
+    """
+    return bool(res == res and res <= max(KRYLOV_ACCEPT * rtol, floor))  # NaN refused
 
 
 def pivots_singular(d):
     """Whether LU pivots of magnitudes ``d`` (an array) make the matrix singular."""
-    import numpy as np
-
     if not np.all(np.isfinite(d)):
         return True
     return bool(d.min() <= SINGULAR_PIVOT * max(d.max(), 1e-300))

@@ -14,7 +14,7 @@ from .linear import (
     LinearSolver,
     solver_options,
 )
-from .nonlinear import Bordered, _check_constraint, newton
+from .nonlinear import Bordered, _check_constraint, _constraint_scale, newton
 from .plan import SolveStatus
 
 
@@ -240,7 +240,12 @@ def solve_steady(
             Th = z.reshape(N, P)
             return system.residual(Th, eps, lam).ravel(), system.jacobian_operator(Th, eps)
 
-        z, factor, info = newton(fun, Theta0.ravel(), tol, maxiter, linear_solver=linear)
+        def scale(z):
+            return system.residual_scale(z.reshape(N, P), eps, lam)
+
+        z, factor, info = newton(
+            fun, Theta0.ravel(), tol, maxiter, linear_solver=linear, scale=scale
+        )
         Theta, lam_out = z.reshape(N, P), lam
     else:
         Cth = system.constraint_jacobian(M_obs)
@@ -252,8 +257,12 @@ def solve_steady(
             r = np.concatenate([system.residual(Th, eps, lm).ravel(), Cth @ z[:n] - v])
             return r, bordered(system.jacobian_operator(Th, eps))
 
+        def scale(z):
+            s = system.residual_scale(z[:n].reshape(N, P), eps, z[n:])
+            return s + _constraint_scale(Cth, z[:n], v)
+
         z0 = np.concatenate([Theta0.ravel(), np.zeros(system.n_forces)])
-        z, factor, info = newton(fun, z0, tol, maxiter, linear_solver=linear)
+        z, factor, info = newton(fun, z0, tol, maxiter, linear_solver=linear, scale=scale)
         Theta, lam_out = z[:n].reshape(N, P), z[n:]
     message = info.message
     if info.success and linear.name == "decoupled":

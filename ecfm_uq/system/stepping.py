@@ -25,7 +25,7 @@ from .._validation import as_finite_array, check_int, check_positive
 from ..errors import ConvergenceError
 from .compiled import compiled_march
 from .linear import LinearSolver
-from .nonlinear import Bordered, _check_constraint, newton
+from .nonlinear import Bordered, _check_constraint, _constraint_scale, newton
 from .options import solver_options
 from .trajectory import Trajectory, _generic_adjoint
 
@@ -186,7 +186,15 @@ def march(
                 return r1, system.jacobian_operator(T1, eps, t1, dt=dt)
 
             z0 = prev if guess is None else guess.Theta[s + 1].ravel()
-        z, lu, info = newton(fun, z0, tol, maxiter, linear_solver=linear)
+
+        def scale(z, prev=prev, t1=t1, v1=V[s + 1] if constrained else None):
+            T1 = z[:n].reshape(N, P)
+            mag = np.abs(T1) + np.abs(prev.reshape(N, P))
+            sc = system.residual_scale(T1, eps, z[n:] if constrained else None, t1)
+            sc += system.mass_scale(mag) / dt
+            return sc + (_constraint_scale(Cth, z[:n], v1) if constrained else 0.0)
+
+        z, lu, info = newton(fun, z0, tol, maxiter, linear_solver=linear, scale=scale)
         nits[s] = info.nit
         if not info.success:
             msg = (

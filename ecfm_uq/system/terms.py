@@ -215,8 +215,17 @@ class LinearTerm:
         bound.G = G
         bound._G_sparse = _sparse_coupling(G)
         bound._kron = {}
+        bound._abs = None
         bound.__dict__.pop("_symmetric", None)
         return bound
+
+    def magnitude(self, X):
+        """:math:`|K|\\,|X|\\,|G|` (N, P), without the coefficient: the scale of the
+        round-off in :meth:`action` (see :func:`.plan.residual_floor`)."""
+        if self._abs is None:
+            self._abs = (abs(self.K), np.abs(self.G))
+        absK, absG = self._abs
+        return np.asarray(absK @ np.abs(X)) @ absG
 
     def action(self, X):
         """:math:`K X G` (without the coefficient) for ``X`` of shape (N, P)."""
@@ -338,6 +347,30 @@ class QuadraticTerm:
             raise ValueError(
                 f"term {self.name!r} is not bound to a system; use the copy in system.terms"
             ) from None
+
+    def _abs_form(self):
+        """The form with :math:`|A|` (a dense form), else the form itself (an estimate)."""
+        if getattr(self, "_form_abs", None) is None:
+            A = getattr(self.form, "A", None)
+            self._form_abs = self.form if A is None else DenseQuadraticForm(np.abs(A))
+        return self._form_abs
+
+    def magnitude(self, Theta, X=None):
+        """The round-off scale of the projected form (no coefficient), (N, P).
+
+        :math:`|A|:|\\Theta||\\Theta|` projected with :math:`|\\mathbb E[\\Psi\\Psi\\Psi]|`; with
+        ``X``, the same for the Jacobian action :meth:`linear_action` along ``X``.
+        """
+        form, T = self._abs_form(), np.abs(Theta)
+        Y = T if X is None else np.abs(X)
+        if self._P == 1:
+            out = np.abs(form.apply(Y, T))
+            return out if X is None else out + np.abs(form.apply(T, Y))
+        bs, cs, W = self._bs, self._cs, np.abs(self._W)
+        out = np.abs(form.apply(Y[:, bs], T[:, cs]))
+        if X is not None:
+            out = out + np.abs(form.apply(T[:, bs], Y[:, cs]))
+        return out @ W
 
     def _raw(self, Theta):
         if self._P == 1:

@@ -1,0 +1,67 @@
+"""Newton's termination does not depend on the model's units (issue 21, item 1).
+
+A 1-D finite-difference Poisson matrix in plain units has entries 1/h^2 ~ 4e6 at
+N = 2000, so round-off alone leaves a residual ~1e-8, above the absolute tol = 1e-10:
+every solver must still stop at the round-off floor of the model's own scale and match
+scipy's spsolve, in plain units and scaled by 1e-9 and 1e9.
+"""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ecfm_uq.chaos import ChaosBasis, weighted_gram
+from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm, solve_steady
+from ecfm_uq.system.plan import SolveStatus, newton_converged, residual_floor
+
+
+def _poisson(N):
+    h = 1.0 / (N + 1)
+    K = sp.diags([-np.ones(N - 1), 2 * np.ones(N), -np.ones(N - 1)], [-1, 0, 1], format="csr")
+    x = np.linspace(h, 1 - h, N)
+    return K / h**2, np.pi**2 * np.sin(np.pi * x) + 1.0
+
+
+@pytest.mark.parametrize("units", [1.0, 1e-9, 1e9])
+@pytest.mark.parametrize("solver", ["auto", "dense", "sparse-direct", "cg", "gmres"])
+def test_poisson_in_any_units_matches_spsolve(units, solver):
+    K, F = _poisson(2000)
+    K = units * K
+    ref = spla.spsolve(K.tocsc(), F)
+    system = GalerkinSystem([LinearTerm(K), LoadTerm.constant(F)], 0)
+    sol = solve_steady(system, [], solver=solver)
+    assert sol.success and sol.status == SolveStatus.CONVERGED, sol.message
+    np.testing.assert_allclose(sol.Theta[:, 0], ref, rtol=0, atol=1e-8 * np.abs(ref).max())
+    # the absolute test alone could not have stopped: round-off sits above tol = 1e-10
+    assert sol.residual_norm > 1e-10
+
+
+@pytest.mark.parametrize("units", [1.0, 1e-9, 1e9])
+def test_random_poisson_in_any_units_matches_spsolve_of_the_galerkin_matrix(units):
+    # conductivity 1 + 0.3 w1 + 0.2 w2 (two germs): "auto" takes a Krylov method
+    N = 400
+    K, F = _poisson(N)
+    K = units * K
+    basis = ChaosBasis(2, dim=2)
+    G1 = weighted_gram(basis, lambda w: 1.0 + 0.3 * w[:, 0])
+    G2 = weighted_gram(basis, lambda w: 0.2 * w[:, 1])
+    terms = [LinearTerm(K, G=G1), LinearTerm(K, G=G2), LoadTerm.constant(F)]
+    system = GalerkinSystem(terms, 0, basis=basis)
+    sol = solve_steady(system, [])
+    assert sol.success, sol.message
+    assert sol.solver.startswith(("cg", "gmres"))
+    A = system.jacobian_operator(system.zeros(), []).to_sparse().tocsc()
+    b = -system.residual(system.zeros(), []).ravel()
+    ref = spla.spsolve(A, b).reshape(N, system.P)
+    np.testing.assert_allclose(sol.Theta, ref, rtol=0, atol=1e-8 * np.abs(ref).max())
+
+
+def test_well_scaled_models_still_stop_on_the_absolute_tol():
+    # the floor only counts where it exceeds tol: here it is far below
+    assert residual_floor(1.0, 1e-10) == 0.0
+    assert not newton_converged(2e-10, 1e-10, residual_floor(1.0, 1e-10))
+    # a model of scale 1e8 cannot get below ~2e-7: that is converged
+    floor = residual_floor(1e8, 1e-10)
+    assert floor == pytest.approx(10 * np.finfo(float).eps * 1e8)
+    assert newton_converged(1e-7, 1e-10, floor) and not newton_converged(1e-5, 1e-10, floor)
