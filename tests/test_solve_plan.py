@@ -12,7 +12,7 @@ from ecfm_uq.system import (
     solve_steady,
     solver_options,
 )
-from ecfm_uq.system import plan as plan_module
+from ecfm_uq.system import compiled as compiled_module
 from ecfm_uq.system.plan import SolveStatus, krylov_accepts, newton_rtol, plan_solve
 
 N = 6
@@ -64,7 +64,7 @@ def test_unavailable_kernels_fall_back_to_the_generic_march(monkeypatch):
     system = _burgers_like()
     args = (system, [0.0], 0.1 * np.sin(np.arange(N)), 0.05, 4)
     fast = march(*args, tol=1e-12, sensitivities=True)
-    monkeypatch.setattr(plan_module, "compiled_kernels", lambda: None)
+    monkeypatch.setattr(compiled_module, "compiled_kernels", lambda: None)
     slow = march(*args, tol=1e-12, sensitivities=True)
     assert fast.solver == "dense (compiled)" and slow.solver == "dense"
     np.testing.assert_allclose(slow.Theta, fast.Theta, rtol=0, atol=1e-12)

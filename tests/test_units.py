@@ -12,7 +12,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ecfm_uq.chaos import ChaosBasis, weighted_gram
-from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm, solve_steady
+from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm, march, solve_steady
 from ecfm_uq.system.plan import SolveStatus, newton_converged, residual_floor
 
 
@@ -65,3 +65,24 @@ def test_well_scaled_models_still_stop_on_the_absolute_tol():
     floor = residual_floor(1e8, 1e-10)
     assert floor == pytest.approx(10 * np.finfo(float).eps * 1e8)
     assert newton_converged(1e-7, 1e-10, floor) and not newton_converged(1e-5, 1e-10, floor)
+
+
+@pytest.mark.parametrize("units", [1.0, 1e-9, 1e9])
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_march_of_the_whole_model_in_any_units_matches_backward_euler(units, compiled):
+    # M, K and F all scaled: the states are the same, the residual's round-off scales
+    N, dt, n_steps = 100, 1e-3, 5
+    K, F = _poisson(N)
+    M = sp.identity(N, format="csr")
+    x = np.linspace(0, 1, N + 2)[1:-1]
+    theta0 = np.sin(2 * np.pi * x)
+    A = (M / dt + K).tocsc()
+    ref = [theta0]
+    for _ in range(n_steps):
+        ref.append(spla.spsolve(A, M @ ref[-1] / dt + F))
+    terms = [LinearTerm((units * K).toarray()), LoadTerm.constant(units * F)]
+    system = GalerkinSystem(terms, 0, M=units * M.toarray())
+    tr = march(system, [], theta0, dt, n_steps, solver={"compiled": compiled})
+    assert tr.success and tr.solver == ("dense (compiled)" if compiled else "dense"), tr.message
+    scale = np.abs(ref).max()
+    np.testing.assert_allclose(tr.Theta[:, :, 0], ref, rtol=0, atol=1e-8 * scale)

@@ -37,7 +37,9 @@ from .plan import (
     NEWTON_ETA_FACTOR,
     NEWTON_ETA_MAX,
     NEWTON_ETA_MIN,
+    ROUNDOFF_FACTOR,
     SINGULAR_PIVOT,
+    UNIT_ROUNDOFF,
     SolveStatus,
 )
 
@@ -61,6 +63,7 @@ _MAX_ITERATIONS = int(SolveStatus.MAX_ITERATIONS)
 _SINGULAR_JACOBIAN = int(SolveStatus.SINGULAR_JACOBIAN)
 _KRYLOV_FAILED = int(SolveStatus.KRYLOV_FAILED)
 _NON_FINITE = int(SolveStatus.NON_FINITE)
+_ROUNDOFF = ROUNDOFF_FACTOR * UNIT_ROUNDOFF
 
 
 @numba.njit(cache=True)
@@ -158,6 +161,21 @@ def _quadratic(theta, rows, ptr, idx, val, q, S):
 
 
 @numba.njit(cache=True)
+def _p1_floor(th, prev, lam, Mdt, Klin, cq, S, F, Gam, Cobs, V, tol):
+    """:func:`.plan.residual_floor` of the ``P = 1`` step residual (0 below ``tol``)."""
+    a = np.abs(th)
+    scale = np.sqrt(np.sum((np.abs(Mdt) @ (a + np.abs(prev))) ** 2))
+    scale += np.sqrt(np.sum((np.abs(Klin) @ a) ** 2))
+    scale += 0.5 * abs(cq) * np.sqrt(np.sum((np.abs(S) @ a) ** 2))
+    scale += np.sqrt(np.sum(F * F))
+    if Cobs.shape[0] > 0:
+        scale += np.sqrt(np.sum((np.abs(Gam) @ np.abs(lam)) ** 2))
+        scale += np.sqrt(np.sum((np.abs(Cobs) @ a) ** 2)) + np.sqrt(np.sum(V * V))
+    floor = _ROUNDOFF * scale
+    return floor if floor > tol else 0.0
+
+
+@numba.njit(cache=True)
 def march_p1(
     Mdt,
     Klin,
@@ -251,7 +269,10 @@ def march_p1(
             nits[s] = k
             if not _lu_factor(J, lu, piv):
                 return Th, lam, dTh, dlam, nits, s, _SINGULAR_JACOBIAN, rnorm, LUs, pivs
-            if rnorm < tol:
+            floor = 0.0
+            if rnorm >= tol:  # the plan's round-off floor of the step residual's terms
+                floor = _p1_floor(th, Th[s], z[N:], Mdt, Klin, cq, S, F[t1], Gam, Cobs, V[t1], tol)
+            if rnorm < tol or (floor > 0.0 and rnorm <= floor):
                 # the last Newton correction is taken with the converged Jacobian, whose
                 # factors give the sensitivities (Eqs. discrete_sens / discrete_sens_ecfm)
                 converged = True

@@ -17,6 +17,33 @@ from .plan import SolveStatus
 from .terms import LoadTerm
 from .trajectory import Trajectory
 
+# the compiled kernels: loaded once, given up once if numba cannot run them
+_KERNELS = {"module": None, "failed": False}
+
+
+def compiled_kernels():
+    """The module of compiled kernels, or ``None`` where it cannot work.
+
+    The kernels reach LAPACK through numba's own binding (``numba.np.linalg``), which is
+    numba-internal: if a numba release moves it, every march takes the generic Python
+    path (same results, slower) instead of failing.
+    """
+    if _KERNELS["failed"]:
+        return None
+    if _KERNELS["module"] is None:
+        try:
+            from . import _kernels
+        except (ImportError, AttributeError):
+            _KERNELS["failed"] = True
+            return None
+        _KERNELS["module"] = _kernels
+    return _KERNELS["module"]
+
+
+def kernels_failed():
+    """Record that a kernel did not compile with this numba: later plans go generic."""
+    _KERNELS["failed"] = True
+
 
 def compiled_march(linear, system, eps, Theta0, dt, n_steps, t0, M_obs, V, sens, tol, maxiter,
                    keep, guess):  # fmt: skip
@@ -26,7 +53,7 @@ def compiled_march(linear, system, eps, Theta0, dt, n_steps, t0, M_obs, V, sens,
     dense, data constraint, sensitivities and kept factors allowed) or ``"compiled-sg"``
     (:func:`._kernels.march_sg`: ``P > 1``, node-preconditioned GMRES).
     """
-    _kernels = _plan.compiled_kernels()
+    _kernels = compiled_kernels()
     if _kernels is None:
         return None
     N, P = system.shape
@@ -64,7 +91,7 @@ def compiled_march(linear, system, eps, Theta0, dt, n_steps, t0, M_obs, V, sens,
                 )
             return _march_sg(_kernels, linear, *args, lin, Ks, quad, F, dF, Mdt)
     except NumbaError:  # the kernel does not compile with this numba: use the generic march
-        _plan.kernels_failed()
+        kernels_failed()
         return None
 
 

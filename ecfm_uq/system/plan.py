@@ -56,24 +56,17 @@ Shared thresholds and the Krylov acceptance rule
     (fast local convergence) nor tighter than :math:`10^{-13}` (the generic path and the
     ``P > 1`` kernel alike).
 :func:`krylov_accepts`
-    Every Krylov solve (CG, scipy's GMRES, the kernel's GMRES) iterates until the
-    residual it monitors is below ``rtol``, and its answer is **accepted when the true
-    relative residual** :math:`\\|b - Jx\\|/\\|b\\|` **is at most**
-    :data:`KRYLOV_ACCEPT` ``* rtol``. The factor covers scipy's left-preconditioned
-    GMRES, which stops on the preconditioned residual; CG and the kernel's
-    right-preconditioned GMRES monitor the true residual and so meet ``rtol`` itself
-    unless they run out of iterations.
+    Every Krylov solve (CG, scipy's GMRES, the kernel's GMRES) iterates to ``rtol`` on
+    the residual it monitors and is **accepted when the true relative residual is at
+    most** :data:`KRYLOV_ACCEPT` ``* rtol`` (the factor covers scipy's GMRES, which
+    monitors the left-preconditioned residual).
 :func:`residual_floor`
-    Newton stops when :math:`\\|R\\| <` ``tol`` (absolute, the default ``1e-10``) **or**
-    when :math:`\\|R\\|` is at the round-off floor of the model's own scale,
-    :data:`ROUNDOFF_FACTOR` unit round-offs of :meth:`GalerkinSystem.residual_scale`
-    (the size of the terms the residual sums, e.g. :math:`\\| |K||\\Theta| \\|`), when
-    that floor is above ``tol``: a model in units where ``1e-10`` is below round-off
-    (a finite-difference Laplacian with entries :math:`1/h^2`) converges as one in
-    well-scaled units does. The floor also bounds the forcing term from below, and a
-    Krylov answer whose residual is at the round-off floor of :math:`|J||x|` is accepted
-    (:func:`krylov_accepts`). The generic path only: the compiled kernels still stop on
-    the absolute ``tol``.
+    Newton stops when :math:`\\|R\\| <` ``tol`` (absolute) **or**, when it is above
+    ``tol``, at the round-off floor of the model's own scale
+    (:meth:`GalerkinSystem.residual_scale`), so a model in any units converges. The
+    floor also bounds the forcing term from below, and a Krylov answer at the round-off
+    floor of :math:`|J||x|` is accepted. The generic path and the compiled ``P = 1``
+    march follow this rule; the compiled ``P > 1`` march stops on ``tol`` only.
 :data:`CHORD_RATE`
     Default of ``SolverOptions.chord_rate``: the ``P > 1`` kernel's chord iteration hands
     a step to Newton-Krylov once the residual falls by less than this factor per
@@ -389,6 +382,8 @@ def _march_refusal(system, solver, precond, constrained, keep_factors):
 def _march_path(system, options, solver, precond, constrained, keep_factors):
     if options.compiled is False:
         return "generic"
+    from .compiled import compiled_kernels  # the kernels' loader (numba, on first use)
+
     refusal = _march_refusal(system, solver, precond, constrained, keep_factors)
     if refusal is None and compiled_kernels() is None:
         refusal = "the compiled kernels do not load with this numba"
@@ -400,31 +395,3 @@ def _march_path(system, options, solver, precond, constrained, keep_factors):
             )
         return "generic"
     return "compiled-p1" if system.P == 1 else "compiled-sg"
-
-
-# -- the compiled kernels: loaded once, given up once if numba cannot run them ----------
-_KERNELS = {"module": None, "failed": False}
-
-
-def compiled_kernels():
-    """The module of compiled kernels, or ``None`` where it cannot work.
-
-    The kernels reach LAPACK through numba's own binding (``numba.np.linalg``), which is
-    numba-internal: if a numba release moves it, every march takes the generic Python
-    path (same results, slower) instead of failing.
-    """
-    if _KERNELS["failed"]:
-        return None
-    if _KERNELS["module"] is None:
-        try:
-            from . import _kernels
-        except (ImportError, AttributeError):
-            _KERNELS["failed"] = True
-            return None
-        _KERNELS["module"] = _kernels
-    return _KERNELS["module"]
-
-
-def kernels_failed():
-    """Record that a kernel did not compile with this numba: later plans go generic."""
-    _KERNELS["failed"] = True
