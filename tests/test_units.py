@@ -12,7 +12,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ecfm_uq.chaos import ChaosBasis, weighted_gram
-from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm, march, solve_steady
+from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm, QuadraticTerm, march, solve_steady
 from ecfm_uq.system.plan import SolveStatus, newton_converged, residual_floor
 
 
@@ -86,3 +86,33 @@ def test_a_march_of_the_whole_model_in_any_units_matches_backward_euler(units, c
     assert tr.success and tr.solver == ("dense (compiled)" if compiled else "dense"), tr.message
     scale = np.abs(ref).max()
     np.testing.assert_allclose(tr.Theta[:, :, 0], ref, rtol=0, atol=1e-8 * scale)
+
+
+def _random_burgers_like(units, N=24):
+    """A nonlinear one-germ model (the compiled P > 1 march takes it), all terms x units."""
+    K, F = _poisson(N)
+    A = np.zeros((N, N, N))
+    for i in range(1, N - 1):  # a centred u u_x
+        A[i, i, i + 1], A[i, i, i - 1] = 0.25 * (N + 1), -0.25 * (N + 1)
+    basis = ChaosBasis(3)
+    G = weighted_gram(basis, lambda w: 1.0 + 0.3 * np.ravel(w))
+    terms = [
+        LinearTerm(units * 0.05 * K.toarray(), G=G),
+        QuadraticTerm(units * A),
+        LoadTerm.constant(units * 10 * F),
+    ]
+    return GalerkinSystem(terms, 0, basis=basis, M=units * np.eye(N))
+
+
+@pytest.mark.parametrize("units", [1e3, 1e9])
+def test_the_compiled_stochastic_march_in_large_units_matches_the_dense_march(units):
+    # x1e9: the round-off floor (~1e-5 here) is far above tol = 1e-10. (The whole model
+    # x1e-9 is the other side, an absolute tol that is loose for it: not covered by the
+    # floor, which only ever relaxes tol to what round-off allows.)
+    dt, n_steps = 2e-3, 4
+    ref = march(_random_burgers_like(1.0), [], np.zeros(24), dt, n_steps, solver="dense")
+    tr = march(_random_burgers_like(units), [], np.zeros(24), dt, n_steps)
+    assert ref.success and tr.success, tr.message
+    assert tr.solver == "gmres+nodal (compiled)"
+    scale = np.abs(ref.Theta).max()
+    np.testing.assert_allclose(tr.Theta, ref.Theta, rtol=0, atol=1e-8 * scale)

@@ -432,6 +432,23 @@ def _sg_precond(R, Tn, Tb, LUs, pivs, out):
 
 
 @numba.njit(cache=True)
+def _sg_floor(Z, prev, Mdt, E2, Kc, Gs, cq, rows, ptr, idx, val, E3m, F, tol):
+    """:func:`.plan.residual_floor` of the ``P > 1`` step residual (0 below ``tol``)."""
+    N, P = Z.shape
+    A = np.abs(Z)
+    scale = np.sqrt(np.sum(((np.abs(Mdt) @ (A + np.abs(prev))) @ np.abs(E2)) ** 2))
+    for j in range(Kc.shape[0]):
+        scale += np.sqrt(np.sum(((np.abs(Kc[j]) @ A) @ np.abs(Gs[j])) ** 2))
+    if rows.shape[0] > 0 and cq != 0.0:
+        Sa = np.zeros((N, N * P))
+        _linearize(A, rows, ptr, idx, np.abs(val), Sa)
+        scale += 0.5 * abs(cq) * np.sqrt(np.sum(_sg_quadratic(A, Sa, np.abs(E3m)) ** 2))
+    scale += np.sqrt(np.sum(F * F))
+    floor = _ROUNDOFF * scale
+    return floor if floor > tol else 0.0
+
+
+@numba.njit(cache=True)
 def _sg_gmres(
     b, Mdt, E2, e2_eye, Kc, Gs, cq, Sf, E3m, Tn, Tb, LUs, pivs, rtol, restart, maxiter, x
 ):
@@ -625,7 +642,11 @@ def march_sg(
             nits[s] = k
             if not np.isfinite(rnorm):
                 break
-            if rnorm < tol:
+            floor = 0.0
+            if rnorm >= tol:  # the plan's round-off floor of the step residual's terms
+                floor = _sg_floor(Z, Th[s], Mdt, E2, Kc, Gs, cq_eff, rows, ptr, idx, val, E3m,
+                                  F[t1], tol)  # fmt: skip
+            if rnorm < tol or (floor > 0.0 and rnorm <= floor):
                 converged = True
                 break
             if k == maxiter:
@@ -637,7 +658,8 @@ def march_sg(
                     return Th, dTh, nits, kits, s, _SINGULAR_JACOBIAN, rnorm
                 factored = True
             if krylov:
-                eta = min(NEWTON_ETA_MAX, max(NEWTON_ETA_FACTOR * tol / rnorm, NEWTON_ETA_MIN))
+                eta = max(NEWTON_ETA_FACTOR * tol / rnorm, NEWTON_ETA_MIN, floor / rnorm)
+                eta = min(NEWTON_ETA_MAX, eta)
                 its, rel = _sg_gmres(
                     R, Mdt, E2, e2_eye, Kc, Gs, cq_eff, Sf, E3m, Tn, Tb, LUs, pivs, eta,
                     restart, lin_maxiter, X,

@@ -65,8 +65,8 @@ Shared thresholds and the Krylov acceptance rule
     ``tol``, at the round-off floor of the model's own scale
     (:meth:`GalerkinSystem.residual_scale`), so a model in any units converges. The
     floor also bounds the forcing term from below, and a Krylov answer at the round-off
-    floor of :math:`|J||x|` is accepted. The generic path and the compiled ``P = 1``
-    march follow this rule; the compiled ``P > 1`` march stops on ``tol`` only.
+    floor of :math:`|J||x|` is accepted (the generic path; the compiled marches apply
+    the floor to Newton's termination and to the forcing term).
 :data:`CHORD_RATE`
     Default of ``SolverOptions.chord_rate``: the ``P > 1`` kernel's chord iteration hands
     a step to Newton-Krylov once the residual falls by less than this factor per
@@ -105,6 +105,8 @@ __all__ = [
 ]
 
 # -- thresholds shared by the Python solvers and the compiled kernels ------------------
+# (the kernels freeze them when numba compiles; its cache is keyed on _kernels.py, so
+# after changing one, touch _kernels.py or clear its __pycache__)
 SINGULAR_PIVOT = 1e-14
 NEWTON_ETA_MAX = 1e-4
 NEWTON_ETA_FACTOR = 0.05
