@@ -6,23 +6,17 @@ work per step or per Newton iteration; :mod:`.plan` decides when, :mod:`.compile
 prepares and validates their inputs and translates their status codes (:class:`.plan.SolveStatus`).
 
 :func:`march_p1`
-    ``P = 1`` systems of dense linear terms, at most one quadratic term (its folded
-    tensor in compressed rows) and precomputed loads, with the optional ECFM data
-    constraint, forward sensitivities and the discrete adjoint (:func:`adjoint_p1`).
-    Each Newton iteration factorizes the step Jacobian with LAPACK's ``dgetrf`` (the
-    routine ``numpy.linalg.solve`` uses, reached through numba's own LAPACK binding so
-    the kernels stay cacheable); the triangular solves are short loops here. The factors
-    at the converged state carry the final Newton correction and the sensitivity
-    right-hand sides, as in the generic march, and are kept per step for the adjoint,
-    whose transposed solves then cost two triangular sweeps each. The quadratic term is
-    evaluated from its folded tensor: ``S = dq/dtheta`` by one sparse pass and
-    ``q = S theta / 2`` (Euler's identity for a form homogeneous of degree 2).
+    ``P = 1``: dense linear terms, at most one quadratic term (its folded tensor in
+    compressed rows: ``S = dq/dtheta`` in one sparse pass, ``q = S theta / 2``), loads,
+    the optional ECFM data constraint, forward sensitivities and the discrete adjoint
+    (:func:`adjoint_p1`, two triangular sweeps per step with the kept factors). The step
+    Jacobian is factorized by LAPACK's ``dgetrf`` through numba's own binding (so the
+    kernels stay cacheable); the converged factors carry the final Newton correction.
 :func:`march_sg`
     ``P > 1`` one-germ systems (no data constraint, no kept factors): a chord iteration
-    with the node-wise preconditioner (the deterministic Jacobians at the germ's Gauss
-    nodes, ``P`` dense LUs), handing over to Newton-Krylov (right-preconditioned GMRES,
-    :func:`_sg_gmres`) when it converges slowly; sensitivities are GMRES solves with the
-    same preconditioner.
+    with the node-wise preconditioner (``P`` dense LUs at the germ's Gauss nodes),
+    handing over to Newton-Krylov (right-preconditioned GMRES, :func:`_sg_gmres`) when
+    it converges slowly; sensitivities are GMRES solves with the same preconditioner.
 """
 
 from __future__ import annotations
