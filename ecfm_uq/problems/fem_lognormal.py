@@ -101,9 +101,12 @@ def kl_expansion(points, mass, n_kl, *, sigma, corr_length, covariance="exponent
     -----
     Galerkin discretization of :math:`\\int C(x, y)\\phi(y)\\,dy = \\lambda\\phi(x)` with
     :math:`C` replaced by its P1 x P1 interpolant: :math:`M C M\\phi = \\lambda M\\phi`.
-    The eigenvalues sum to :math:`\\operatorname{tr}(CM) = s^2|D|` over all ``n`` modes
-    (the field's total variance), so :math:`\\sum_{k \\le d}\\lambda_k / (s^2|D|)` is the
-    variance fraction the truncation keeps.
+    Over all ``n`` modes the eigenvalues sum to :math:`\\operatorname{tr}(CM) =
+    \\int c_h(x, x)\\,dx`, :math:`c_h` the P1 x P1 interpolant of the covariance; it
+    tends to the field's total variance :math:`s^2|D|` as the mesh is refined (from below:
+    the interpolant lies under :math:`s^2` on the diagonal inside the elements), so
+    :math:`\\sum_{k \\le d}\\lambda_k / (s^2|D|)` is the variance fraction the truncation
+    keeps, up to that discretization error.
     """
     points = as_finite_array("points", points, shape=(None, 2))
     n = points.shape[0]
@@ -340,7 +343,7 @@ def build_fem_lognormal(
 
     # sqrt(lam_k) phi_k at the stiffness's quadrature points
     loadings = np.stack(
-        [basis.interpolate(np.sqrt(values[k]) * modes[:, k]).value for k in range(n_kl)],
+        [np.asarray(basis.interpolate(np.sqrt(values[k]) * modes[:, k])) for k in range(n_kl)],
         axis=-1,
     )
     dx = np.asarray(basis.dx)
