@@ -77,6 +77,15 @@ def test_chaos_terms_sum_to_the_sampled_stiffness():
     assert abs(K - Kx).max() < 1e-12 * abs(Kx).max()
 
 
+def test_deterministic_system_is_the_sample_solved_by_the_engine():
+    problem = build_fem_lognormal(CELLS, 1, N_KL)
+    xi = np.array([1.1, -0.4])
+    sol = solve_steady(problem.deterministic_system(xi), [0.2])
+    assert sol.success and sol.solver == "sparse-direct"
+    u = spla.splu((10**0.2 * problem.stiffness(xi)).tocsc()).solve(problem.F)
+    np.testing.assert_allclose(sol.Theta[:, 0], u, rtol=1e-10)
+
+
 def test_kl_modes_are_mass_orthonormal_eigenpairs_of_the_covariance_operator():
     x = np.linspace(0, 1, 5)
     mesh = skfem.MeshTri.init_tensor(x, x)
