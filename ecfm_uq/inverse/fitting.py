@@ -29,6 +29,7 @@ import warnings
 from dataclasses import dataclass, field
 
 from .._validation import check_int, check_positive
+from .loglik import likelihood_of
 from .verdict import DEFAULT_ALPHA, check_alpha, check_bounds
 
 __all__ = ["FitSettings", "fit"]
@@ -170,16 +171,16 @@ def fit(
         alpha=check_alpha(alpha),
     )
     if kind == "steady":
-        from .steady import fit_steady_problem
-
-        return fit_steady_problem(problem, eps0, settings)
-    if kind == "dynamic":
-        from .dynamic import fit_dynamic_problem
-
-        return fit_dynamic_problem(problem, eps0, settings)
-    from .replicated import fit_replicated_problem
-
-    return fit_replicated_problem(problem, eps0, settings)
+        from .steady import fit_steady_problem as fitter
+    elif kind == "dynamic":
+        from .dynamic import fit_dynamic_problem as fitter
+    else:
+        from .replicated import fit_replicated_problem as fitter
+    result = fitter(problem, eps0, settings)
+    # what the profile likelihood needs: the likelihood (or why there is none), the bounds
+    result.likelihood = likelihood_of(problem, settings.formulation, settings.sigma)
+    result.bounds = settings.bounds
+    return result
 
 
 _WARNED = set()
