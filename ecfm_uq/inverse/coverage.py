@@ -125,7 +125,12 @@ def steady_coverage(
     for _ in range(n):
         v = v0 + sigma * rng.normal(size=v0.size)
         problem = SteadyProblem(system, M_obs, v)
-        res = fit(problem, eps0, formulation=formulation, sigma=sigma if known_sigma else None)
+        # the paper's exact-match ECFM (the random-force ECFM is fit's default with sigma)
+        opts = {"forces": "exact"} if formulation == "ecfm" else None
+        res = fit(
+            problem, eps0, formulation=formulation, sigma=sigma if known_sigma else None,
+            options=opts,
+        )  # fmt: skip
         if not res.success or res.eps_ci95 is None:
             failed += 1
             continue

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numbers
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from .._validation import check_int, check_positive
 from .loglik import likelihood_of
@@ -170,7 +170,16 @@ def fit(
         uncertainty=bool(uncertainty),
         alpha=check_alpha(alpha),
     )
-    if kind == "steady":
+    forces = settings.options.get("forces", "random") if formulation == "ecfm" else None
+    if forces not in (None, "random", "exact"):
+        raise ValueError(f"`options['forces']` must be 'random' or 'exact', got {forces!r}")
+    if forces is not None and "forces" in settings.options:
+        settings = replace(
+            settings, options={k: v for k, v in settings.options.items() if k != "forces"}
+        )
+    if kind == "steady" and forces == "random" and settings.sigma is not None:
+        from .discrepancy import fit_random_force as fitter
+    elif kind == "steady":
         from .steady import fit_steady_problem as fitter
     elif kind == "dynamic":
         from .dynamic import fit_dynamic_problem as fitter
@@ -178,7 +187,8 @@ def fit(
         from .replicated import fit_replicated_problem as fitter
     result = fitter(problem, eps0, settings)
     # what the profile likelihood needs: the likelihood (or why there is none), the bounds
-    result.likelihood = likelihood_of(problem, settings.formulation, settings.sigma)
+    if result.likelihood is None:
+        result.likelihood = likelihood_of(problem, settings.formulation, settings.sigma)
     result.bounds = settings.bounds
     return result
 

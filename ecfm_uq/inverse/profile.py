@@ -51,7 +51,8 @@ _MODEL_FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError
 # two interval ends "agree" when they differ by less than this fraction of the
 # delta-method half-width
 AGREEMENT_RTOL = 0.1
-_WALL = 1e12  # the likelihood increase standing in for "the model fails here"
+_WALL = 1e12
+_MAX_RECENTRE = 3  # profiles redone from a better point found along them  # the likelihood increase standing in for "the model fails here"
 
 
 @dataclass(frozen=True)
@@ -227,7 +228,10 @@ def _scales(result, like, eps_hat):
     fallback = 0.1 * np.maximum(1.0, np.abs(eps_hat))
     if naive is not None:
         fallback = np.where(have, se, np.sqrt(np.diag(naive)))
-    return se, naive, np.where(have, se, fallback)
+    # a flat direction (practically non-identifiable) has a huge standard error: cap the
+    # step scale at the parameter's magnitude so steps stay where the model can be solved
+    scale = np.minimum(np.where(have, se, fallback), np.maximum(1.0, np.abs(eps_hat)))
+    return se, naive, scale
 
 
 class _Profiler:
@@ -237,6 +241,7 @@ class _Profiler:
         self.like, self.eps_hat, self.ell_hat = like, eps_hat, ell_hat
         self.scale, self.bounds = scale, bounds
         self.nfev = 0
+        self.visited = []  # optima of the inner problems, reused as starting points
 
     def at(self, fixed, values, start):
         """:math:`\\ell` minimized over the free parameters with ``eps[fixed] = values``.
@@ -269,15 +274,36 @@ class _Profiler:
             ((lo - self.eps_hat[j]) / self.scale[j], (hi - self.eps_hat[j]) / self.scale[j])
             for j, (lo, hi) in zip(free, (self.bounds[j] for j in free), strict=True)
         ]
-        res = optimize.minimize(
-            fun,
-            x0,
-            jac=True,
-            method="L-BFGS-B",
-            bounds=bnds,
-            options={"ftol": 1e-15, "gtol": 1e-9, "maxiter": 500},
-        )
+        best = None
+        # the inner problem need not be convex (a flat direction can hide a lower valley):
+        # besides the warm start, start from the visited optimum nearest in the fixed
+        # coordinates (e.g. the other parameters' profiles); the estimate's values last
+        starts = [x0]
+        if self.visited:
+            far = np.array(
+                [np.max(np.abs(v[fixed] - eps[fixed]) / self.scale[fixed]) for v in self.visited]
+            )
+            near = self.visited[int(np.argmin(far))]
+            x1 = (near[free] - self.eps_hat[free]) / s
+            if np.max(np.abs(x1 - x0)) > 1e-3:
+                starts.append(x1)
+        for k, x_start in enumerate([*starts, np.zeros(free.size)]):
+            if k == len(starts) and best is not None and best.success:
+                break
+            res = optimize.minimize(
+                fun, x_start, jac=True, method="L-BFGS-B", bounds=bnds,
+                options={"ftol": 1e-15, "gtol": 1e-9, "maxiter": 500},
+            )  # fmt: skip
+            if best is None or res.fun < best.fun:
+                best = res
+        res = best
+        if res.fun >= self.ell_hat + 0.5 * _WALL:
+            raise ConvergenceError(
+                f"the model cannot be solved anywhere the profile searched at eps{fixed.tolist()}"
+                f"={np.round(values, 6).tolist()}"
+            )
         eps[free] = self.eps_hat[free] + s * res.x
+        self.visited.append(eps.copy())
         return float(res.fun) - self.ell_hat, eps
 
 
@@ -350,6 +376,36 @@ def _crossing(prof, i, t_in, t_out, start, threshold):
     return optimize.brentq(g, t_in, t_out, xtol=xtol, rtol=1e-12)
 
 
+def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci):
+    """Every requested profile, and (decrease, eps) of the lowest point found below the
+    estimate's likelihood (None when the estimate is the minimum)."""
+    profiles, best = {}, None
+    for i in which:
+        # a quadratic profile crosses z standard errors out: ~3 steps
+        step = z * prof.scale[i] / 3
+        ends, reasons, pts = [], [], [(prof.eps_hat[i], 0.0, prof.eps_hat)]
+        for direction, bound in ((-1, bnds[i][0]), (1, bnds[i][1])):
+            p, end, why = _walk(prof, i, direction, threshold[i], step, bound, max_steps)
+            pts += p
+            ends.append(end)
+            reasons.append(why)
+        pts.sort(key=lambda q: q[0])
+        k = int(np.argmin([q[1] for q in pts]))
+        if pts[k][1] < -1e-6 * max(1.0, threshold[i]) and (best is None or pts[k][1] < best[0]):
+            best = (pts[k][1], pts[k][2])
+        profiles[i] = Profile(
+            i,
+            np.array([q[0] for q in pts]),
+            np.array([q[1] for q in pts]),
+            np.array([q[2] for q in pts]),
+            threshold[i],
+            np.array(ends, dtype=float),
+            tuple(reasons),
+            delta_ci[i],
+        )
+    return profiles, best
+
+
 def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps=40):
     """Profiles, likelihood-ratio intervals and delta-method intervals of a fit.
 
@@ -403,37 +459,33 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
     z = stats.norm.ppf(0.5 + 0.5 * level)
     delta_ci = np.column_stack([eps_hat - z * se, eps_hat + z * se])
 
-    prof = _Profiler(like, eps_hat, ell_hat, scale, bnds)
-    intervals = np.full((n, 2), np.nan)
-    profiles, notes = {}, []
-    for i in which:
-        # a quadratic profile crosses z standard errors out: ~3 steps
-        step = z * scale[i] / 3
-        ends, reasons, pts = [], [], [(eps_hat[i], 0.0, eps_hat)]
-        for direction, bound in ((-1, bnds[i][0]), (1, bnds[i][1])):
-            p, end, why = _walk(prof, i, direction, threshold[i], step, bound, max_steps)
-            pts += p
-            ends.append(end)
-            reasons.append(why)
-        pts.sort(key=lambda q: q[0])
-        deltas = np.array([q[1] for q in pts])
-        if deltas.min() < -1e-6 * max(1.0, threshold[i]):
-            notes.append(
-                f"the profile of eps[{i}] found a likelihood lower than at the estimate "
-                f"(by {-deltas.min():.3g}): the fit did not end at its optimum"
-            )
-        intervals[i] = ends
-        profiles[i] = Profile(
-            i,
-            np.array([q[0] for q in pts]),
-            deltas,
-            np.array([q[2] for q in pts]),
-            threshold[i],
-            np.array(ends, dtype=float),
-            tuple(reasons),
-            delta_ci[i],
+    recentred = []
+    for _ in range(_MAX_RECENTRE + 1):
+        profiles, best = _profiles(
+            _Profiler(like, eps_hat, ell_hat, scale, bnds), which, threshold, z, bnds,
+            max_steps, delta_ci,
+        )  # fmt: skip
+        if best is None:
+            break
+        # a profile found a lower likelihood: the fit did not end at its optimum; the
+        # intervals are relative to the best point found, so profile again from there
+        recentred.append(f"{best[0]:.3g} lower at eps={np.round(best[1], 6).tolist()}")
+        ell_hat, eps_hat = ell_hat + best[0], best[1]
+    notes = []
+    if recentred:
+        notes.append(
+            "the fit did not end at its optimum: the profiles found a likelihood "
+            + ", then ".join(recentred)
+            + "; the intervals are around the best point found"
         )
-        notes += [f"eps[{i}] {side} end open: {r}" for side, r in zip(("lower", "upper"), reasons, strict=True) if r != "crossed"]  # fmt: skip
+    intervals = np.full((n, 2), np.nan)
+    for i, prof_i in profiles.items():
+        intervals[i] = prof_i.interval
+        notes += [
+            f"eps[{i}] {side} end open: {r}"
+            for side, r in zip(("lower", "upper"), prof_i.reasons, strict=True)
+            if r != "crossed"
+        ]
     disagree = np.array([i in profiles and not profiles[i].agrees for i in range(n)])
     for i in np.flatnonzero(disagree & ~np.isfinite(se)):
         notes.append(f"eps[{i}]: the fit has no delta-method standard error to compare with")
