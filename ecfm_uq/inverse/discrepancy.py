@@ -71,6 +71,7 @@ class Linearization:
     A: np.ndarray  # M dE[theta]/dlam, (C, n_forces)
     mu: np.ndarray  # eigenvalues of A A^T / a0^2
     w2: np.ndarray  # squared residual in the eigenbasis
+    UJ: np.ndarray  # the sensitivity dE[M theta]/deps in the eigenbasis, (C, n_eps)
 
 
 class RandomForceModel:
@@ -103,31 +104,41 @@ class RandomForceModel:
         r = self.v - self.M @ sysm.mean(sol.Theta)
         dmean = np.einsum("nkc,k->nc", sol.lam_sensitivity(), sysm.E1)
         A = np.asarray(self.M @ dmean)
+        J = np.asarray(self.M @ np.einsum("nkm,k->nm", sol.eps_sensitivity()[0], sysm.E1))
         AA = A @ A.T
         if self.a0 is None:
             self.a0 = float(np.sqrt(max(np.trace(AA) / AA.shape[0], 1e-300)))
         mu, U = np.linalg.eigh(AA / self.a0**2)
         mu = np.maximum(mu, 0.0)
-        return Linearization(np.asarray(eps, float), r, A, mu, (U.T @ r) ** 2)
+        return Linearization(np.asarray(eps, float), r, A, mu, (U.T @ r) ** 2, U.T @ J)
 
-    def nll(self, lin, s):
+    def nll(self, lin, s, restricted=False):
         """:math:`\\ell` at scaled variance ``s`` (:math:`\\tau^2 = s\\sigma^2/a_0^2`), up to
-        the constant :math:`\\tfrac C2 \\log 2\\pi`."""
+        the constant :math:`\\tfrac C2 \\log 2\\pi`; ``restricted`` adds the REML term."""
         d = self.sigma**2 * (1.0 + s * lin.mu)
-        return 0.5 * float(np.sum(lin.w2 / d) + np.sum(np.log(d)))
+        val = 0.5 * float(np.sum(lin.w2 / d) + np.sum(np.log(d)))
+        if restricted and lin.UJ.size:
+            # the residual has lost n_eps degrees of freedom to the fitted parameters,
+            # which the plain marginal likelihood reads as a smaller variance (a biased
+            # tau and a conservative test of tau = 0): + 1/2 log det(J^T S^-1 J)
+            w = np.linalg.eigvalsh(lin.UJ.T @ (lin.UJ / d[:, None]))
+            val += 0.5 * float(np.sum(np.log(np.maximum(w, 1e-300 + 1e-14 * w[-1]))))
+        return val
 
     def best_s(self, lin):
-        """:math:`\\arg\\min_{s \\ge 0} \\ell(\\epsilon, s)`: a log grid, then Brent."""
-        vals = np.array([self.nll(lin, s) for s in _S_GRID])
+        """The restricted-likelihood :math:`\\arg\\min_{s \\ge 0}`: a log grid, then Brent;
+        returns ``(s, marginal nll at s)``."""
+        vals = np.array([self.nll(lin, s, restricted=True) for s in _S_GRID])
         k = int(np.argmin(vals))
-        if k == 0:
-            return 0.0, float(vals[0])
-        lo, hi = _S_GRID[k - 1], _S_GRID[min(k + 1, _S_GRID.size - 1)]
-        res = optimize.minimize_scalar(
-            lambda s: self.nll(lin, s), bounds=(lo, hi), method="bounded",
-            options={"xatol": 1e-10 * hi},
-        )  # fmt: skip
-        return (float(res.x), float(res.fun)) if res.fun < vals[k] else (_S_GRID[k], vals[k])
+        s_hat = 0.0
+        if k > 0:
+            lo, hi = _S_GRID[k - 1], _S_GRID[min(k + 1, _S_GRID.size - 1)]
+            res = optimize.minimize_scalar(
+                lambda s: self.nll(lin, s, restricted=True), bounds=(lo, hi),
+                method="bounded", options={"xatol": 1e-10 * hi},
+            )  # fmt: skip
+            s_hat = float(res.x) if res.fun < vals[k] else float(_S_GRID[k])
+        return s_hat, self.nll(lin, s_hat)
 
     def tau(self, s):
         return float(np.sqrt(s) * self.sigma / self.a0)
@@ -182,7 +193,7 @@ def fit_random_force(problem, eps0, s):
         np.isfinite(se) & (se > 0), se, 0.1 * np.maximum(1.0, np.abs(eps_std))
     ) if se is not None else 0.1 * np.maximum(1.0, np.abs(eps_std))  # fmt: skip
     nll0, _, _ = _profiled(model, eps_std)
-    base = model.nll(model.linearize(eps_std), 0.0)
+    base = nll0
     nfev = [0]
 
     def p(x):
@@ -224,7 +235,8 @@ def fit_random_force(problem, eps0, s):
         status = FitStatus.STALLED
     lam, lam_sd = model.forces(lin, s_hat)
     unc = _uncertainty(p, x, scale, standard, s_hat)
-    verdict = _verdict(model, base, val, s_hat, lam, lam_sd, s.alpha, at_bound)
+    T = 2.0 * (model.nll(lin, 0.0, restricted=True) - model.nll(lin, s_hat, restricted=True))
+    verdict = _verdict(model, T, s_hat, lam, lam_sd, s.alpha, at_bound)
     like = LogLikelihood(
         lambda e: _profiled_with_gradient(model, p, e, eps_std, scale),
         system.n_eps, problem.v.size, "random forces",
@@ -293,9 +305,9 @@ def _uncertainty(p, x, scale, standard, s_hat):
     )  # fmt: skip
 
 
-def _verdict(model, nll0, nll_hat, s_hat, lam, lam_sd, alpha, at_bound):
-    """Likelihood-ratio test of tau = 0 against the boundary mixture."""
-    T = max(2.0 * (nll0 - nll_hat), 0.0)
+def _verdict(model, T, s_hat, lam, lam_sd, alpha, at_bound):
+    """Restricted likelihood-ratio test of tau = 0 against the boundary mixture."""
+    T = max(T, 0.0)
     p = 1.0 if T == 0.0 else 0.5 * float(stats.chi2.sf(T, 1))
     zs = np.divide(lam, lam_sd, out=np.zeros_like(lam), where=lam_sd > 0)
     peak = int(np.argmax(np.abs(lam))) if lam.size else None
