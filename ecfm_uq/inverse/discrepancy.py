@@ -114,21 +114,25 @@ class RandomForceModel:
 
     def nll(self, lin, s, restricted=False):
         """:math:`\\ell` at scaled variance ``s`` (:math:`\\tau^2 = s\\sigma^2/a_0^2`), up to
-        the constant :math:`\\tfrac C2 \\log 2\\pi`; ``restricted`` adds the REML term."""
-        d = self.sigma**2 * (1.0 + s * lin.mu)
-        val = 0.5 * float(np.sum(lin.w2 / d) + np.sum(np.log(d)))
+        the constant :math:`\\tfrac C2 \\log 2\\pi`; ``restricted`` adds the REML term.
+        ``s`` may be an array (one value per entry)."""
+        s_arr = np.atleast_1d(np.asarray(s, dtype=float))
+        d = self.sigma**2 * (1.0 + s_arr[:, None] * lin.mu[None, :])  # (G, C)
+        val = 0.5 * (np.sum(lin.w2 / d, axis=1) + np.sum(np.log(d), axis=1))
         if restricted and lin.UJ.size:
             # the residual has lost n_eps degrees of freedom to the fitted parameters,
             # which the plain marginal likelihood reads as a smaller variance (a biased
             # tau and a conservative test of tau = 0): + 1/2 log det(J^T S^-1 J)
-            w = np.linalg.eigvalsh(lin.UJ.T @ (lin.UJ / d[:, None]))
-            val += 0.5 * float(np.sum(np.log(np.maximum(w, 1e-300 + 1e-14 * w[-1]))))
-        return val
+            info = np.einsum("cm,gc,cn->gmn", lin.UJ, 1.0 / d, lin.UJ)
+            w = np.linalg.eigvalsh(info)
+            floor = 1e-300 + 1e-14 * w[:, -1:]
+            val = val + 0.5 * np.sum(np.log(np.maximum(w, floor)), axis=1)
+        return float(val[0]) if np.ndim(s) == 0 else val
 
     def best_s(self, lin):
         """The restricted-likelihood :math:`\\arg\\min_{s \\ge 0}`: a log grid, then Brent;
         returns ``(s, marginal nll at s)``."""
-        vals = np.array([self.nll(lin, s, restricted=True) for s in _S_GRID])
+        vals = self.nll(lin, _S_GRID, restricted=True)
         k = int(np.argmin(vals))
         s_hat = 0.0
         if k > 0:
@@ -139,6 +143,32 @@ class RandomForceModel:
             )  # fmt: skip
             s_hat = float(res.x) if res.fun < vals[k] else float(_S_GRID[k])
         return s_hat, self.nll(lin, s_hat)
+
+    def conditional_likelihood(self, lin, s):
+        """:math:`\\tfrac12 r(\\epsilon)^T S_0^{-1} r(\\epsilon)` with the data covariance
+        :math:`S_0 = \\sigma^2 I + \\hat\\tau^2 A A^T` held at the estimate: the likelihood
+        of :math:`\\epsilon` conditional on the estimated discrepancy (generalized least
+        squares), exact gradient :math:`-J^T S_0^{-1} r`. With :math:`\\hat\\tau = 0` it is
+        the standard likelihood with ``sigma`` known."""
+        from scipy.linalg import cho_factor, cho_solve
+
+        tau2 = self.tau(s) ** 2
+        S0 = self.sigma**2 * np.eye(lin.A.shape[0]) + tau2 * lin.A @ lin.A.T
+        chol = cho_factor(S0)
+        sysm = self.system
+
+        def evaluate(eps):
+            sol = solve_steady(sysm, eps, strict=True, **self.problem.solve_options)
+            r = self.v - self.M @ sysm.mean(sol.Theta)
+            dmean = np.einsum("nkm,k->nm", sol.eps_sensitivity()[0], sysm.E1)
+            w = cho_solve(chol, r)
+            return 0.5 * float(r @ w), -np.asarray(self.M @ dmean).T @ w
+
+        what = "Gaussian, sigma" if tau2 == 0.0 else "GLS with the estimated discrepancy"
+        return LogLikelihood(
+            evaluate, sysm.n_eps, self.v.size, "known sigma" if tau2 == 0.0 else "random forces",
+            f"{what} covariance held at the estimate (sigma={self.sigma:g}, tau={self.tau(s):.3g})",
+        )  # fmt: skip
 
     def tau(self, s):
         return float(np.sqrt(s) * self.sigma / self.a0)
@@ -237,11 +267,7 @@ def fit_random_force(problem, eps0, s):
     unc = _uncertainty(p, x, scale, standard, s_hat)
     T = 2.0 * (model.nll(lin, 0.0, restricted=True) - model.nll(lin, s_hat, restricted=True))
     verdict = _verdict(model, T, s_hat, lam, lam_sd, s.alpha, at_bound)
-    like = LogLikelihood(
-        lambda e: _profiled_with_gradient(model, p, e, eps_std, scale),
-        system.n_eps, problem.v.size, "random forces",
-        f"marginal likelihood with random constraint forces, sigma={s.sigma:g}",
-    )  # fmt: skip
+    like = model.conditional_likelihood(lin, s_hat)
     result = InverseResult(
         eps=eps, loss=val, status=status, message=str(res.message),
         nit=standard.nit + res.nit, nfev=standard.nfev + nfev[0],
@@ -254,12 +280,6 @@ def fit_random_force(problem, eps0, s):
     )  # fmt: skip
     result.likelihood = like
     return result
-
-
-def _profiled_with_gradient(model, p, eps, eps_std, scale):
-    x = (np.asarray(eps, float) - eps_std) / scale
-    val = _profiled(model, eps)[0]
-    return val, _fd_gradient(p, x, 1e-5) / scale
 
 
 def _at_bound(eps, bounds):

@@ -49,6 +49,9 @@ class LogLikelihood:
         ``"known sigma"``, ``"profiled sigma"`` or ``"replicated"``.
     description : str
         One line for messages and plots.
+    exact_gradient : bool
+        Whether ``evaluate``'s gradient is exact (else finite differences: optimizers on it
+        stop at a correspondingly looser tolerance).
     """
 
     evaluate: Callable
@@ -56,6 +59,7 @@ class LogLikelihood:
     n_data: int
     noise: str
     description: str
+    exact_gradient: bool = True  # False: finite differences, accurate to about 1e-6
 
     def __call__(self, eps):
         return self.evaluate(np.asarray(eps, dtype=float))

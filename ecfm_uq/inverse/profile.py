@@ -242,6 +242,12 @@ class _Profiler:
         self.scale, self.bounds = scale, bounds
         self.nfev = 0
         self.visited = []  # optima of the inner problems, reused as starting points
+        exact = like.exact_gradient
+        self.inner_options = {
+            "ftol": 1e-15 if exact else 1e-12,
+            "gtol": 1e-9 if exact else 1e-6,
+            "maxiter": 500,
+        }
 
     def at(self, fixed, values, start):
         """:math:`\\ell` minimized over the free parameters with ``eps[fixed] = values``.
@@ -292,7 +298,7 @@ class _Profiler:
                 break
             res = optimize.minimize(
                 fun, x_start, jac=True, method="L-BFGS-B", bounds=bnds,
-                options={"ftol": 1e-15, "gtol": 1e-9, "maxiter": 500},
+                options=self.inner_options,
             )  # fmt: skip
             if best is None or res.fun < best.fun:
                 best = res
