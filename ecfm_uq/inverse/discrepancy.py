@@ -164,10 +164,16 @@ class RandomForceModel:
             w = cho_solve(chol, r)
             return 0.5 * float(r @ w), -np.asarray(self.M @ dmean).T @ w
 
+        def value(eps):
+            sol = solve_steady(sysm, eps, strict=True, **self.problem.solve_options)
+            r = self.v - self.M @ sysm.mean(sol.Theta)
+            return 0.5 * float(r @ cho_solve(chol, r))
+
         what = "Gaussian, sigma" if tau2 == 0.0 else "GLS with the estimated discrepancy"
         return LogLikelihood(
             evaluate, sysm.n_eps, self.v.size, "known sigma" if tau2 == 0.0 else "random forces",
             f"{what} covariance held at the estimate (sigma={self.sigma:g}, tau={self.tau(s):.3g})",
+            value_only=value,
         )  # fmt: skip
 
     def tau(self, s):

@@ -60,12 +60,18 @@ class LogLikelihood:
     noise: str
     description: str
     exact_gradient: bool = True  # False: finite differences, accurate to about 1e-6
+    value_only: Callable | None = None  # the value without the gradient's extra solves
 
     def __call__(self, eps):
         return self.evaluate(np.asarray(eps, dtype=float))
 
+    def value(self, eps):
+        """:math:`\\ell(\\epsilon)` alone (cheaper where ``value_only`` is given)."""
+        eps = np.asarray(eps, dtype=float)
+        return float(self.value_only(eps) if self.value_only else self.evaluate(eps)[0])
 
-def _least_squares(rss_and_grad, n_data, n_eps, sigma, what):
+
+def _least_squares(rss_and_grad, n_data, n_eps, sigma, what, rss_only=None):
     """``rss_and_grad(eps) -> (||r||^2, d||r||^2/deps)`` to :class:`LogLikelihood`."""
     if sigma is not None:
         s2 = float(sigma) ** 2
@@ -75,8 +81,9 @@ def _least_squares(rss_and_grad, n_data, n_eps, sigma, what):
             return 0.5 * rss / s2, 0.5 * g / s2
 
         return LogLikelihood(
-            evaluate, n_eps, n_data, "known sigma", f"{what}, Gaussian noise sigma={sigma:g}"
-        )
+            evaluate, n_eps, n_data, "known sigma", f"{what}, Gaussian noise sigma={sigma:g}",
+            value_only=None if rss_only is None else (lambda eps: 0.5 * rss_only(eps) / s2),
+        )  # fmt: skip
     if n_data <= n_eps:
         return (
             f"sigma is unknown and the {n_data} data leave no residual degrees of freedom "
@@ -133,6 +140,7 @@ def likelihood_of(problem, formulation, sigma):
             "intervals"
         )
     if isinstance(problem, SteadyProblem):
+        from ..system import solve_steady
         from .steady import standard_objective
 
         solve_kw = {**problem.solve_options, "gradient": problem.gradient}
@@ -141,7 +149,12 @@ def likelihood_of(problem, formulation, sigma):
             z, g, _ = standard_objective(problem.system, problem.M_obs, problem.v, eps, **solve_kw)
             return 2.0 * z, 2.0 * g
 
-        return _least_squares(rss, problem.v.size, n_eps, sigma, "steady least squares")
+        def rss_only(eps):
+            sol = solve_steady(problem.system, eps, strict=True, **problem.solve_options)
+            r = problem.M_obs @ problem.system.mean(sol.Theta) - problem.v
+            return float(r @ r)
+
+        return _least_squares(rss, problem.v.size, n_eps, sigma, "steady least squares", rss_only)
     if isinstance(problem, DynamicInverseProblem):
         dt = problem.dt
 
@@ -149,6 +162,9 @@ def likelihood_of(problem, formulation, sigma):
             z, g, _ = problem.standard_objective(eps, gradient=True)
             return 2.0 * z / dt, 2.0 * g / dt
 
+        def rss_only(eps):
+            return 2.0 * problem.loss(eps, "standard") / dt
+
         n_data = int(np.size(problem.V[1:]))
-        return _least_squares(rss, n_data, n_eps, sigma, "trajectory least squares")
+        return _least_squares(rss, n_data, n_eps, sigma, "trajectory least squares", rss_only)
     return f"no likelihood is defined for a {type(problem).__name__}"
