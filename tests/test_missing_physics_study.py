@@ -25,7 +25,7 @@ def test_random_force_ecfm_maps_the_missing_source_and_flags_the_model(result):
     assert rf["success"] and std["success"] and paper["success"]
     assert rf["peak_sensor"] == result["nearest_sensor"]
     assert rf["peak_over_median_force"] > paper["peak_over_median_force"]
-    assert not rf["consistent"] and rf["p_value"] < 1e-6
+    assert not rf["consistent"] and rf["p_value"] < 1e-3  # Monte Carlo p, resolution 1/4001
     # the discrepancy takes the source, not the conductivity
     assert rf["error"] < std["error"] and rf["error"] < paper["error"]
     assert (result["_dir"] / "force_maps.png").stat().st_size > 0

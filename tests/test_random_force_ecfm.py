@@ -56,7 +56,7 @@ def test_a_missing_source_is_flagged_and_mapped_and_the_estimate_is_not_worse(am
     res = fit(SteadyProblem(model(), M_OBS, v), [1.0, 10.0], formulation="ecfm", sigma=sigma)
     std = res.extra["standard"]
     assert res.success, res.message
-    assert not res.verdict.consistent and res.verdict.p_value < 1e-6
+    assert not res.verdict.consistent and res.verdict.p_value < 1e-3  # MC resolution 1/4001
     lam = np.abs(res.extra["lam"])
     assert np.argmax(lam) == np.argmin(np.abs(SENS - SOURCE_AT))  # the sensor nearest it
     assert lam.max() > 4 * np.median(lam)
