@@ -18,16 +18,13 @@ the same statistics are estimated non-intrusively from deterministic solves
 
 from __future__ import annotations
 
-import functools
-import math
 import numbers
-import pickle
-from concurrent.futures import ProcessPoolExecutor
 from typing import NamedTuple
 
 import numpy as np
 
 from ._validation import as_finite_array, check_int
+from .executor import evaluate_samples
 
 __all__ = [
     "Moments",
@@ -70,17 +67,11 @@ def draw_germ(n, seed=None, dim=1):
     return gen.random(n) if dim == 1 else gen.random((n, dim))
 
 
-def _evaluate_chunk(fn, chunk):
-    """Evaluate ``fn`` on every sample of ``chunk``; module-level so it pickles."""
-    return np.stack([np.asarray(fn(s), dtype=float) for s in chunk])
-
-
-def _is_future(obj):
-    return hasattr(obj, "result") and callable(obj.result) and not isinstance(obj, np.ndarray)
-
-
 def monte_carlo(fn, samples, executor=None, *, workers=2, chunksize=None, callback=None):
     """Evaluate ``fn`` at each sample, in parallel, and stack the outputs.
+
+    The executor path shared with :func:`ecfm_uq.chaos.fit_pce`
+    (:func:`ecfm_uq.executor.evaluate_samples`).
 
     Parameters
     ----------
@@ -118,63 +109,9 @@ def monte_carlo(fn, samples, executor=None, *, workers=2, chunksize=None, callba
         Empty or non-finite samples, outputs of different shapes, or a non-finite output
         (the message gives the first offending sample).
     """
-    if not callable(fn):
-        raise TypeError(f"`fn` must be callable fn(sample), got {type(fn).__name__}")
-    samples = as_finite_array("samples", samples)
-    if samples.ndim == 0 or samples.shape[0] == 0:
-        raise ValueError("`samples` must be a non-empty array of shape (n, ...)")
-    workers = check_int("workers", workers, minimum=1)
-    n = samples.shape[0]
-    if chunksize is None:
-        chunksize = max(1, math.ceil(n / (4 * workers)))
-    chunksize = check_int("chunksize", chunksize, minimum=1)
-    if executor is not None and not callable(getattr(executor, "map", None)):
-        raise TypeError(
-            "`executor` must have a map(f, iterable) method (concurrent.futures executor or "
-            f"dask.distributed.Client), got {type(executor).__name__}"
-        )
-    chunks = [samples[i : i + chunksize] for i in range(0, n, chunksize)]
-    task = functools.partial(_evaluate_chunk, fn)
-
-    own_pool = executor is None and workers > 1
-    if own_pool:
-        try:
-            pickle.dumps(fn)
-        except Exception as e:
-            raise TypeError(
-                "`fn` must be picklable to run in worker processes: use a module-level "
-                "function or functools.partial of one (not a lambda or closure), or pass "
-                "workers=1"
-            ) from e
-        executor = ProcessPoolExecutor(max_workers=workers)
-    try:
-        if executor is None:
-            results = map(task, chunks)
-        elif callable(getattr(executor, "gather", None)):
-            results = executor.gather(executor.map(task, chunks))
-        else:
-            results = executor.map(task, chunks)
-        parts = []
-        for r in results:
-            r = r.result() if _is_future(r) else r
-            parts.append(r)
-            if callback is not None:
-                callback(len(r))
-    finally:
-        if own_pool:
-            executor.shutdown(wait=True, cancel_futures=True)
-    try:
-        out = np.concatenate(parts, axis=0)
-    except ValueError as e:
-        raise ValueError(f"`fn` returned outputs of different shapes: {e}") from e
-    bad = ~np.isfinite(out.reshape(n, -1)).all(axis=1)
-    if bad.any():
-        i = int(np.argmax(bad))
-        raise ValueError(
-            f"`fn` returned NaN or inf for sample {i} ({samples[i]!r}); "
-            "check the model at that germ value"
-        )
-    return out
+    return evaluate_samples(
+        fn, samples, executor, workers=workers, chunksize=chunksize, callback=callback
+    )
 
 
 def mc_moments(outputs):
@@ -263,6 +200,9 @@ def pseudospectral_projection(fn, chaos, n_points=None):
 
     With ``n_points = order + 1`` this is interpolation at the Gauss nodes, which for an
     operator affine in a single germ equals the stochastic Galerkin solution of Eq. pce.
+    The projection itself is the chaos layer's one (:func:`ecfm_uq.chaos.project`, also
+    behind ``fit_pce(method="quadrature")``); this function only takes a model of the
+    germ in the Galerkin layout.
 
     Parameters
     ----------
@@ -282,15 +222,14 @@ def pseudospectral_projection(fn, chaos, n_points=None):
     ValueError
         If ``fn`` returns NaN or inf at a node (the message names the node).
     """
-    from .chaos import ChaosBasis, gauss_legendre
-    from .chaos.pce import _project
+    from .chaos import ChaosBasis, project
 
     if not isinstance(chaos, ChaosBasis) or chaos.dim != 1:
         raise TypeError("`chaos` must be a one-dimensional ChaosBasis")
     n_points = chaos.order + 1 if n_points is None else n_points
-    nodes, w = gauss_legendre(check_int("n_points", n_points, minimum=1))
-    y = _node_outputs(fn, nodes)
-    return _project(chaos, nodes, w, y).T  # the PCE layer's projection, as (m, P)
+    nodes, w = chaos.quadrature(check_int("n_points", n_points, minimum=1))
+    y = _node_outputs(fn, nodes[:, 0])
+    return project(chaos, nodes, w, y).T  # the PCE layer's projection, as (m, P)
 
 
 def relative_error(estimate, reference):

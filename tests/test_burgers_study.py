@@ -39,7 +39,8 @@ def test_cli_run_recovers_paper_parameters_and_conditioning(tmp_path):
         assert isinstance(r[key]["loss"], float) and isinstance(r[key]["hessian_cond"], float)
         # the paper: both end at (1.750, 1.000), matching the truth to three decimals
         assert np.all(np.abs(np.array(r[key]["eps"]) - [1.75, 1.0]) < 5e-4), r[key]["eps"]
-        assert r[key]["success"]
+        # 250 Adam epochs stop a few 1e-6 short of the optimum: the fit says so (issue 20)
+        assert not r[key]["success"] and "NOT converged" in r[key]["message"]
         assert len(r[key]["loss_history"]) == 251
     # the paper: ECFM's loss surface is better conditioned (3.46 vs 8.11)
     assert r["ecfm"]["hessian_cond"] < r["inv"]["hessian_cond"]

@@ -498,8 +498,9 @@ def test_non_uniform_chaospy_distribution():
     dist = chaospy.J(chaospy.Uniform(0, 1), chaospy.Normal(0, 1))
     with pytest.raises(TypeError, match="dist.*Normal.*uniform"):
         UniformInputs.from_chaospy(dist)
-    with pytest.raises(TypeError, match="inputs.*Legendre"):
-        fit_pce(poly_model, dist, "quadrature")
+    # issue 22: fit_pce takes it (Legendre x Hermite germs) instead of refusing it
+    pce = fit_pce(poly_model, dist, "quadrature")
+    assert [g.family for g in pce.basis.germs] == ["legendre", "hermite"]
 
 
 def test_too_few_regression_samples():

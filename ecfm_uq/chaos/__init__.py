@@ -1,47 +1,63 @@
-"""Polynomial chaos on a uniform germ: shifted Legendre basis, quadrature, expectation tensors.
+"""Polynomial chaos: shifted Legendre basis (or any Askey germ), quadrature, tensors, PCE.
 
 The germ is omega ~ U(0, 1)^dim with independent components (paper Section 3.3, where
-dim = 1). A field is expanded as theta_i(omega) = Theta_ij Psi_j(omega) and projected with
-the expectations computed here (paper Eq. ``pce``). Deterministic problems are the P = 1
+dim = 1); a basis may instead take normal, gamma or beta germ variables (``germ=``), and
+the inputs of a non-intrusive fit any continuous marginals and a Gaussian copula. A field
+is expanded as theta_i(omega) = Theta_ij Psi_j(omega) and projected with the expectations
+computed here (paper Eq. ``pce``). Deterministic problems are the P = 1
 case, ``ChaosBasis(0)``, for which every tensor is the scalar 1.
 
 Public API
 ----------
 ChaosBasis           basis terms Psi_k, multi-indices, evaluation, quadrature
+Germ                 one germ variable of the Askey scheme (uniform, normal, gamma, beta)
 gauss_legendre       Gauss-Legendre nodes and probability weights on [0, 1]
 expectation_tensor   E[Psi_k], E[Psi_i Psi_j], E[Psi_i Psi_j Psi_k] (dense or sparse)
 weighted_gram        E[g(omega) Psi_k Psi_l]
+coupling_tensor      E[phi_a Psi_i Psi_j]: a coefficient's own chaos against the basis
+lognormal_coefficients  exact Hermite chaos of exp(m + b . xi) (lognormal fields)
 GaussNodes           a one-germ basis at its P-node Gauss rule (node-wise solvers)
 SparseTensor3        coordinate-form third-order tensor with contractions
 PolynomialChaosExpansion  a PCE as an object: moments, Sobol indices, sampling, chaospy export
+Inputs               any continuous marginals, independent or joined by a Gaussian copula
 UniformInputs        independent uniform inputs on their own ranges, mapped to the germ
+project              pseudo-spectral projection of node values onto the basis
 fit_pce              non-intrusive PCE of a black-box model (quadrature, Smolyak, OLS, LARS)
 """
 
 from .basis import ChaosBasis
-from .inputs import UniformInputs
+from .germs import Germ
+from .inputs import Inputs, UniformInputs
 from .nonintrusive import fit_pce, sample_design, smolyak_rule
 from .pce import PolynomialChaosExpansion
+from .projection import project
 from .quadrature import gauss_legendre
 from .tensors import (
     GaussNodes,
     SparseTensor3,
     common_eigenbasis,
+    coupling_tensor,
     expectation_tensor,
+    lognormal_coefficients,
     triple_product_1d,
     weighted_gram,
 )
 
 __all__ = [
     "ChaosBasis",
+    "Germ",
     "PolynomialChaosExpansion",
+    "Inputs",
     "UniformInputs",
     "fit_pce",
+    "project",
     "sample_design",
     "smolyak_rule",
     "GaussNodes",
     "SparseTensor3",
     "common_eigenbasis",
+    "coupling_tensor",
+    "lognormal_coefficients",
     "expectation_tensor",
     "gauss_legendre",
     "triple_product_1d",

@@ -1,9 +1,10 @@
-"""Shifted Legendre polynomial chaos basis on the uniform germ omega ~ U(0, 1)^dim.
+"""Polynomial chaos basis: shifted Legendre on the uniform germ, or any Askey germ.
 
 The paper's stochastic basis (Section 3.3, expansion theta_i(omega) = Theta_ij Psi_j(omega))
-is the Legendre family shifted to [0, 1], P_n(2 omega - 1). This module builds its
-multi-variate version by products over multi-indices, in orthonormal or in the paper's
-unnormalised scaling.
+is the Legendre family shifted to [0, 1], P_n(2 omega - 1), on omega ~ U(0, 1)^dim. This
+module builds its multi-variate version by products over multi-indices, in orthonormal or
+in the paper's unnormalised scaling; with ``germ=`` a variable may instead be a standard
+normal (Hermite), gamma (Laguerre) or beta (Jacobi) germ (:mod:`ecfm_uq.chaos.germs`).
 """
 
 from __future__ import annotations
@@ -15,7 +16,8 @@ import numpy as np
 
 from .._validation import as_finite_array, check_choice, check_int
 from ._kernels import legendre_table
-from .quadrature import tensor_gauss_legendre
+from .germs import as_germs
+from .quadrature import tensor_gauss_legendre, tensor_rule
 
 __all__ = ["ChaosBasis", "default_n_points"]
 
@@ -76,13 +78,20 @@ class ChaosBasis:
     normalized : bool, optional
         ``True`` (default): orthonormal, :math:`\\mathbb{E}[\\Psi_k \\Psi_l] = \\delta_{kl}`.
         ``False``: the paper's unnormalised :math:`P_n(2\\omega - 1)` products, with
-        :math:`\\mathbb{E}[\\Psi_k^2] = \\prod_d 1/(2\\alpha_d + 1)`.
+        :math:`\\mathbb{E}[\\Psi_k^2] = \\prod_d 1/(2\\alpha_d + 1)` (Legendre germs only).
+    germ : str, Germ or sequence of them, optional
+        The law of each germ variable and so its polynomial family: ``"legendre"``
+        (U(0, 1), the default), ``"hermite"`` (N(0, 1)), or a
+        :class:`~ecfm_uq.chaos.Germ` such as ``Germ("laguerre", shape=2.5)`` (gamma) or
+        ``Germ("jacobi", a=2, b=3)`` (beta on [0, 1]); one per variable or one for all.
 
     Attributes
     ----------
     order, dim : int
     index_set : str
     normalized : bool
+    germs : tuple of Germ
+        One per variable.
     size : int
         Number of terms P (``comb(p + dim, dim)`` for the total set, ``(p + 1)**dim`` for the
         tensor set).
@@ -115,7 +124,7 @@ class ChaosBasis:
     [[0, 0], [1, 0], [0, 1], [2, 0], [1, 1], [0, 2]]
     """
 
-    def __init__(self, order, dim=1, index_set="total", normalized=True):
+    def __init__(self, order, dim=1, index_set="total", normalized=True, germ=None):
         self.order = check_int("order", order, minimum=0)
         self.dim = check_int("dim", dim, minimum=1)
         if not isinstance(index_set, str):
@@ -124,6 +133,13 @@ class ChaosBasis:
         if not isinstance(normalized, bool | np.bool_):
             raise TypeError(f"`normalized` must be True or False, got {normalized!r}")
         self.normalized = bool(normalized)
+        self.germs = as_germs(germ, self.dim)
+        self.is_legendre = all(g.family == "legendre" for g in self.germs)
+        if not self.normalized and not self.is_legendre:
+            raise ValueError(
+                "`normalized=False` (the paper's unnormalised Legendre scaling) needs "
+                f"Legendre germs, got germ={self.germs}; use normalized=True"
+            )
 
         if self.index_set == "total":
             n_terms = math.comb(self.order + self.dim, self.dim)
@@ -154,23 +170,25 @@ class ChaosBasis:
         return self.size
 
     def __repr__(self):
+        germ = "" if self.is_legendre else f", germ={list(self.germs)}"
         return (
             f"ChaosBasis(order={self.order}, dim={self.dim}, index_set={self.index_set!r}, "
-            f"normalized={self.normalized})  # P = {self.size}"
+            f"normalized={self.normalized}{germ})  # P = {self.size}"
         )
 
     def __eq__(self, other):
         if not isinstance(other, ChaosBasis):
             return NotImplemented
-        return (self.order, self.dim, self.index_set, self.normalized) == (
+        return (self.order, self.dim, self.index_set, self.normalized, self.germs) == (
             other.order,
             other.dim,
             other.index_set,
             other.normalized,
+            other.germs,
         )
 
     def __hash__(self):
-        return hash((self.order, self.dim, self.index_set, self.normalized))
+        return hash((self.order, self.dim, self.index_set, self.normalized, self.germs))
 
     def _as_points(self, omega):
         """Validate ``omega`` and return it as a C-contiguous (n, dim) float array."""
@@ -180,24 +198,40 @@ class ChaosBasis:
         if arr.ndim != 2 or arr.shape[1] != self.dim:
             want = "(n,) or (n, 1)" if self.dim == 1 else f"(n, {self.dim})"
             raise ValueError(f"`omega` must have shape {want} for dim={self.dim}, got {arr.shape}")
-        if arr.size and (arr.min() < -_SUPPORT_TOL or arr.max() > 1.0 + _SUPPORT_TOL):
-            raise ValueError(
-                "`omega` must lie in the germ's support [0, 1] (omega ~ U(0, 1)); "
-                f"got values in [{arr.min():.6g}, {arr.max():.6g}]. Map samples from "
-                "[-1, 1] with (x + 1) / 2"
-            )
+        if self.is_legendre:
+            if arr.size and (arr.min() < -_SUPPORT_TOL or arr.max() > 1.0 + _SUPPORT_TOL):
+                raise ValueError(
+                    "`omega` must lie in the germ's support [0, 1] (omega ~ U(0, 1)); "
+                    f"got values in [{arr.min():.6g}, {arr.max():.6g}]. Map samples from "
+                    "[-1, 1] with (x + 1) / 2"
+                )
+        elif arr.size:
+            for d, g in enumerate(self.germs):
+                lo, hi = g.support
+                col = arr[:, d]
+                if col.min() < lo - _SUPPORT_TOL or col.max() > hi + _SUPPORT_TOL:
+                    raise ValueError(
+                        f"`omega` column {d} must lie in the support [{lo:g}, {hi:g}] of its "
+                        f"germ {g!r}; got values in [{col.min():.6g}, {col.max():.6g}]"
+                    )
         return np.ascontiguousarray(arr)
 
     def univariate(self, omega):
         """Per-variable orthonormal tables, shape (dim, n, order + 1).
 
-        ``out[d, q, m]`` is :math:`\\sqrt{2m + 1} P_m(2\\omega_{qd} - 1)` (unnormalised
-        bases are rescaled in :meth:`evaluate`, not here).
+        ``out[d, q, m]`` is :math:`\\sqrt{2m + 1} P_m(2\\omega_{qd} - 1)` for a Legendre
+        germ (unnormalised bases are rescaled in :meth:`evaluate`, not here) and the
+        orthonormal polynomial of degree m of germ d otherwise.
         """
         pts = self._as_points(omega)
-        return np.stack(
-            [legendre_table(np.ascontiguousarray(pts[:, d]), self.order) for d in range(self.dim)]
-        )
+        if self.is_legendre:
+            return np.stack(
+                [
+                    legendre_table(np.ascontiguousarray(pts[:, d]), self.order)
+                    for d in range(self.dim)
+                ]
+            )
+        return np.stack([g.table(pts[:, d], self.order) for d, g in enumerate(self.germs)])
 
     def evaluate(self, omega):
         """Values of every basis term at the points ``omega``.
@@ -230,7 +264,7 @@ class ChaosBasis:
         return self.evaluate(omega)
 
     def quadrature(self, n_points=None):
-        """Tensor-product Gauss-Legendre rule for expectations over U(0, 1)^dim.
+        """Tensor-product Gauss rule of the germs (Gauss-Legendre for U(0, 1)^dim).
 
         Parameters
         ----------
@@ -247,4 +281,6 @@ class ChaosBasis:
         """
         if n_points is None:
             n_points = default_n_points(self.order)
-        return tensor_gauss_legendre(n_points, self.dim)
+        if self.is_legendre:
+            return tensor_gauss_legendre(n_points, self.dim)
+        return tensor_rule([g.gauss for g in self.germs], n_points)

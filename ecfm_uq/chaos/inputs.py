@@ -1,4 +1,13 @@
-"""Independent uniform inputs on their own ranges, mapped affinely to the germ.
+"""Model inputs as distributions, mapped to the germ of the chaos basis.
+
+:class:`Inputs` takes any continuous marginals (scipy.stats frozen or chaospy
+distributions) and, optionally, a Gaussian copula (Nataf) given by its correlation
+matrix; each marginal is matched to its Askey germ or reached through an isoprobabilistic
+transform (:mod:`ecfm_uq.chaos.marginals`). Dependent inputs are all expanded on
+independent standard normal germs :math:`\\xi`: :math:`z = L\\xi` with
+:math:`LL^T = R`, then :math:`x_k = F_k^{-1}(\\Phi(z_k))`.
+
+:class:`UniformInputs` is the uniform case, kept as it was:
 
 The chaos basis lives on the germ :math:`\\omega \\sim \\mathcal U(0, 1)^d`. A user's model
 takes its inputs on their own ranges, :math:`x_k \\sim \\mathcal U(a_k, b_k)` independent,
@@ -8,20 +17,261 @@ and the affine map
 
 carries one to the other. Because the map is affine, Legendre polynomials in
 :math:`\\omega` are Legendre polynomials in :math:`x` and every statistic (moments, Sobol
-indices, quantiles) is the same in either variable. Only uniform inputs are supported:
-the basis is Legendre, orthogonal for the uniform density.
+indices, quantiles) is the same in either variable.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import scipy.linalg as sla
 
 from .._validation import as_finite_array
+from .germs import LEGENDRE, Germ
+from .marginals import as_marginal
 
-__all__ = ["UniformInputs"]
+__all__ = ["Inputs", "UniformInputs", "as_inputs", "draw_germs"]
 
 
-class UniformInputs:
+class Inputs:
+    """Model inputs: continuous marginals, independent or joined by a Gaussian copula.
+
+    Parameters
+    ----------
+    marginals : sequence of distributions
+        One per input: ``scipy.stats`` frozen distributions (``norm(1, 0.2)``,
+        ``lognorm(0.3, scale=2)``, ``gamma(2.5)``, ``beta(2, 3)``, ``weibull_min(1.5)``,
+        ``truncnorm(...)``, ...) or 1-D chaospy distributions. Discrete laws are refused.
+    correlation : (dim, dim) array_like, optional
+        The correlation matrix :math:`R` of the Gaussian copula (the correlation of the
+        normal scores :math:`z_k = \\Phi^{-1}(F_k(x_k))`; for normal marginals it is the
+        inputs' own correlation). Symmetric, unit diagonal, positive definite. ``None``:
+        independent inputs.
+    names : sequence of str, optional
+        Input names (default ``x0, x1, ...``).
+
+    Attributes
+    ----------
+    marginals : tuple of Marginal
+    germs : tuple of Germ
+        The germ of each chaos variable: the marginal's Askey germ for independent
+        inputs, the standard normal for every variable of dependent inputs.
+    correlation : (dim, dim) ndarray or None
+    dependent : bool
+    affine : bool
+        Independent inputs that are all affine images of their germs (uniform, normal,
+        gamma, beta): a PCE is then a polynomial in the inputs themselves.
+    dim : int
+    names : tuple of str
+
+    Raises
+    ------
+    TypeError
+        A discrete or unknown distribution (naming the input).
+    ValueError
+        A correlation matrix that is misshaped, not symmetric, without unit diagonal or
+        not positive definite.
+
+    Examples
+    --------
+    >>> from scipy import stats
+    >>> inputs = Inputs([stats.norm(1.0, 0.1), stats.lognorm(0.25)], names=["load", "E"])
+    >>> [g.family for g in inputs.germs]
+    ['hermite', 'hermite']
+    >>> inputs.from_germ([[1.0, 0.0]]).tolist()
+    [[1.1, 1.0]]
+    """
+
+    def __init__(self, marginals, correlation=None, names=None):
+        if type(marginals).__module__.startswith("chaospy") and len(marginals) > 1:
+            if getattr(marginals, "stochastic_dependent", False):
+                raise TypeError(
+                    f"`marginals` is a dependent chaospy distribution ({type(marginals).__name__}); "
+                    "build its inputs with Inputs.from_chaospy(dist) (MvNormal), or give the "
+                    "marginals and a `correlation`"
+                )
+            marginals = list(marginals)  # a chaospy.J / Iid of 1-D laws
+        elif hasattr(marginals, "dist") or type(marginals).__module__.startswith("chaospy"):
+            marginals = [marginals]
+        try:
+            items = list(marginals)
+        except TypeError as e:
+            raise TypeError(
+                f"`marginals` must be a sequence of distributions, got {type(marginals).__name__}"
+            ) from e
+        if not items:
+            raise ValueError("`marginals` must hold at least one distribution")
+        if names is None:
+            names = [f"x{k}" for k in range(len(items))]
+        names = tuple(str(n) for n in names)
+        if len(names) != len(items):
+            raise ValueError(f"`names` must hold {len(items)} names, got {len(names)}")
+        self.names = names
+        self.marginals = tuple(as_marginal(d, n) for d, n in zip(items, names, strict=True))
+        self.correlation = None if correlation is None else self._check_correlation(correlation)
+        self.dependent = self.correlation is not None and not np.array_equal(
+            self.correlation, np.eye(self.dim)
+        )
+        if self.dependent:
+            self._L = np.linalg.cholesky(self.correlation)
+            self.germs = (Germ("hermite"),) * self.dim
+        else:
+            self.correlation = None
+            self.germs = tuple(m.germ for m in self.marginals)
+        self.affine = not self.dependent and all(m.affine for m in self.marginals)
+
+    def _check_correlation(self, correlation):
+        d = len(self.marginals)
+        R = as_finite_array("correlation", correlation)
+        if R.shape != (d, d):
+            raise ValueError(
+                f"`correlation` must have shape ({d}, {d}), one row per input, got {R.shape}"
+            )
+        if not np.allclose(R, R.T, rtol=0, atol=1e-12):
+            raise ValueError("`correlation` must be symmetric")
+        if not np.allclose(np.diag(R), 1.0, rtol=0, atol=1e-12):
+            raise ValueError(f"`correlation` must have a unit diagonal, got {np.diag(R)}")
+        eig = np.linalg.eigvalsh(0.5 * (R + R.T))
+        if eig.min() <= 1e-12:
+            raise ValueError(
+                f"`correlation` is not positive definite (smallest eigenvalue {eig.min():.3g}): "
+                "no Gaussian copula has it; check the entries (|r| < 1, consistent triples) or "
+                "drop an input that is a function of the others"
+            )
+        return 0.5 * (R + R.T)
+
+    @property
+    def dim(self):
+        """Number of inputs."""
+        return len(self.marginals)
+
+    def __repr__(self):
+        rows = ", ".join(f"{n}~{m!r}" for n, m in zip(self.names, self.marginals, strict=True))
+        dep = "" if not self.dependent else ", Gaussian copula"
+        return f"Inputs({rows}{dep})"
+
+    def __eq__(self, other):
+        if not isinstance(other, Inputs) or isinstance(other, UniformInputs):
+            return NotImplemented
+        same_r = (self.correlation is None and other.correlation is None) or (
+            self.correlation is not None
+            and other.correlation is not None
+            and np.array_equal(self.correlation, other.correlation)
+        )
+        return self.marginals == other.marginals and same_r
+
+    __hash__ = None
+
+    def _points(self, name, value):
+        arr = as_finite_array(name, value)
+        if arr.ndim == 1 and self.dim == 1:
+            arr = arr[:, None]
+        elif arr.ndim == 1 and arr.shape[0] == self.dim:
+            arr = arr[None, :]
+        if arr.ndim != 2 or arr.shape[1] != self.dim:
+            raise ValueError(f"`{name}` must have shape (n, {self.dim}), got {arr.shape}")
+        return arr
+
+    def from_germ(self, omega):
+        """Input points of germ points (one column per chaos variable).
+
+        Parameters
+        ----------
+        omega : (n, dim) array_like
+
+        Returns
+        -------
+        x : (n, dim) ndarray
+        """
+        g = self._points("omega", omega)
+        if self.dependent:
+            z = g @ self._L.T
+            cols = [m.from_normal(z[:, k]) for k, m in enumerate(self.marginals)]
+        else:
+            cols = [m.from_germ(g[:, k]) for k, m in enumerate(self.marginals)]
+        return np.column_stack(cols)
+
+    def to_germ(self, x):
+        """Germ points of input points.
+
+        Raises
+        ------
+        ValueError
+            If a point lies outside an input's support.
+        """
+        x = self._points("x", x)
+        for k, m in enumerate(self.marginals):
+            lo, hi = m.support
+            bad = (x[:, k] < lo) | (x[:, k] > hi)
+            if bad.any():
+                q = int(np.argmax(bad))
+                raise ValueError(
+                    f"`x` point {q} has {self.names[k]} = {x[q, k]:g} outside the support "
+                    f"[{lo:g}, {hi:g}] of its law {m!r}"
+                )
+        if self.dependent:
+            z = np.column_stack([m.to_normal(x[:, k]) for k, m in enumerate(self.marginals)])
+            return sla.solve_triangular(self._L, z.T, lower=True).T
+        return np.column_stack([m.to_germ(x[:, k]) for k, m in enumerate(self.marginals)])
+
+    def sample(self, n, seed=None):
+        """``n`` random input points (through independent germ draws)."""
+        g = draw_germs(self.germs, n, seed)
+        return self.from_germ(g)
+
+    def to_chaospy(self):
+        """The inputs as a chaospy distribution (a ``chaospy.J``, or ``MvNormal``)."""
+        import chaospy
+
+        if self.dependent:
+            if all(m.kind == "normal" for m in self.marginals):
+                s = np.array([m.scale for m in self.marginals])
+                mu = [m.loc for m in self.marginals]
+                return chaospy.MvNormal(mu, self.correlation * np.outer(s, s))
+            raise ValueError(
+                "dependent non-normal inputs have no chaospy equivalent here; use "
+                "chaospy.Nataf or sample through Inputs.sample"
+            )
+        return chaospy.J(*[m.to_chaospy() for m in self.marginals])
+
+    @classmethod
+    def from_chaospy(cls, dist, names=None):
+        """Inputs from a chaospy distribution: ``J``/``Iid`` of 1-D laws, or ``MvNormal``."""
+        import chaospy
+
+        if not isinstance(dist, chaospy.Distribution):
+            raise TypeError(f"`dist` must be a chaospy distribution, got {type(dist).__name__}")
+        if isinstance(dist, chaospy.MvNormal):
+            mu = np.asarray(chaospy.E(dist), dtype=float).ravel()
+            C = np.asarray(chaospy.Cov(dist), dtype=float).reshape(len(mu), len(mu))
+            s = np.sqrt(np.diag(C))
+            from scipy import stats
+
+            marg = [stats.norm(m, sk) for m, sk in zip(mu, s, strict=True)]
+            return cls(marg, correlation=C / np.outer(s, s), names=names)
+        if getattr(dist, "stochastic_dependent", False):
+            raise TypeError(
+                f"`dist` is a dependent chaospy distribution ({type(dist).__name__}) other than "
+                "MvNormal; give the marginals and the Gaussian copula's `correlation` to Inputs"
+            )
+        parts = [dist] if len(dist) == 1 and not isinstance(dist, chaospy.J) else list(dist)
+        return cls(parts, names=names)
+
+
+def draw_germs(germs, n, seed=None):
+    """``n`` independent draws of the germ variables, (n, dim).
+
+    Uniform germs are ``Generator.random`` draws exactly (as in the uniform-only code);
+    other germs are their inverse CDF of the same uniforms.
+    """
+    omega = np.random.default_rng(seed).random((n, len(germs)))
+    for d, g in enumerate(germs):
+        if g.family != "legendre":
+            u = np.clip(omega[:, d], np.finfo(float).tiny, 1.0 - np.finfo(float).epsneg)
+            omega[:, d] = g.ppf(u)
+    return omega
+
+
+class UniformInputs(Inputs):
     """Independent uniform inputs :math:`x_k \\sim \\mathcal U(a_k, b_k)`, ``k < dim``.
 
     Parameters
@@ -72,6 +322,20 @@ class UniformInputs:
         if len(names) != arr.shape[0]:
             raise ValueError(f"`names` must hold {arr.shape[0]} names, got {len(names)}")
         self.names = names
+        self.germs = (LEGENDRE,) * arr.shape[0]
+        self.correlation = None
+        self.dependent = False
+        self.affine = True
+
+    @property
+    def marginals(self):
+        """Each input as a :class:`~ecfm_uq.chaos.marginals.Marginal` (uniform)."""
+        from scipy import stats
+
+        return tuple(
+            as_marginal(stats.uniform(a, b - a), n)
+            for n, (a, b) in zip(self.names, self.bounds, strict=True)
+        )
 
     @property
     def dim(self):
@@ -102,16 +366,6 @@ class UniformInputs:
         return np.array_equal(self.bounds, other.bounds)
 
     __hash__ = None
-
-    def _points(self, name, value):
-        arr = as_finite_array(name, value)
-        if arr.ndim == 1 and self.dim == 1:
-            arr = arr[:, None]
-        elif arr.ndim == 1 and arr.shape[0] == self.dim:
-            arr = arr[None, :]
-        if arr.ndim != 2 or arr.shape[1] != self.dim:
-            raise ValueError(f"`{name}` must have shape (n, {self.dim}), got {arr.shape}")
-        return arr
 
     def to_germ(self, x):
         """Germ points :math:`\\omega = (x - a)/(b - a)`.
@@ -191,3 +445,66 @@ class UniformInputs:
         import chaospy
 
         return chaospy.J(*[chaospy.Uniform(float(a), float(b)) for a, b in self.bounds])
+
+
+def _is_distribution(obj):
+    return type(obj).__module__.startswith("chaospy") or (
+        hasattr(obj, "dist") and hasattr(obj, "ppf") and hasattr(obj, "cdf")
+    )
+
+
+def as_inputs(inputs, dim=None):
+    """``None``, :class:`Inputs`, bounds, distributions or a chaospy joint → inputs.
+
+    Parameters
+    ----------
+    inputs : None, Inputs, UniformInputs, (dim, 2) array_like, chaospy.Distribution,
+        scipy.stats frozen distribution (1-D, or ``multivariate_normal``) or a sequence
+        of 1-D distributions
+    dim : int, optional
+        Required number of inputs.
+    """
+    if inputs is None or isinstance(inputs, Inputs):
+        out = inputs
+    elif type(inputs).__module__.startswith("chaospy"):
+        import chaospy
+
+        parts = [inputs] if isinstance(inputs, chaospy.Uniform) else None
+        if parts is None and not isinstance(inputs, chaospy.MvNormal):
+            try:
+                parts = list(inputs)
+            except TypeError:
+                parts = [inputs]
+        if parts is not None and all(isinstance(d, chaospy.Uniform) for d in parts):
+            out = UniformInputs.from_chaospy(inputs)  # the uniform-only path, unchanged
+        else:
+            out = _named(Inputs.from_chaospy, inputs)
+    elif hasattr(inputs, "cov") and hasattr(inputs, "mean") and hasattr(inputs, "rvs"):
+        # scipy.stats.multivariate_normal(mean, cov)
+        from scipy import stats
+
+        mu = np.atleast_1d(np.asarray(inputs.mean, dtype=float))
+        C = np.atleast_2d(np.asarray(inputs.cov, dtype=float))
+        s = np.sqrt(np.diag(C))
+        marg = [stats.norm(m, sk) for m, sk in zip(mu, s, strict=True)]
+        out = _named(Inputs, marg, correlation=C / np.outer(s, s))
+    elif _is_distribution(inputs):
+        out = _named(Inputs, [inputs])
+    elif isinstance(inputs, list | tuple) and inputs and any(_is_distribution(d) for d in inputs):
+        out = _named(Inputs, list(inputs))
+    else:
+        try:
+            out = UniformInputs(inputs)
+        except ValueError as e:
+            raise ValueError(f"`inputs`: {e}") from e
+    if out is not None and dim is not None and out.dim != dim:
+        raise ValueError(f"`inputs` has {out.dim} variables but the basis has dim={dim}")
+    return out
+
+
+def _named(build, *args, **kwargs):
+    """Build inputs, prefixing errors with the argument name ``inputs``."""
+    try:
+        return build(*args, **kwargs)
+    except (TypeError, ValueError) as e:
+        raise type(e)(f"`inputs`: {e}") from e

@@ -2,7 +2,8 @@
 
 One entry point, :func:`fit_pce`, dispatches on ``method`` to
 
-* ``"quadrature"``: pseudo-spectral projection on a tensor Gauss-Legendre rule,
+* ``"quadrature"``: pseudo-spectral projection on a tensor Gauss rule of the germs
+  (Gauss-Legendre for uniform inputs, Gauss-Hermite for normal ones, ...),
   :math:`c_k = \\sum_q w_q\\, y(x_q)\\,\\Psi_k(\\omega_q) / \\mathbb E[\\Psi_k^2]`;
 * ``"smolyak"``: the Smolyak combination of tensor pseudo-spectral projections
   (Conrad & Marzouk 2013), on non-nested Gauss-Legendre rules (``rule="gauss"``, linear
@@ -24,15 +25,14 @@ error; they stop after ``early_stop`` degrees without improvement.
 
 All return the same :class:`~ecfm_uq.chaos.PolynomialChaosExpansion` as the stochastic
 Galerkin solver, with ``.diagnostics`` saying what was done. Model evaluations go through
-:func:`ecfm_uq.mc.monte_carlo` (threads, processes or a ``dask.distributed`` client),
-with a progress bar on request.
+:func:`ecfm_uq.executor.evaluate_samples`, the executor path Monte Carlo uses too
+(threads, processes or a ``dask.distributed`` client), with a progress bar on request.
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-import re
 import time
 import warnings
 
@@ -40,20 +40,21 @@ import numpy as np
 import scipy.linalg as sla
 
 from .._validation import as_finite_array, check_choice, check_int
+from ..executor import NonFiniteOutputError, evaluate_samples
 from ._kernels import legendre_table
 from .basis import ChaosBasis
-from .pce import PolynomialChaosExpansion, _project, as_inputs
-from .quadrature import gauss_legendre, tensor_gauss_legendre
+from .germs import as_germs
+from .inputs import as_inputs
+from .pce import PolynomialChaosExpansion
+from .projection import project
+from .quadrature import gauss_legendre
+from .sparse import _fit_sparse, _loo_nested  # noqa: F401  (tests import _loo_nested here)
 
 __all__ = ["fit_pce", "sample_design", "smolyak_rule"]
 
 METHODS = ("quadrature", "smolyak", "lstsq", "lars", "omp")
 DESIGNS = ("lhs", "sobol", "halton", "random")
 RULES = ("gauss", "clenshaw-curtis")
-# Sparse regression: largest candidate basis per model run, and the highest degree tried
-# (the degree loop stops earlier when the corrected LOO error stops improving).
-_CANDIDATES_PER_RUN = 10
-_MAX_DEGREE = 30
 
 
 # --------------------------------------------------------------------------------------
@@ -91,6 +92,15 @@ def sample_design(n, dim, design="lhs", seed=None):
         # the balance warning for n not a power of 2: the points are still valid
         warnings.simplefilter("ignore", UserWarning)
         return qmc.Sobol(dim, rng=rng).random(n)
+
+
+def _design_to_germ(u, germs):
+    """Design points in [0, 1]^dim to germ points: each germ's inverse CDF (uniform: as is)."""
+    for d, g in enumerate(germs):
+        if g.family != "legendre":
+            ud = np.clip(u[:, d], np.finfo(float).tiny, 1.0 - np.finfo(float).epsneg)
+            u[:, d] = g.ppf(ud)
+    return u
 
 
 def _clenshaw_curtis(n):
@@ -131,7 +141,7 @@ def _smolyak_levels(level, dim):
     return out
 
 
-def smolyak_rule(level, dim, rule="gauss"):
+def smolyak_rule(level, dim, rule="gauss", germs=None):
     """Distinct nodes of a Smolyak sparse grid and the tensor rules that make it.
 
     Parameters
@@ -142,6 +152,9 @@ def smolyak_rule(level, dim, rule="gauss"):
     rule : {"gauss", "clenshaw-curtis"}
         1-D rules: Gauss-Legendre with ``l`` points at level ``l`` (not nested; only the
         midpoint is shared) or Clenshaw-Curtis with :math:`2^{l-1} + 1` points (nested).
+    germs : sequence of Germ, optional
+        The germ of each variable (default uniform). A non-uniform germ uses its own
+        ``l``-point Gauss rule at level ``l`` and needs ``rule="gauss"``.
 
     Returns
     -------
@@ -154,18 +167,32 @@ def smolyak_rule(level, dim, rule="gauss"):
     level = check_int("order", level, minimum=0)
     dim = check_int("dim", dim, minimum=1)
     rule = check_choice("rule", rule, RULES)
-    rules = {l: _rule_1d(rule, l) for l in range(1, level + 2)}
+    germs = as_germs(germs, dim)
+    if rule != "gauss" and any(g.family != "legendre" for g in germs):
+        raise ValueError(
+            f"`rule`={rule!r} (nested Clenshaw-Curtis on [0, 1]) is for uniform inputs; the "
+            f"germs {list(germs)} need rule='gauss' (each germ's own Gauss rule)"
+        )
+    shared = {l: _rule_1d(rule, l) for l in range(1, level + 2)}
+
+    def germ_rule(g, l):
+        if g.family == "legendre":
+            return shared[l]
+        x, w = g.gauss(l)
+        return x, w, l - 1
+
+    rules = [{l: germ_rule(g, l) for l in range(1, level + 2)} for g in germs]
     keys = {}
     all_nodes = []
     parts = []
     for l, coef in _smolyak_levels(level, dim):
         if coef == 0:
             continue
-        grids = np.meshgrid(*[rules[li][0] for li in l], indexing="ij")
+        grids = np.meshgrid(*[rules[d][li][0] for d, li in enumerate(l)], indexing="ij")
         pts = np.stack([g.ravel() for g in grids], axis=1)
         w = np.ones(1)
-        for li in l:
-            w = np.outer(w, rules[li][1]).ravel()
+        for d, li in enumerate(l):
+            w = np.outer(w, rules[d][li][1]).ravel()
         idx = np.empty(len(pts), dtype=np.int64)
         for j, p in enumerate(np.round(pts, 13)):
             key = tuple(p.tolist())
@@ -173,7 +200,7 @@ def smolyak_rule(level, dim, rule="gauss"):
                 keys[key] = len(all_nodes)
                 all_nodes.append(pts[j])
             idx[j] = keys[key]
-        parts.append((coef, l, idx, w, tuple(rules[li][2] for li in l)))
+        parts.append((coef, l, idx, w, tuple(rules[d][li][2] for d, li in enumerate(l))))
     return np.array(all_nodes).reshape(-1, dim), parts
 
 
@@ -181,9 +208,7 @@ def smolyak_rule(level, dim, rule="gauss"):
 # model evaluations through the executor path
 # --------------------------------------------------------------------------------------
 def _evaluate(model, x, executor, workers, progress, label):
-    """``model`` at each row of ``x`` through :func:`ecfm_uq.mc.monte_carlo`."""
-    from ..mc import monte_carlo
-
+    """``model`` at each row of ``x`` through :func:`ecfm_uq.executor.evaluate_samples`."""
     if not callable(model):
         raise TypeError(f"`model` must be callable model(x) -> array, got {type(model).__name__}")
     bar, own_bar = None, False
@@ -194,66 +219,23 @@ def _evaluate(model, x, executor, workers, progress, label):
 
         bar, own_bar = tqdm(total=len(x), desc=f"fit_pce ({label})", leave=False), True
     try:
-        return monte_carlo(
+        return evaluate_samples(
             model,
             x,
             executor,
             workers=workers,
             callback=None if bar is None else bar.update,
+            name="model",
         )
-    except ValueError as e:
-        msg = str(e)
-        m = re.search(r"for sample (\d+)", msg)
-        if m:
-            i = int(m.group(1))
-            point = np.array2string(x[i], precision=6)
-            raise ValueError(
-                f"`model` returned NaN or inf at {label} point {i} (x={point}); check the "
-                "model there (a PCE cannot be fitted to non-finite outputs)"
-            ) from e
-        raise ValueError(msg.replace("`fn`", "`model`")) from e
-    except TypeError as e:
-        raise TypeError(str(e).replace("`fn`", "`model`")) from e
+    except NonFiniteOutputError as e:
+        point = np.array2string(x[e.index], precision=6)
+        raise ValueError(
+            f"`model` returned NaN or inf at {label} point {e.index} (x={point}); check the "
+            "model there (a PCE cannot be fitted to non-finite outputs)"
+        ) from e
     finally:
         if own_bar:
             bar.close()
-
-
-# --------------------------------------------------------------------------------------
-# leave-one-out errors
-# --------------------------------------------------------------------------------------
-def _loo_nested(Q, R, y):
-    """Corrected LOO errors of the OLS fits on the first k = 1..s columns, all at once.
-
-    With :math:`X = QR` (economic), the fit on the first k columns uses :math:`Q_k`, so the
-    hat diagonals and residuals of all nested fits are cumulative sums:
-    :math:`h^{(k)}_i = \\sum_{j<k} Q_{ij}^2`, :math:`r^{(k)} = y - \\sum_{j<k} Q_j (Q_j^T y)`.
-    The LOO residual is :math:`r_i / (1 - h_i)` (no refits), normalised by the sample
-    variance, and multiplied by Chapelle's correction (Blatman & Sudret 2011)
-
-    .. math:: T(k, n) = \\frac{n}{n - k}\\Bigl(1 + \\operatorname{tr}(C^{-1})/n\\Bigr),
-              \\qquad C = X_k^T X_k / n,\\quad \\operatorname{tr}(C^{-1})/n = \\|R_k^{-1}\\|_F^2.
-
-    Returns
-    -------
-    loo, corrected : (s,) ndarray
-    """
-    n, s = Q.shape
-    z = Q.T @ y
-    fitted = np.cumsum(Q * z[None, :], axis=1)
-    h = np.cumsum(Q**2, axis=1)
-    resid = y[:, None] - fitted
-    one_h = 1.0 - h
-    with np.errstate(divide="ignore", invalid="ignore"):
-        e = np.where(one_h > 1e-10, resid / one_h, np.inf)
-    var = np.var(y) if np.var(y) > 0 else 1.0
-    loo = np.mean(e**2, axis=0) / var
-    Rinv = sla.solve_triangular(R, np.eye(s))
-    trace = np.cumsum(np.sum(np.triu(Rinv) ** 2, axis=0))
-    k = np.arange(1, s + 1)
-    with np.errstate(divide="ignore"):
-        T = np.where(k < n, n / np.maximum(n - k, 1) * (1.0 + trace), np.inf)
-    return loo, loo * T
 
 
 # --------------------------------------------------------------------------------------
@@ -263,11 +245,12 @@ def _fit_quadrature(model, inputs, order, n_points, index_set, ev):
     dim = inputs.dim
     order = check_int("order", 3 if order is None else order, minimum=0)
     n_points = order + 1 if n_points is None else check_int("n_points", n_points, minimum=1)
-    basis = ChaosBasis(order, dim, index_set=index_set or "tensor")
-    nodes, w = tensor_gauss_legendre(n_points, dim)
+    basis = ChaosBasis(order, dim, index_set=index_set or "tensor", germ=inputs.germs)
+    nodes, w = basis.quadrature(n_points)
     y = ev(inputs.from_germ(nodes), "Gauss")
-    pce = PolynomialChaosExpansion(basis, _project(basis, nodes, w, y), inputs)
-    pce.diagnostics.update(n_points=n_points, rule="tensor Gauss-Legendre")
+    pce = PolynomialChaosExpansion(basis, project(basis, nodes, w, y), inputs)
+    rule = "tensor Gauss-Legendre" if basis.is_legendre else "tensor Gauss (germ rules)"
+    pce.diagnostics.update(n_points=n_points, rule=rule)
     return pce, len(nodes)
 
 
@@ -275,17 +258,17 @@ def _fit_smolyak(model, inputs, order, rule, ev):
     dim = inputs.dim
     level = check_int("order", 3 if order is None else order, minimum=0)
     rule = check_choice("rule", rule, RULES)
-    nodes, parts = smolyak_rule(level, dim, rule)
+    nodes, parts = smolyak_rule(level, dim, rule, inputs.germs)
     y = ev(inputs.from_germ(nodes), "sparse-grid")
     out_shape = y.shape[1:]
     # the union of the tensor sets, inside the smallest total-degree basis holding it
     max_total = max(sum(deg) for _, _, _, _, deg in parts)
-    basis = ChaosBasis(max_total, dim, index_set="total")
+    basis = ChaosBasis(max_total, dim, index_set="total", germ=inputs.germs)
     lookup = {tuple(a): k for k, a in enumerate(basis.indices.tolist())}
     c = np.zeros((basis.size, int(np.prod(out_shape, dtype=int))))
     yf = y.reshape(len(nodes), -1)
     for coef, _, idx, w, deg in parts:
-        tb = ChaosBasis(max(deg), dim, index_set="tensor")
+        tb = ChaosBasis(max(deg), dim, index_set="tensor", germ=inputs.germs)
         keep = np.all(tb.indices <= np.array(deg), axis=1)
         Psi = tb.evaluate(nodes[idx])[:, keep]
         ck = (Psi * w[:, None]).T @ yf[idx]
@@ -313,7 +296,7 @@ def _regression_data(model, inputs, n_samples, samples, evaluations, design, see
         name = "samples"
     else:
         n = 2 * P if n_samples is None else check_int("n_samples", n_samples, minimum=1)
-        omega = sample_design(n, dim, design, seed)
+        omega = _design_to_germ(sample_design(n, dim, design, seed), inputs.germs)
         x = inputs.from_germ(omega)
         name = "n_samples"
     if evaluations is not None:
@@ -331,7 +314,7 @@ def _regression_data(model, inputs, n_samples, samples, evaluations, design, see
 def _fit_lstsq(model, inputs, order, index_set, data, ev):
     dim = inputs.dim
     order = check_int("order", 3 if order is None else order, minimum=0)
-    basis = ChaosBasis(order, dim, index_set=index_set or "total")
+    basis = ChaosBasis(order, dim, index_set=index_set or "total", germ=inputs.germs)
     P = basis.size
     omega, x, y, name = data(P)
     n = len(omega)
@@ -369,118 +352,6 @@ def _fit_lstsq(model, inputs, order, index_set, data, ev):
     return pce, n
 
 
-def _path_order(X, y, max_steps, solver):
-    """Order in which the columns of ``X`` enter a LARS or OMP path (nested active sets)."""
-    from sklearn.exceptions import ConvergenceWarning
-    from sklearn.linear_model import lars_path, orthogonal_mp
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        warnings.simplefilter("ignore", RuntimeWarning)
-        if solver == "lars":
-            _, active, _ = lars_path(X, y, method="lar", max_iter=max_steps, return_path=False)
-            return list(active)[:max_steps]
-        path = orthogonal_mp(X, y, n_nonzero_coefs=max_steps, return_path=True)
-    path = path.reshape(X.shape[1], -1)
-    # OMP only adds: the first nonzero step of each column gives its entry order
-    nz = path != 0
-    first = np.where(nz.any(axis=1), np.argmax(nz, axis=1), path.shape[1])
-    entered = np.flatnonzero(first < path.shape[1])
-    return entered[np.argsort(first[entered], kind="stable")].tolist()
-
-
-def _sparse_select(Psi, y, candidates, n, solver):
-    """Hybrid LARS/OMP on the candidate columns: (columns, coefficients, corrected LOO).
-
-    The path is computed on centred, unit-norm candidate columns (the constant term is
-    always kept); every nested active set along it is then refitted by OLS, and the one
-    with the smallest corrected leave-one-out error wins (Blatman & Sudret 2011).
-    """
-    X = Psi[:, candidates]
-    Xc = X - X.mean(axis=0)
-    scale = np.linalg.norm(Xc, axis=0)
-    scale[scale == 0] = 1.0
-    # beyond n / 2 terms the LOO correction factor exceeds 2: such fits never win
-    max_steps = min(len(candidates), max(n // 2, 2))
-    active = _path_order(Xc / scale, y - y.mean(), max_steps, solver)
-    cols = [0] + [int(candidates[j]) for j in active]
-    Q, R = sla.qr(Psi[:, cols], mode="economic")
-    d = np.abs(np.diag(R))
-    # stop at the first column that is numerically dependent on the earlier ones
-    bad = np.flatnonzero(d < 1e-10 * d[0])
-    s = int(bad[0]) if bad.size else len(cols)
-    Q, R, cols = Q[:, :s], R[:s, :s], cols[:s]
-    _, corrected = _loo_nested(Q, R, y)
-    k = int(np.argmin(corrected)) + 1
-    coef = sla.solve_triangular(R[:k, :k], Q[:, :k].T @ y)
-    return cols[:k], coef, float(corrected[k - 1])
-
-
-def _fit_sparse(model, inputs, order, index_set, data, ev, q_norm, early_stop, solver):
-    dim = inputs.dim
-    if index_set not in (None, "total"):
-        raise ValueError(
-            f"`index_set` must be 'total' for method={solver!r} (candidate sets are graded)"
-        )
-    omega, x, y, name = data(None)
-    n = len(omega)
-    if n < 4:
-        raise ValueError(f"too few regression samples: `{name}` gives {n} points; pass at least 4")
-    if order is None:
-        # candidate degrees while the candidate set stays below _CANDIDATES_PER_RUN * n
-        order = 1
-        while math.comb(order + 1 + dim, dim) <= _CANDIDATES_PER_RUN * n and order < _MAX_DEGREE:
-            order += 1
-    order = check_int("order", order, minimum=1)
-    if y is None:
-        y = ev(x, "regression")
-    yf = y.reshape(n, -1)
-    basis = ChaosBasis(order, dim)
-    Psi = basis.evaluate(omega)
-    alpha = np.asarray(basis.indices, dtype=float)
-    qn = (np.sum(alpha**q_norm, axis=1)) ** (1.0 / q_norm)
-    coeffs = np.zeros((basis.size, yf.shape[1]))
-    chosen_deg, errors, n_terms = [], [], []
-    for j in range(yf.shape[1]):
-        if np.all(yf[:, j] == yf[0, j]):
-            # a constant output component: the mean term alone, exactly
-            coeffs[0, j] = yf[0, j]
-            chosen_deg.append(0)
-            errors.append(0.0)
-            n_terms.append(1)
-            continue
-        best = None
-        worse = 0
-        for p in range(1, order + 1):
-            candidates = np.flatnonzero((qn <= p + 1e-12) & (qn > 0))
-            cols, coef, err = _sparse_select(Psi, yf[:, j], candidates, n, solver)
-            if best is None or err < best[2]:
-                best = (cols, coef, err, p)
-                worse = 0
-            else:
-                worse += 1
-                if worse >= early_stop:
-                    break
-        cols, coef, err, p = best
-        coeffs[cols, j] = coef
-        chosen_deg.append(p)
-        errors.append(err)
-        n_terms.append(len(cols))
-    top = max(max(chosen_deg), 1)
-    basis_out = ChaosBasis(top, dim)
-    c = coeffs[: basis_out.size].reshape((basis_out.size, *y.shape[1:]))
-    pce = PolynomialChaosExpansion(basis_out, c, inputs)
-    shape = y.shape[1:]
-    pce.diagnostics.update(
-        design=None if name == "samples" else data.design,
-        degree=np.array(chosen_deg).reshape(shape),
-        n_terms=np.array(n_terms).reshape(shape),
-        corrected_loo_error=np.array(errors).reshape(shape),
-        q_norm=q_norm,
-    )
-    return pce, n
-
-
 # --------------------------------------------------------------------------------------
 # public entry point
 # --------------------------------------------------------------------------------------
@@ -499,6 +370,8 @@ def fit_pce(
     rule="gauss",
     q_norm=1.0,
     early_stop=2,
+    compress=None,
+    compress_tol=1e-6,
     executor=None,
     workers=1,
     seed=None,
@@ -514,8 +387,13 @@ def fit_pce(
         processes (a module-level function or ``functools.partial`` of one). May be
         ``None`` when ``evaluations`` are given.
     inputs : UniformInputs, (dim, 2) bounds or chaospy distribution
-        Independent uniform inputs :math:`x_k \\sim \\mathcal U(a_k, b_k)`; a chaospy
-        joint distribution must be made of ``chaospy.Uniform`` s.
+        Independent uniform inputs :math:`x_k \\sim \\mathcal U(a_k, b_k)` as bounds;
+        any continuous inputs as an :class:`~ecfm_uq.chaos.Inputs` (marginals and an
+        optional Gaussian-copula correlation), a list of scipy.stats frozen distributions,
+        a chaospy distribution (``J``, ``Iid``, ``MvNormal``) or a
+        ``scipy.stats.multivariate_normal``. The design is drawn (and the quadrature rule
+        built) in the germ variables: each input's Askey germ, or standard normals for
+        transformed and dependent inputs.
     method : {"lars", "omp", "lstsq", "quadrature", "smolyak"}
         See the module docstring. Default ``"lars"``.
     order : int, optional
@@ -545,6 +423,16 @@ def fit_pce(
         (1 = total degree; smaller keeps fewer interactions).
     early_stop : int
         Sparse methods: stop raising the degree after this many degrees without improvement.
+    compress : bool, optional
+        Sparse methods on a field output: select on the leading principal components of
+        the evaluations instead of on every component (PCA-PCE, Blatman & Sudret 2013),
+        so a 10 000-value field costs about what a scalar does. Default: for outputs of
+        more than 64 components. ``diagnostics`` then holds ``n_components``,
+        ``compression_error`` (per output component, its discarded variance over its
+        variance) beside ``corrected_loo_error`` (per component, the scores' errors
+        mapped onto it plus the compression's).
+    compress_tol : float
+        Largest share of any component's variance the compression may discard.
     executor : object with ``map``, optional
         As in :func:`ecfm_uq.mc.monte_carlo`: a ``ThreadPoolExecutor``,
         ``ProcessPoolExecutor`` or ``dask.distributed.Client``.
@@ -570,7 +458,7 @@ def fit_pce(
         ``n_samples`` or ``samples``), a model output that is NaN or inf (naming the
         point), outputs of different shapes, ``evaluations`` not matching ``samples``.
     TypeError
-        ``model`` not callable; a non-uniform chaospy distribution.
+        ``model`` not callable; a discrete input distribution.
 
     Examples
     --------
@@ -625,8 +513,22 @@ def fit_pce(
         if isinstance(q_norm, bool) or not 0 < float(q_norm) <= 1:
             raise ValueError(f"`q_norm` must lie in (0, 1], got {q_norm!r}")
         early_stop = check_int("early_stop", early_stop, minimum=1)
+        if compress is not None and not isinstance(compress, bool | np.bool_):
+            raise TypeError(f"`compress` must be None, True or False, got {compress!r}")
+        if isinstance(compress_tol, bool) or not 0 <= float(compress_tol) < 1:
+            raise ValueError(f"`compress_tol` must lie in [0, 1), got {compress_tol!r}")
         pce, n_eval = _fit_sparse(
-            model, inputs, order, index_set, data, ev, float(q_norm), early_stop, method
+            model,
+            inputs,
+            order,
+            index_set,
+            data,
+            ev,
+            float(q_norm),
+            early_stop,
+            method,
+            compress,
+            float(compress_tol),
         )
     pce.diagnostics.update(
         method=method,

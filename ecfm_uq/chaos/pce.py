@@ -21,39 +21,14 @@ import scipy.sparse as sp
 
 from .._validation import as_finite_array, check_choice, check_int
 from .basis import ChaosBasis
-from .inputs import UniformInputs
+from .inputs import UniformInputs, as_inputs, draw_germs
+from .projection import project
 
-__all__ = ["PolynomialChaosExpansion", "as_inputs"]
+__all__ = ["PolynomialChaosExpansion"]
 
 # Rows of the (n, P) basis matrix formed at once when evaluating many points.
 _EVAL_BLOCK_ENTRIES = 4_000_000
 _KINDS = ("interaction", "closed", "total")
-
-
-def as_inputs(inputs, dim=None):
-    """``None``, a :class:`UniformInputs`, bounds, or a chaospy distribution → inputs.
-
-    Parameters
-    ----------
-    inputs : None, UniformInputs, (dim, 2) array_like or chaospy.Distribution
-    dim : int, optional
-        Required number of inputs.
-    """
-    if inputs is None or isinstance(inputs, UniformInputs):
-        out = inputs
-    elif type(inputs).__module__.startswith("chaospy"):
-        try:
-            out = UniformInputs.from_chaospy(inputs)
-        except TypeError as e:
-            raise TypeError(str(e).replace("`dist`", "`inputs`")) from e
-    else:
-        try:
-            out = UniformInputs(inputs)
-        except ValueError as e:
-            raise ValueError(f"`inputs`: {e}") from e
-    if out is not None and dim is not None and out.dim != dim:
-        raise ValueError(f"`inputs` has {out.dim} variables but the basis has dim={dim}")
-    return out
 
 
 class PolynomialChaosExpansion:
@@ -67,15 +42,17 @@ class PolynomialChaosExpansion:
         :math:`c_k`, one row per basis term; ``output_shape`` is ``()`` for a scalar
         output, ``(C,)`` for sensors, any shape for a field. (A Galerkin state
         :math:`\\Theta` is ``(N, P)``: pass ``Theta.T`` or use :meth:`from_galerkin`.)
-    inputs : UniformInputs, (dim, 2) bounds or chaospy distribution, optional
-        The model inputs :math:`x_k \\sim \\mathcal U(a_k, b_k)` that the germ stands for
-        (:math:`x = a + (b - a)\\omega`). ``None``: the inputs are the germ itself.
+    inputs : Inputs, UniformInputs, (dim, 2) bounds or distributions, optional
+        The model inputs that the germ stands for, e.g. :math:`x_k \\sim \\mathcal U(a_k,
+        b_k)` with :math:`x = a + (b - a)\\omega`, or any :class:`~ecfm_uq.chaos.Inputs`
+        whose germs are the basis's (``basis.germs == inputs.germs``). ``None``: the
+        inputs are the germ itself.
 
     Attributes
     ----------
     basis : ChaosBasis
     coefficients : (P, *output_shape) ndarray
-    inputs : UniformInputs or None
+    inputs : Inputs, UniformInputs or None
     output_shape : tuple
     diagnostics : dict
         Set by :func:`~ecfm_uq.chaos.fit_pce` (method, evaluations, errors); empty else.
@@ -127,6 +104,11 @@ class PolynomialChaosExpansion:
             )
         self.coefficients = c
         self.inputs = as_inputs(inputs, basis.dim)
+        if self.inputs is not None and tuple(self.inputs.germs) != tuple(basis.germs):
+            raise ValueError(
+                f"`inputs` are expanded on the germs {list(self.inputs.germs)} but the basis "
+                f"has {list(basis.germs)}; build the basis with germ=inputs.germs"
+            )
         self.diagnostics = {}
 
     # -- construction ------------------------------------------------------------------
@@ -205,13 +187,14 @@ class PolynomialChaosExpansion:
             )
         degree = int(poly.exponents.sum(axis=1).max()) if poly.exponents.size else 0
         order = degree if order is None else check_int("order", order, minimum=0)
-        basis = ChaosBasis(order, dim, index_set=index_set)
+        germ = None if inputs is None else inputs.germs
+        basis = ChaosBasis(order, dim, index_set=index_set, germ=germ)
         nodes, w = basis.quadrature(max(order, degree) + 1)
         x = nodes if inputs is None else inputs.from_germ(nodes)
         vals = poly(**{n: x[:, int(n[1:])] for n in names})
         vals = np.broadcast_to(np.asarray(vals, dtype=float), (*poly.shape, len(w)))
         y = np.moveaxis(vals, -1, 0)
-        return cls(basis, _project(basis, nodes, w, y), inputs)
+        return cls(basis, project(basis, nodes, w, y), inputs)
 
     # -- shapes ------------------------------------------------------------------------
     @property
@@ -320,7 +303,57 @@ class PolynomialChaosExpansion:
 
     @property
     def _support(self):
-        return np.asarray(self.basis.indices) > 0
+        if self.inputs is not None and self.inputs.dependent:
+            raise ValueError(
+                "Sobol indices are not defined for dependent `inputs` (a Gaussian copula): "
+                "the variance of y has no unique split among correlated inputs, and the "
+                "indices of the chaos variables are those of independent normal scores "
+                "(the inputs decorrelated in one order), not of the inputs. Mean, variance, "
+                "quantiles and densities are exact; for sensitivities fit with independent "
+                "inputs or use sobol_germ()"
+            )
+        support = np.asarray(self.basis.indices) > 0
+        self._check_finite_variance(support)
+        return support
+
+    def _check_finite_variance(self, support):
+        """Refuse indices when the output depends on an input without finite variance."""
+        if self.inputs is None or isinstance(self.inputs, UniformInputs):
+            return
+        contrib = self._contributions()
+        # a variable carrying less than 1e-12 of every component's variance is round-off
+        share = contrib / np.maximum(contrib.sum(axis=0), np.finfo(float).tiny)
+        used = support[np.any(share > 1e-12, axis=1)].any(axis=0)
+        for k, m in enumerate(self.inputs.marginals):
+            if used[k] and not m.finite_variance:
+                raise ValueError(
+                    f"input {self.inputs.names[k]!r} ({m!r}) has no finite variance, so the "
+                    "output's variance may not exist and its Sobol indices with it; the "
+                    "expansion only has the variance of its truncated polynomial. If the "
+                    f"model is bounded in {self.inputs.names[k]!r}, read the indices of the "
+                    "germ: PolynomialChaosExpansion(pce.basis, pce.coefficients).first_order()"
+                )
+
+    def sobol_germ(self, kind="first", zero_variance="raise"):
+        """First-order or total indices of the chaos (germ) variables, shape (dim, ...).
+
+        For independent inputs these are :meth:`first_order` and :meth:`total`. For
+        dependent inputs they are the indices of the independent standard normals
+        :math:`\\xi = L^{-1}z` behind the Gaussian copula, variable k being the part of
+        normal score :math:`z_k` not explained by :math:`z_0..z_{k-1}` (Cholesky order):
+        the "full and independent" indices of Mara & Tarantola (2012) for one ordering,
+        not Sobol indices of the inputs.
+
+        Parameters
+        ----------
+        kind : {"first", "total"}
+        zero_variance : "raise" or float
+        """
+        kind = check_choice("kind", kind, ("first", "total"))
+        s = np.asarray(self.basis.indices) > 0
+        if kind == "first":
+            s = s & (s.sum(axis=1) == 1)[:, None]
+        return self._normalize(s.T.astype(float) @ self._contributions(), zero_variance)
 
     def first_order(self, zero_variance="raise"):
         """First-order Sobol indices :math:`S_i`, shape ``(dim, *output_shape)``.
@@ -471,7 +504,7 @@ class PolynomialChaosExpansion:
         x : (n, dim) ndarray, only with ``return_inputs``
         """
         n = check_int("n", n, minimum=1)
-        omega = np.random.default_rng(seed).random((n, self.dim))
+        omega = draw_germs(self.basis.germs, n, seed)
         y = self.evaluate(omega)
         if not return_inputs:
             return y
@@ -538,7 +571,10 @@ class PolynomialChaosExpansion:
 
         The variables ``q0, ..., q{d-1}`` are the inputs on their own ranges (the germ
         when ``inputs`` is ``None``), so ``chaospy.E(poly, inputs.to_chaospy())`` and
-        ``chaospy.Sens_m`` work on it, and ``poly(*x.T)`` evaluates it.
+        ``chaospy.Sens_m`` work on it, and ``poly(*x.T)`` evaluates it. Inputs must be
+        affine images of their germs (independent uniform, normal, gamma or beta); a
+        lognormal or other transformed input makes the expansion non-polynomial in it
+        (ValueError).
 
         Returns
         -------
@@ -551,13 +587,40 @@ class PolynomialChaosExpansion:
         """
         import numpoly
 
+        if self.inputs is not None and not self.inputs.affine:
+            raise ValueError(
+                "to_chaospy needs inputs that are affine images of their germs (uniform, "
+                f"normal, gamma, beta, independent); these are {self.inputs!r}, so the "
+                "expansion is not a polynomial in the inputs. Evaluate it with pce(x), or "
+                "export it in the germ variables: PolynomialChaosExpansion(pce.basis, "
+                "pce.coefficients).to_chaospy()"
+            )
         q = numpoly.variable(self.dim)
         if self.dim == 1:
             q = numpoly.polynomial([q])
         p = self.basis.order
         univariate = []
         for d in range(self.dim):
-            a, b = (0.0, 1.0) if self.inputs is None else self.inputs.bounds[d]
+            germ = self.basis.germs[d]
+            if germ.family != "legendre":
+                m_d = None if self.inputs is None else self.inputs.marginals[d]
+                g = q[d] if m_d is None else (q[d] - m_d.loc) / m_d.scale
+                ra, rb = germ.recurrence(p + 1)
+                sb = np.sqrt(rb)
+                P = [numpoly.polynomial(1.0)]
+                prev = numpoly.polynomial(0.0)
+                for m in range(p):
+                    P.append(((g - ra[m]) * P[m] - sb[m] * prev) / sb[m + 1])
+                    prev = P[m]
+                univariate.append(P)
+                continue
+            if self.inputs is None:
+                a, b = 0.0, 1.0
+            elif isinstance(self.inputs, UniformInputs):
+                a, b = self.inputs.bounds[d]
+            else:
+                m_d = self.inputs.marginals[d]
+                a, b = m_d.loc, m_d.loc + m_d.scale
             t = 2.0 * (q[d] - a) / (b - a) - 1.0
             P = [numpoly.polynomial(1.0), t]
             for m in range(1, p):
@@ -575,20 +638,3 @@ class PolynomialChaosExpansion:
         c = self._flat()
         poly = numpoly.sum(psi.reshape(-1, 1) * c, axis=0)
         return poly.reshape(self.output_shape)
-
-
-def _project(basis, nodes, weights, y):
-    """Discrete projection :math:`c_k = \\sum_q w_q y_q \\Psi_k(\\omega_q) / n_k`.
-
-    Parameters
-    ----------
-    nodes : (n, dim), weights : (n,), y : (n, *output_shape)
-
-    Returns
-    -------
-    (P, *output_shape) ndarray
-    """
-    Psi = basis.evaluate(nodes)
-    yf = y.reshape(len(weights), -1)
-    c = (Psi * weights[:, None]).T @ yf / np.asarray(basis.norms2)[:, None]
-    return c.reshape((basis.size, *y.shape[1:]))

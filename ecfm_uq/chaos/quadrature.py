@@ -13,7 +13,7 @@ from scipy.special import roots_legendre
 from .._validation import check_int
 from ..memory import check_allocation
 
-__all__ = ["gauss_legendre", "tensor_gauss_legendre"]
+__all__ = ["gauss_legendre", "tensor_gauss_legendre", "tensor_rule"]
 
 # A tensor rule larger than this is almost certainly a mistake (n_points ** dim nodes).
 _MAX_TENSOR_NODES = 20_000_000
@@ -89,5 +89,43 @@ def tensor_gauss_legendre(n, dim):
     nodes = np.stack([g.ravel() for g in grids], axis=1)
     weights = np.ones(1)
     for _ in range(dim):
+        weights = np.outer(weights, w).ravel()
+    return nodes, weights
+
+
+def tensor_rule(rules, n):
+    """Tensor product of 1-D rules, one per variable (e.g. ``Germ.gauss`` of each germ).
+
+    Parameters
+    ----------
+    rules : sequence of callable
+        ``rule(n) -> (nodes (n,), weights (n,))``, one per variable.
+    n : int
+        Nodes per variable.
+
+    Returns
+    -------
+    nodes : (n**dim, dim) ndarray
+        The last variable varies fastest.
+    weights : (n**dim,) ndarray
+        Products of the 1-D weights.
+    """
+    n = check_int("n_points", n, minimum=1)
+    dim = len(rules)
+    if n**dim > _MAX_TENSOR_NODES:
+        raise ValueError(
+            f"a tensor rule with `n_points`={n} in dim={dim} has {n**dim} nodes "
+            f"(limit {_MAX_TENSOR_NODES}); pass a smaller `n_points`"
+        )
+    check_allocation(
+        8.0 * (2 * dim + 1) * float(n) ** dim,
+        f"a tensor Gauss rule with {n}^{dim} nodes",
+        "pass a smaller `n_points` or use fewer variables",
+    )
+    parts = [rule(n) for rule in rules]
+    grids = np.meshgrid(*[x for x, _ in parts], indexing="ij")
+    nodes = np.stack([g.ravel() for g in grids], axis=1)
+    weights = np.ones(1)
+    for _, w in parts:
         weights = np.outer(weights, w).ravel()
     return nodes, weights

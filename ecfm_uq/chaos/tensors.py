@@ -16,18 +16,29 @@ of 1-D factors over the variables, :math:`T_{abc} = \\prod_d t_{\\alpha_d \\beta
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .._validation import as_finite_array, check_choice, check_int
 from ..memory import check_allocation
-from ._kernels import triple_1d, triple_dense, triple_sparse
+from ._kernels import (
+    triple_1d,
+    triple_cross,
+    triple_dense,
+    triple_dense_mixed,
+    triple_sparse,
+    triple_sparse_mixed,
+)
 from .basis import ChaosBasis
 
 __all__ = [
     "GaussNodes",
     "SparseTensor3",
     "common_eigenbasis",
+    "coupling_tensor",
     "expectation_tensor",
+    "lognormal_coefficients",
     "weighted_gram",
 ]
 
@@ -219,6 +230,11 @@ def expectation_tensor(basis, rank, *, sparse=False):
     :math:`|i - j| \\le k \\le i + j`; both the dense zeros and the sparse pattern
     follow from this rule.
 
+    Other germs (``basis.germs``) use their own exact 1-D tables
+    (:meth:`~ecfm_uq.chaos.Germ.triple`: the Hermite closed form, the Jacobi-matrix
+    linearisation for Laguerre and Jacobi); the sparse pattern keeps the triangle rule for
+    every germ and the parity rule for symmetric ones (Legendre, Hermite, Jacobi a = b).
+
     Examples
     --------
     >>> T = expectation_tensor(ChaosBasis(3), 3)
@@ -246,8 +262,10 @@ def expectation_tensor(basis, rank, *, sparse=False):
         )
         return np.diag(np.asarray(basis.norms2, dtype=float))
 
-    t = triple_product_1d(basis.order, basis.normalized)
     alpha = np.ascontiguousarray(basis.indices)
+    if not basis.is_legendre:
+        return _triple_mixed(basis, alpha, sparse)
+    t = triple_product_1d(basis.order, basis.normalized)
     if sparse:
         idx, val = triple_sparse(alpha, t)
         return SparseTensor3(idx, val, (P, P, P))
@@ -259,6 +277,115 @@ def expectation_tensor(basis, rank, *, sparse=False):
     return triple_dense(alpha, t)
 
 
+def _triple_mixed(basis, alpha, sparse):
+    """E[Psi_a Psi_b Psi_c] with one exact 1-D table per germ (Hermite, Laguerre, Jacobi)."""
+    P = basis.size
+    cache = {}
+    for g in basis.germs:
+        if g not in cache:
+            cache[g] = g.triple(basis.order)
+    tables = np.stack([cache[g] for g in basis.germs])
+    if sparse:
+        parity = np.array([g.symmetric for g in basis.germs])
+        idx, val = triple_sparse_mixed(alpha, tables, parity)
+        return SparseTensor3(idx, val, (P, P, P))
+    check_allocation(
+        8.0 * P**3,
+        f"the dense (P, P, P) tensor E[Psi_a Psi_b Psi_c] at P={P}",
+        "pass sparse=True for a SparseTensor3, or lower the chaos `order` or `dim`",
+    )
+    return triple_dense_mixed(alpha, tables)
+
+
+def coupling_tensor(coef_basis, basis):
+    """:math:`\\mathbb E[\\phi_a \\Psi_i \\Psi_j]`: a coefficient's chaos terms against the basis.
+
+    A random coefficient expanded on its own chaos, :math:`a(\\xi) = \\sum_a a_a
+    \\phi_a(\\xi)` (e.g. a lognormal field in Hermite chaos, which needs about twice the
+    order of the solution), enters the Galerkin system through
+    :math:`\\mathbb E[a\\,\\Psi\\Psi^T] = \\sum_a a_a\\, T[a]`; each slice ``T[a]`` is the
+    coupling ``G`` of one term :math:`K_a \\otimes G_a`.
+
+    Parameters
+    ----------
+    coef_basis : ChaosBasis
+        The coefficient's basis (same dim and germs as ``basis``, any order), Pa terms.
+    basis : ChaosBasis
+        The solution's basis, P terms.
+
+    Returns
+    -------
+    T : (Pa, P, P) ndarray
+        Exact (the germs' closed-form or Jacobi-matrix triple products), symmetric in the
+        last two indices.
+    """
+    coef_basis = _check_basis(coef_basis)
+    basis = _check_basis(basis)
+    if coef_basis.germs != basis.germs or not (coef_basis.normalized and basis.normalized):
+        raise ValueError(
+            "`coef_basis` and `basis` must share dim and germs and be orthonormal; got "
+            f"{coef_basis!r} and {basis!r}"
+        )
+    Pa, P = coef_basis.size, basis.size
+    check_allocation(
+        8.0 * Pa * P * P,
+        f"the (Pa, P, P) coupling tensor at Pa={Pa}, P={P}",
+        "lower the coefficient's or the solution's order",
+    )
+    p = max(coef_basis.order, basis.order)
+    cache = {}
+    for g in basis.germs:
+        if g not in cache:
+            cache[g] = g.triple(p)
+    tables = np.stack([cache[g] for g in basis.germs])
+    return triple_cross(
+        np.ascontiguousarray(coef_basis.indices), np.ascontiguousarray(basis.indices), tables
+    )
+
+
+def lognormal_coefficients(coef_basis, b, mean=0.0):
+    """Hermite chaos coefficients of :math:`\\exp(m + b\\cdot\\xi)`, exactly.
+
+    Parameters
+    ----------
+    coef_basis : ChaosBasis
+        With Hermite germs only (:math:`\\xi \\sim N(0, I)`), Pa terms.
+    b : (..., dim) array_like
+        Loadings, e.g. :math:`\\sqrt{\\lambda_k}\\,\\phi_k(x)` of a Karhunen-Loeve
+        expansion at points x (leading axes).
+    mean : float or (...) array_like
+        :math:`m`, e.g. the Gaussian field's mean at those points.
+
+    Returns
+    -------
+    (..., Pa) ndarray
+        :math:`a_\\alpha = e^{m + |b|^2/2} \\prod_k b_k^{\\alpha_k} / \\sqrt{\\alpha_k!}`.
+
+    Notes
+    -----
+    From the generating function :math:`e^{b\\xi - b^2/2} = \\sum_n b^n He_n(\\xi)/n!` and
+    :math:`\\psi_n = He_n/\\sqrt{n!}`; the truncation at total order p leaves out
+    :math:`e^{2m + |b|^2}\\sum_{|\\alpha| > p} \\prod_k b_k^{2\\alpha_k}/\\alpha_k!` of the
+    second moment.
+    """
+    coef_basis = _check_basis(coef_basis)
+    if any(g.family != "hermite" for g in coef_basis.germs) or not coef_basis.normalized:
+        raise ValueError(
+            f"`coef_basis` must be an orthonormal Hermite basis (germ='hermite'), got {coef_basis!r}"
+        )
+    b = as_finite_array("b", b)
+    if b.ndim == 0 or b.shape[-1] != coef_basis.dim:
+        raise ValueError(f"`b` must have shape (..., {coef_basis.dim}), got {b.shape}")
+    mean = as_finite_array("mean", mean)
+    alpha = np.asarray(coef_basis.indices)
+    log_fact = np.array([math.lgamma(k + 1.0) for k in range(coef_basis.order + 1)])
+    out = np.exp(mean + 0.5 * np.sum(b**2, axis=-1))[..., None] * np.ones(coef_basis.size)
+    for d in range(coef_basis.dim):
+        powers = b[..., d, None] ** alpha[:, d]  # 0 ** 0 = 1
+        out = out * powers * np.exp(-0.5 * log_fact[alpha[:, d]])
+    return out
+
+
 def weighted_gram(basis, g, n_points=None):
     """Germ-weighted Gram matrix :math:`\\mathbb{E}[g(\\omega)\\, \\Psi_k \\Psi_l]`.
 
@@ -268,8 +395,9 @@ def weighted_gram(basis, g, n_points=None):
         The chaos basis, with P terms.
     g : callable or (n,) array_like
         Either a function of the germ, called as ``g(omega)`` with ``omega`` of shape
-        (n,) for ``dim == 1`` and (n, dim) otherwise, returning n finite values; or the
-        values of g at the nodes of ``basis.quadrature(n_points)``, in that order.
+        (n, dim) for every ``dim`` (so ``lambda w: w[:, 0]`` is the first germ whatever
+        the dimension), returning n finite values (shape (n,), or (n, 1)); or the values
+        of g at the nodes of ``basis.quadrature(n_points)``, in that order.
     n_points : int, optional
         Gauss-Legendre nodes per variable. Default as in :meth:`ChaosBasis.quadrature`,
         exact for polynomial g of degree <= order + 2 per variable; raise it for
@@ -304,12 +432,14 @@ def weighted_gram(basis, g, n_points=None):
         "pass a smaller `n_points`, or lower the chaos `order` or `dim`",
     )
     if callable(g):
-        arg = nodes[:, 0] if basis.dim == 1 else nodes
+        arg = nodes
         out = g(arg.copy())
         try:
             vals = np.asarray(out, dtype=float)
         except (TypeError, ValueError) as e:
             raise TypeError(f"`g` must return real numbers, got {type(out).__name__}") from e
+        if vals.shape == (n, 1):
+            vals = vals[:, 0]  # e.g. ``lambda w: w`` for one germ
         if vals.shape != (n,):
             raise ValueError(
                 f"`g` must return an array of shape ({n},) for omega of shape {arg.shape}, "
@@ -392,7 +522,8 @@ class GaussNodes:
     Attributes
     ----------
     nodes, weights : (P,) ndarray
-        Gauss-Legendre nodes on [0, 1] and probability weights.
+        Gauss nodes of the germ (Gauss-Legendre on [0, 1] for the uniform germ) and
+        probability weights.
     Phi : (P, P) ndarray
         ``Phi[k, b]`` = :math:`\\Psi_b(\\omega_k)`; node values of a state ``Theta``
         (N, P) are ``Theta @ Phi.T``.
@@ -406,8 +537,6 @@ class GaussNodes:
     """
 
     def __init__(self, basis):
-        from .quadrature import gauss_legendre
-
         _check_basis(basis)
         if basis.dim != 1 or basis.size != basis.order + 1:
             raise ValueError(
@@ -415,7 +544,7 @@ class GaussNodes:
                 "node-wise form of a multi-germ basis has more nodes than terms"
             )
         P = basis.size
-        self.nodes, self.weights = gauss_legendre(P)
+        self.nodes, self.weights = basis.germs[0].gauss(P)
         self.Phi = basis.evaluate(self.nodes)
         dinv = 1.0 / np.asarray(basis.norms2, dtype=float)
         self.to_nodes = np.ascontiguousarray(dinv[:, None] * self.Phi.T)

@@ -16,9 +16,22 @@ import numpy as np
 import scipy.optimize as sopt
 
 from ..errors import ConvergenceError
+from .convergence import (
+    OFFSET_TOL,
+    decide_status,
+    least_squares_optimality,
+    polish_least_squares,
+)
 from .status import FitStatus
 
-__all__ = ["MINIMIZE_METHODS", "Outcome", "check_minimize_method", "minimize_scaled"]
+__all__ = [
+    "MINIMIZE_METHODS",
+    "Outcome",
+    "check_minimize_method",
+    "least_squares_scaled",
+    "minimize_scaled",
+    "verify_least_squares",
+]
 
 #: gradient methods of scipy.optimize.minimize the reduced fits accept by name
 MINIMIZE_METHODS = ("BFGS", "CG", "L-BFGS-B", "TNC", "SLSQP", "Newton-CG", "trust-constr")
@@ -48,6 +61,7 @@ class Outcome:
     loss_history: np.ndarray
     failures: list = field(default_factory=list)
     final_error: Exception | None = None
+    optimality: float | None = None
 
     @property
     def success(self):
@@ -153,3 +167,154 @@ def minimize_scaled(evaluate, eps0, method, bounds, gtol, maxiter, options):
     else:
         status = FitStatus.STALLED
     return Outcome(x, z, g, payload, status, msg, nit, counts["nfev"], *path, failures)
+
+
+def verify_least_squares(out, residual, bounds, exhausted, *, polish, tol=OFFSET_TOL):
+    """Decide ``out``'s status from the least-squares optimality conditions
+    (:mod:`~ecfm_uq.inverse.convergence`), whatever the optimizer said.
+
+    ``residual(eps) -> (r, J, payload)``. When the conditions do not hold and ``polish``
+    is set and the optimizer stopped on its own (not ``exhausted`` its budget), a few
+    Levenberg-Marquardt steps are taken from ``out.x`` first. The returned
+    :class:`Outcome` carries the measured optimality; its message keeps the optimizer's
+    and adds the test's sentence when the two disagree (or after a polish).
+    """
+    if out.payload is None:  # the model cannot be solved at the final point
+        return out
+    try:
+        r, J, payload = residual(out.x)
+    except ConvergenceError as e:
+        out.status, out.message = FitStatus.MODEL_FAILURE, f"{out.message} ({e})"
+        return out
+    out.nfev += 1
+    opt = least_squares_optimality(r, J, out.x, bounds=bounds, tol=tol)
+    msg = out.message
+    if not opt.converged and polish and not exhausted:
+        x, (r, J, payload), opt2, n = polish_least_squares(residual, out.x, bounds=bounds, tol=tol)
+        out.nfev += n
+        if float(r @ r) <= 2 * out.loss or opt2.converged:
+            out.x, out.loss, out.payload, opt = np.asarray(x), 0.5 * float(r @ r), payload, opt2
+            msg += f"; polished by Levenberg-Marquardt steps ({n} evaluations)"
+    said = out.status is FitStatus.CONVERGED
+    out.status = decide_status(opt, exhausted)
+    if opt.converged != said or not opt.converged or "polished" in msg:
+        msg += f" [{'converged' if opt.converged else 'NOT converged'}: {opt.message}]"
+    out.message, out.optimality = msg, opt.value
+    return out
+
+
+def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options):
+    """``scipy.optimize.least_squares`` (trust-region reflective, ``x_scale="jac"``, the
+    exact Jacobian) on the residuals divided by their norm at ``eps0``.
+
+    Parameters
+    ----------
+    residual : callable
+        ``eps -> (r (n,), J (n, p), payload)``; may raise ConvergenceError (the trial
+        point is rejected: the trust region shrinks).
+    eps0 : (p,) ndarray
+    bounds : list of (lo, hi) or None
+    tol : float or None
+        Relative-offset tolerance of the convergence test (default
+        :data:`~ecfm_uq.inverse.convergence.OFFSET_TOL`).
+    maxiter : int
+        Residual evaluations allowed to ``least_squares`` (``max_nfev``).
+    options : dict
+        ``polish`` (default True: Levenberg-Marquardt steps when the test fails), and any
+        keyword of ``scipy.optimize.least_squares`` (``ftol``, ``xtol``, ``gtol``,
+        ``x_scale``, ``loss``...).
+
+    Returns
+    -------
+    Outcome
+        Status decided by :func:`verify_least_squares`.
+
+    Raises
+    ------
+    ConvergenceError
+        When the model cannot be solved at ``eps0``.
+    """
+    options = dict(options)
+    polish = bool(options.pop("polish", True))
+    if "maxiter" in options:  # the v0.2 spelling of minimize's budget
+        maxiter = options.pop("maxiter")
+    tol = OFFSET_TOL if tol is None else tol
+    hist_eps, hist_loss, failures = [], [], []
+    cache = {}
+    counts = {"nfev": 0, "njev": 0}
+
+    def evaluate(x):
+        key = np.asarray(x, dtype=float).tobytes()
+        if key not in cache:
+            counts["nfev"] += 1
+            try:
+                cache.clear()
+                cache[key] = residual(np.array(x, dtype=float))
+            except ConvergenceError as e:
+                failures.append(str(e))
+                cache[key] = None
+        return cache[key]
+
+    first = evaluate(eps0)
+    if first is None:
+        raise ConvergenceError(f"the model cannot be solved at eps0={eps0}: {failures[0]}")
+    r0 = np.asarray(first[0], dtype=float)
+    scale = float(np.linalg.norm(r0)) or 1.0
+    hist_eps.append(np.array(eps0, dtype=float))
+    hist_loss.append(0.5 * float(r0 @ r0))
+
+    def fun(x):
+        ev = evaluate(x)
+        if ev is None:
+            return np.full(r0.size, np.inf)
+        z = 0.5 * float(ev[0] @ ev[0])
+        if not hist_loss or z < hist_loss[-1]:
+            hist_eps.append(np.array(x, dtype=float))
+            hist_loss.append(z)
+        return np.asarray(ev[0], dtype=float) / scale
+
+    def jac(x):
+        ev = evaluate(x)
+        counts["njev"] += 1
+        if ev is None:  # not reached: TRF asks for J only at accepted points
+            return np.zeros((r0.size, np.size(x)))
+        return np.asarray(ev[1], dtype=float).reshape(r0.size, -1) / scale
+
+    lb = -np.inf * np.ones(len(eps0))
+    ub = np.inf * np.ones(len(eps0))
+    if bounds is not None:
+        lb = np.array([-np.inf if b[0] is None else b[0] for b in bounds], dtype=float)
+        ub = np.array([np.inf if b[1] is None else b[1] for b in bounds], dtype=float)
+    kw = {"method": "trf", "x_scale": "jac", "ftol": 1e-15, "xtol": 1e-15, "gtol": 1e-15}
+    kw.update(options)
+    res = sopt.least_squares(fun, eps0, jac=jac, bounds=(lb, ub), max_nfev=maxiter, **kw)
+    x = np.asarray(res.x)
+    ev = evaluate(x)
+    nit = int(res.njev or 0)
+    msg = str(res.message)
+    if failures:
+        msg += f" ({len(failures)} inner solves failed; first: {failures[0]})"
+    if ev is None:
+        e = ConvergenceError(failures[-1])
+        return Outcome(x, np.inf, None, None, FitStatus.MODEL_FAILURE, msg, nit,
+                       counts["nfev"], np.array(hist_eps), np.array(hist_loss), failures, e)  # fmt: skip
+    r, J, payload = ev
+    out = Outcome(
+        x, 0.5 * float(r @ r), J.T @ r, payload,
+        FitStatus.CONVERGED if res.status > 0 else FitStatus.MAX_ITERATIONS, msg, nit,
+        counts["nfev"], np.array(hist_eps), np.array(hist_loss), failures,
+    )  # fmt: skip
+
+    def cached(e):
+        ev = evaluate(e)
+        if ev is None:
+            raise ConvergenceError(failures[-1])
+        return ev
+
+    out = verify_least_squares(out, cached, bounds, res.status == 0, polish=polish, tol=tol)
+    out.nfev = counts["nfev"]
+    if out.loss < hist_loss[-1]:
+        hist_eps.append(np.array(out.x))
+        hist_loss.append(out.loss)
+    out.eps_history, out.loss_history = np.array(hist_eps), np.array(hist_loss)
+    return out

@@ -36,15 +36,24 @@ which is also what the ECFM data constraint acts on.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from .._validation import as_dense_rows, as_finite_array, check_choice, check_int, check_positive
 from ..errors import ConvergenceError
 from ..system import march
-from .drivers import check_minimize_method, minimize_scaled
+from .convergence import least_squares_optimality
+from .drivers import (
+    check_minimize_method,
+    least_squares_scaled,
+    minimize_scaled,
+    verify_least_squares,
+)
 from .gradients import choose_gradient
 from .optimizers import adam
 from .result import InverseResult, Verdict
+from .status import FitStatus
 
 FORMULATIONS = ("standard", "ecfm")
 
@@ -256,6 +265,32 @@ class DynamicInverseProblem:
             return z, traj.adjoint_gradient(np.zeros(traj.Theta.shape), g_lam), traj
         return z, self.dt * np.einsum("tc,tcm->m", lam, traj.dlam[1:]), traj
 
+    def residual(self, eps, formulation="standard"):
+        """The residual vector of the trajectory objective and its sensitivity Jacobian.
+
+        :math:`z = \\tfrac12\\|r\\|^2` with :math:`r = \\sqrt{\\Delta t}\\,
+        (\\mathcal M\\theta_i - v_i)_{i=1..\\mathcal P}` (standard) or
+        :math:`\\sqrt{\\Delta t}\\,(\\lambda_i)_{i=1..\\mathcal P}` (ECFM), stacked;
+        :math:`J = \\partial r/\\partial\\epsilon` by forward sensitivities (one extra
+        solve per parameter and step with the factored step Jacobian).
+
+        Returns
+        -------
+        r : (n_steps C,) ndarray
+        J : (n_steps C, n_eps) ndarray
+        trajectory : Trajectory
+        """
+        formulation = check_choice("formulation", formulation, FORMULATIONS)
+        traj = self.solve(eps, formulation, sensitivities=True)
+        h = np.sqrt(self.dt)
+        n_eps = self.system.n_eps
+        if formulation == "ecfm":
+            return h * traj.lam[1:].ravel(), h * traj.dlam[1:].reshape(-1, n_eps), traj
+        e = self.predictions(traj)[1:] - self.V[1:]
+        dmean = np.einsum("tikm,k->tim", traj.dTheta[1:], self.system.E1)
+        de = np.einsum("cj,tjm->tcm", self.M_obs, dmean)
+        return h * e.ravel(), h * de.reshape(-1, n_eps), traj
+
     def objective(self, formulation):
         """The callable ``eps -> (z, grad)`` of one formulation (for optimizers)."""
         formulation = check_choice("formulation", formulation, FORMULATIONS)
@@ -305,8 +340,14 @@ class DynamicInverseProblem:
             options=options, uncertainty=uncertainty,
         )  # fmt: skip
 
-    def uncertainty(self, eps, formulation="ecfm", sigma=None):
+    def uncertainty(self, eps, formulation="ecfm", sigma=None, covariance="implicit"):
         """Delta-method uncertainty of an estimate of ``eps`` from the data ``V``.
+
+        ``covariance="implicit"`` (this method's default; the full Hessian, the sandwich
+        :math:`H^{-1}J^TJH^{-1}s^2` for the standard formulation) or ``"gauss-newton"``
+        (the curvature taken as :math:`J^TJ` with :math:`J` the stacked residual's
+        Jacobian, :meth:`residual`; :math:`s^2(J^TJ)^{-1}` for the standard formulation,
+        the default of :func:`~ecfm_uq.inverse.fit`).
 
         The estimate is defined by :math:`\\nabla_\\epsilon z(\\epsilon; V) = 0` (Eq.
         grad, or Eq. ecfm_grad); :func:`~ecfm_uq.inverse.uncertainty.implicit_covariance`
@@ -339,6 +380,10 @@ class DynamicInverseProblem:
                     raise ValueError("the residual is zero (noise-free data): pass `sigma`")
         except (ConvergenceError, ValueError) as e:
             return {"uncertainty_message": f"uncertainty not computed: {e}"}
+        if covariance not in ("implicit", "gauss-newton"):
+            raise ValueError(
+                f"`covariance` must be 'implicit' or 'gauss-newton', got {covariance!r}"
+            )
         other = copy.copy(self)  # the same problem with perturbed data
         other._last = dict(self._last)
 
@@ -346,28 +391,70 @@ class DynamicInverseProblem:
             other.V = np.vstack([self.V[:1], w.reshape(self.n_steps, -1)])
             return other.objective(formulation)(e)[1]
 
-        return estimate_uncertainty(grad, eps, self.V[1:].ravel(), s2, model, dof=dof)
+        data = self.V[1:].ravel()
+        if covariance == "implicit":
+            return estimate_uncertainty(grad, eps, data, s2, model, dof=dof)
+        from ..errors import NonIdentifiableError
+        from .uncertainty import least_squares_jacobian
+
+        saved = dict(self._last)
+        try:
+            _, J, _ = self.residual(eps, formulation)
+        except ConvergenceError as e:
+            return {"uncertainty_message": f"uncertainty not computed: {e}"}
+        finally:
+            self._last = saved
+        if formulation == "standard":
+            # r = sqrt(dt) (M theta - V): d eps_hat / dV = sqrt(dt) J^+
+            try:
+                D = np.sqrt(self.dt) * least_squares_jacobian(J)
+            except NonIdentifiableError as e:
+                return {"uncertainty_message": f"uncertainty not computed: {e}"}
+            return estimate_uncertainty(None, eps, data, s2, model, dof=dof, deps_dv=D)
+        return estimate_uncertainty(grad, eps, data, s2, model, dof=dof, hessian=J.T @ J)
 
 
-#: defaults of the dynamic fits: Adam's epochs (the paper's 250), and the relative gradient
-#: tolerance and iterations of the quasi-Newton methods
+#: defaults of the dynamic fits: Adam's epochs (the paper's 250), the relative gradient
+#: tolerance and iterations of the quasi-Newton methods, the residual evaluations of the
+#: least-squares method, and the largest n_eps for which the least-squares method's
+#: forward sensitivities count as cheap (beyond: L-BFGS-B with the adjoint gradient)
 _ADAM_EPOCHS = 250
 _DEFAULT_TOL = 1e-10
 _DEFAULT_MAXITER = 500
+_DEFAULT_MAX_NFEV = 500
+_LSQ_MAX_EPS = 16
 
 
 def fit_dynamic_problem(problem, eps0, s):
     """:func:`~ecfm_uq.inverse.fit` for a :class:`DynamicInverseProblem`.
 
-    ``method``: ``"adam"`` (the paper's optimizer; ``maxiter`` epochs, ``options`` ``lr``,
-    ``betas``, ``eps_hat``, ``callback``) or a gradient method of
-    ``scipy.optimize.minimize`` on the objective scaled by its value at ``eps0``
-    (``"auto"``: BFGS). The verdict tests the unforced model's trajectory residual (chi2
-    with ``sigma``, the noise-free rule without).
+    ``method``: ``"auto"`` (trust-region least squares on the stacked trajectory
+    residual with its forward-sensitivity Jacobian, :meth:`DynamicInverseProblem.residual`;
+    L-BFGS-B with the adjoint gradient when ``n_eps > 16``), ``"adam"`` (the paper's
+    optimizer; ``maxiter`` epochs, ``options`` ``lr``, ``betas``, ``eps_hat``,
+    ``callback``) or a gradient method of ``scipy.optimize.minimize`` on the objective
+    scaled by its value at ``eps0``. Whatever ran, the status is decided from the
+    least-squares optimality conditions at the returned point
+    (:mod:`~ecfm_uq.inverse.convergence`): Adam's fixed epochs are ``MAX_ITERATIONS``
+    unless the conditions hold there. The verdict tests the unforced model's trajectory
+    residual (chi2 with ``sigma``, the noise-free rule without).
     """
     formulation = check_choice("formulation", s.formulation, FORMULATIONS)
     eps0 = problem.system.check_eps(eps0)
-    method = "BFGS" if s.method == "auto" else s.method
+    n_eps = problem.system.n_eps
+    method = s.method
+    covariance = s.options.get("covariance", "gauss-newton")
+    if covariance not in ("gauss-newton", "sandwich"):
+        raise ValueError(
+            f"options['covariance'] must be 'gauss-newton' or 'sandwich', got {covariance!r}"
+        )
+    s = dataclasses.replace(s, options={k: w for k, w in s.options.items() if k != "covariance"})
+    if method == "auto":
+        method = "least-squares" if n_eps <= _LSQ_MAX_EPS else "L-BFGS-B"
+
+    def residual(eps):
+        return problem.residual(eps, formulation)
+
     if method == "adam":
         opts = s.take({"lr": 1e-2, "betas": (0.9, 0.999), "eps_hat": 1e-8, "callback": None})
         res = adam(
@@ -381,8 +468,19 @@ def fit_dynamic_problem(problem, eps0, s):
             callback=opts["callback"],
         )
         traj = None
+        if res.status is FitStatus.CONVERGED:  # completed its epochs: at an optimum?
+            _check_adam(problem, res, residual, s.bounds)
+    elif method in ("least-squares", "trf"):
+        out = least_squares_scaled(
+            residual, eps0, s.bounds, s.tol,
+            _DEFAULT_MAX_NFEV if s.maxiter is None else s.maxiter, s.options,
+        )  # fmt: skip
+        res = _result(out, formulation, "least-squares")
+        traj = out.payload
     else:
         check_minimize_method(method)
+        options = dict(s.options)
+        polish = options.pop("polish", False)
 
         def evaluate(eps):
             z, g, traj = _OBJECTIVE[formulation](problem, eps, gradient=True)
@@ -390,13 +488,13 @@ def fit_dynamic_problem(problem, eps0, s):
 
         out = minimize_scaled(
             evaluate, eps0, method, s.bounds, _DEFAULT_TOL if s.tol is None else s.tol,
-            _DEFAULT_MAXITER if s.maxiter is None else s.maxiter, s.options,
+            _DEFAULT_MAXITER if s.maxiter is None else s.maxiter, options,
         )  # fmt: skip
-        res = InverseResult(
-            eps=out.x, loss=out.loss, status=out.status, message=out.message, nit=out.nit,
-            nfev=out.nfev, njev=out.nfev, method=formulation, optimizer=method,
-            eps_history=out.eps_history, loss_history=out.loss_history,
-        )  # fmt: skip
+        if n_eps <= _LSQ_MAX_EPS:
+            out = verify_least_squares(
+                out, residual, s.bounds, out.status is FitStatus.MAX_ITERATIONS, polish=polish
+            )
+        res = _result(out, formulation, method)
         traj = out.payload
     if traj is None and method != "adam":  # stopped where the model cannot be marched
         res.verdict = Verdict(False, test="none", message=f"NOT consistent: {res.message}")
@@ -405,7 +503,8 @@ def fit_dynamic_problem(problem, eps0, s):
         traj = traj if traj is not None else problem.solve(res.eps, "ecfm")
         res.extra["lam"] = traj.lam
     if s.uncertainty and res.success:
-        for key, value in problem.uncertainty(res.eps, formulation, s.sigma).items():
+        conv = "implicit" if covariance == "sandwich" else covariance
+        for key, value in problem.uncertainty(res.eps, formulation, s.sigma, conv).items():
             setattr(res, key, value)
     elif s.uncertainty:
         res.uncertainty_message = "uncertainty not computed: the fit did not succeed"
@@ -413,6 +512,35 @@ def fit_dynamic_problem(problem, eps0, s):
         res.uncertainty_message = "not computed (uncertainty=False)"
     res.verdict = _verdict(problem, res, s, traj if formulation == "standard" else None)
     return res
+
+
+def _result(out, formulation, optimizer):
+    return InverseResult(
+        eps=out.x, loss=out.loss, status=out.status, message=out.message, nit=out.nit,
+        nfev=out.nfev, njev=out.nfev, method=formulation, optimizer=optimizer,
+        eps_history=out.eps_history, loss_history=out.loss_history,
+        optimality=out.optimality,
+    )  # fmt: skip
+
+
+def _check_adam(problem, res, residual, bounds):
+    """Adam ran its epochs: CONVERGED only if the least-squares optimality conditions
+    hold at its last iterate, else MAX_ITERATIONS (its epochs are a budget, not a test)."""
+    saved = dict(problem._last)  # the check must not move the warm starts
+    try:
+        r, J, _ = residual(res.eps)
+    except ConvergenceError as e:
+        res.status = FitStatus.MODEL_FAILURE
+        res.message += f" [the model cannot be marched at the last iterate: {e}]"
+        return
+    finally:
+        problem._last = saved
+    res.nfev += 1
+    opt = least_squares_optimality(r, J, res.eps, bounds=bounds)
+    res.optimality = opt.value
+    if not opt.converged:
+        res.status = FitStatus.MAX_ITERATIONS
+        res.message += f" [NOT converged: {opt.message}]"
 
 
 _OBJECTIVE = {

@@ -4,18 +4,25 @@ In the manner of :func:`scipy.optimize.minimize`: one call shape whatever the pr
 (steady, dynamic, replicated), the formulation (standard, ECFM, noisy, pseudo-likelihood)
 and the optimizer, dispatching to the module that owns each problem kind; one tolerance
 vocabulary (``tol``, ``maxiter``); method-specific settings in one ``options`` dict,
-checked by name; one result class (:class:`~ecfm_uq.inverse.InverseResult`).
+checked by name; one result class (:class:`~ecfm_uq.inverse.InverseResult`), whose
+``status`` is decided from the optimality conditions at the returned point
+(:mod:`.convergence`), whatever the optimizer reported.
 
 =====================  ===============================  ==============================
 problem                formulation                      method (``"auto"`` first)
 =====================  ===============================  ==============================
-SteadyProblem          ``"standard"``, ``"ecfm"``       ``"BFGS"``, any gradient method
-                                                        of ``scipy.optimize.minimize``,
+SteadyProblem          ``"standard"``, ``"ecfm"``       ``"least-squares"`` (trust-region
+                                                        on the residual and its exact
+                                                        Jacobian), any gradient method
+                                                        of ``scipy.optimize.minimize``
+                                                        (``"BFGS"``, ...),
                                                         ``"all-at-once"`` (SLSQP on
                                                         (theta, eps), standard only)
 SteadyProblem          ``"noisy-ecfm"`` (sigma)         ``"all-at-once"``
-DynamicInverseProblem  ``"standard"``, ``"ecfm"``       ``"BFGS"``, ``"adam"``, any
-                                                        gradient method of ``minimize``
+DynamicInverseProblem  ``"standard"``, ``"ecfm"``       ``"least-squares"`` (L-BFGS-B
+                                                        beyond 16 parameters),
+                                                        ``"adam"``, any gradient method
+                                                        of ``minimize``
 ReplicatedProblem      ``"standard"``,                  ``"trust-region"``;
                        ``"inner-outer"`` (``"ecfm"``),  ``"SLSQP"`` for the penalty
                        ``"penalty"``                    form
@@ -123,12 +130,16 @@ def fit(
     bounds : sequence of (lo, hi), optional
         Bounds on :math:`\\epsilon` (``None`` for an open side).
     tol : float, optional
-        Optimality tolerance (the method's default when omitted).
+        Optimality tolerance: the relative offset of the least-squares methods
+        (:data:`~ecfm_uq.inverse.convergence.OFFSET_TOL` when omitted), the relative
+        gradient tolerance of the ``minimize`` methods.
     maxiter : int, optional
-        Iterations (epochs for Adam).
+        Iterations (epochs for Adam, residual evaluations for ``"least-squares"``).
     options : dict, optional
         Method- and formulation-specific settings by name (e.g. ``{"lr": 1e-2}`` for
-        Adam, ``{"penalty": 100}`` for the penalty form); an unknown name is refused.
+        Adam, ``{"penalty": 100}`` for the penalty form, ``{"covariance": "sandwich"}``
+        and ``{"polish": False}`` for the steady least-squares fits); an unknown name is
+        refused.
     uncertainty : bool
         Attach the estimate's uncertainty (costs extra gradient evaluations).
     alpha : float

@@ -372,10 +372,10 @@ def fit_all_at_once(problem, eps0, s):
     elif s.formulation == "standard":
         # the all-at-once optimum is the reduced one: same optimality condition
         # grad z^INV(eps) = 0, hence the same covariance code path as the reduced fit
-        from .steady import _uncertainty, standard_objective
+        from .steady import _uncertainty
 
         for k, val in _uncertainty(
-            system, inverse.M_obs, inverse.v, res.eps, standard_objective,
+            system, inverse.M_obs, inverse.v, res.eps, "standard",
             dict(problem.solve_options), s.sigma,
         ).items():  # fmt: skip
             setattr(res, k, val)

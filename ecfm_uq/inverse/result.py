@@ -49,10 +49,13 @@ class Uncertainty:
     level : float
         Coverage the intervals are built for (0.95).
     method : str
-        ``"implicit"`` (delta method by implicit differentiation of the optimality
-        condition: the full-Hessian sandwich for least squares), ``"gauss-newton"``
-        (:math:`s^2(J^TJ)^{-1}`), ``"replicates"`` (sandwich from replicated data) or
-        ``""`` when not computed.
+        ``"gauss-newton"`` (the default of the least-squares fits: the curvature of the
+        sum of squares taken as :math:`J^TJ`, :math:`s^2(J^TJ)^{-1}` for the standard
+        formulation, NIST's convention), ``"implicit"`` (delta method by implicit
+        differentiation of the optimality condition with its full Hessian: the sandwich
+        :math:`H^{-1}J^TJH^{-1}s^2` for least squares; ``options={"covariance":
+        "sandwich"}``), ``"replicates"`` (sandwich from replicated data) or ``""`` when
+        not computed.
     noise_model : str
         ``"known"`` (sigma given), ``"estimated"`` (from the residual), ``"replicates"``
         or ``"none"``.
@@ -85,6 +88,7 @@ _UNCERTAINTY_ALIASES = {
     "eps_ci95": "intervals",
     "noise_model": "noise_model",
     "eps_jacobian": "jacobian",
+    "covariance_method": "method",
 }
 
 
@@ -198,7 +202,8 @@ class InverseResult:
     Notes
     -----
     The v0.2 names ``eps_cov``, ``eps_stderr``, ``eps_ci95``, ``noise_model``,
-    ``eps_jacobian`` and ``uncertainty_message`` read and write :attr:`uncertainty`.
+    ``eps_jacobian`` and ``uncertainty_message`` (and ``covariance_method``, the
+    uncertainty's ``method``) read and write :attr:`uncertainty`.
     """
 
     def __init__(
@@ -226,6 +231,7 @@ class InverseResult:
         noise_model="none",
         uncertainty_message="",
         eps_jacobian=None,
+        covariance_method=None,
     ):
         self.eps = np.asarray(eps, dtype=float)
         self.loss = float(loss)
@@ -253,7 +259,7 @@ class InverseResult:
                 eps_ci95,
                 noise_model=noise_model,
                 jacobian=eps_jacobian,
-                method="implicit" if computed else "",
+                method=(covariance_method or "implicit") if computed else "",
             )
         self.uncertainty = uncertainty
         if verdict is None and "verdict" in self.extra:

@@ -20,9 +20,15 @@ import numpy as np
 from .._validation import as_finite_array, as_operator
 from ..errors import ConvergenceError
 from ..system import solve_steady
-from .drivers import check_minimize_method, minimize_scaled
+from .drivers import (
+    check_minimize_method,
+    least_squares_scaled,
+    minimize_scaled,
+    verify_least_squares,
+)
 from .gradients import choose_gradient
 from .result import InverseResult, Verdict
+from .status import FitStatus
 from .verdict import consistency_verdict
 
 
@@ -80,11 +86,55 @@ def ecfm_objective(system, M_obs, v, eps, gradient="auto", **solve_kw):
     return z, dlam.T @ sol.lam, sol
 
 
+def standard_residual(system, M_obs, v, eps, **solve_kw):
+    """The residual :math:`r = \\mathcal M\\,\\mathbb E[\\theta(\\epsilon)] - v` of
+    :math:`z^{INV} = \\tfrac12\\|r\\|^2` and its sensitivity Jacobian.
+
+    Returns
+    -------
+    r : (C,) ndarray
+    J : (C, n_eps) ndarray
+        :math:`\\mathcal M\\,\\partial\\mathbb E[\\theta]/\\partial\\epsilon` (forward
+        sensitivities with the factored Jacobian).
+    sol : SteadySolution
+    """
+    M_obs, v = _data(system, M_obs, v)
+    solve_kw.pop("gradient", None)
+    sol = solve_steady(system, eps, strict=True, **solve_kw)
+    dTheta, _ = sol.eps_sensitivity()
+    J = M_obs @ np.einsum("ikm,k->im", dTheta, system.E1)
+    return M_obs @ system.mean(sol.Theta) - v, np.asarray(J), sol
+
+
+def ecfm_residual(system, M_obs, v, eps, **solve_kw):
+    """The constraint forces :math:`\\lambda(\\epsilon)`, residual of
+    :math:`z^{ECFM} = \\tfrac12\\|\\lambda\\|^2`, and their Jacobian
+    :math:`\\partial\\lambda/\\partial\\epsilon`.
+
+    Returns
+    -------
+    lam : (C,) ndarray
+    dlam : (C, n_eps) ndarray
+    sol : SteadySolution
+    """
+    solve_kw.pop("gradient", None)
+    sol = solve_steady(system, eps, constraint=(M_obs, v), strict=True, **solve_kw)
+    _, dlam = sol.eps_sensitivity()
+    return np.asarray(sol.lam), np.asarray(dlam), sol
+
+
 _OBJECTIVES = {"standard": standard_objective, "ecfm": ecfm_objective}
+_RESIDUALS = {"standard": standard_residual, "ecfm": ecfm_residual}
+#: the least-squares driver's options (the rest go to scipy.optimize.least_squares) and
+#: the covariance conventions
+_COVARIANCES = ("gauss-newton", "sandwich")
 #: the reduced formulations' defaults (tol is the relative gradient tolerance: the
 #: optimizer sees the objective divided by its value at eps0, so it has no data units)
 _DEFAULT_TOL = 1e-10
 _DEFAULT_MAXITER = 500
+#: residual evaluations allowed to the least-squares method (its `maxiter`): hard
+#: problems (NIST Bennett5 from its first start) need over 1000
+_DEFAULT_MAX_NFEV = 2000
 
 
 def fit_steady_problem(problem, eps0, s):
@@ -103,10 +153,21 @@ def fit_steady_problem(problem, eps0, s):
         raise ValueError("formulation='ecfm' needs a system with constraint forces (Gamma)")
     M_obs, v = problem.M_obs, problem.v
     eps0 = system.check_eps(eps0)
-    method = "BFGS" if s.method == "auto" else s.method
-    check_minimize_method(method)
-    gtol = _DEFAULT_TOL if s.tol is None else s.tol
-    maxiter = _DEFAULT_MAXITER if s.maxiter is None else s.maxiter
+    lsq = s.method in ("auto", "least-squares", "trf")
+    method = "least-squares" if lsq else s.method
+    if not lsq:
+        check_minimize_method(method)
+    options = dict(s.options)
+    covariance = options.pop("covariance", "gauss-newton")
+    if covariance not in _COVARIANCES:
+        raise ValueError(f"options['covariance'] must be one of {_COVARIANCES}, got {covariance!r}")
+    polish = options.pop("polish", lsq)
+    if not isinstance(polish, bool):
+        raise TypeError(f"options['polish'] must be True or False, got {polish!r}")
+    if s.maxiter is not None:
+        maxiter = s.maxiter
+    else:
+        maxiter = _DEFAULT_MAX_NFEV if lsq else _DEFAULT_MAXITER
     bounds, sigma = s.bounds, s.sigma
     if v.size < system.n_eps:
         raise ValueError(
@@ -120,14 +181,24 @@ def fit_steady_problem(problem, eps0, s):
     def evaluate(eps):
         return objective(system, M_obs, v, eps, **solve_kw)
 
+    def residual(eps):
+        return _RESIDUALS[s.formulation](system, M_obs, v, eps, **problem.solve_options)
+
     try:
-        out = minimize_scaled(evaluate, eps0, method, bounds, gtol, maxiter, s.options)
+        if lsq:
+            out = least_squares_scaled(residual, eps0, bounds, s.tol, maxiter, options)
+        else:
+            gtol = _DEFAULT_TOL if s.tol is None else s.tol
+            out = minimize_scaled(evaluate, eps0, method, bounds, gtol, maxiter, options)
+            out = verify_least_squares(
+                out, residual, bounds, out.status is FitStatus.MAX_ITERATIONS, polish=polish
+            )
     except ConvergenceError as e:
         raise ConvergenceError(f"fit_steady: {e}") from e
     if out.payload is None:  # the optimizer stopped where the model fails
         return InverseResult(
             eps=out.x, loss=np.inf, message=out.message, nit=out.nit, nfev=out.nfev,
-            status=out.status, method=s.formulation, optimizer=method,
+            status=out.status, method=s.formulation, optimizer=method, optimality=out.optimality,
             eps_history=out.eps_history, loss_history=out.loss_history,
             verdict=Verdict(False, test="none", message=f"NOT consistent: {out.final_error}"),
         )  # fmt: skip
@@ -137,7 +208,9 @@ def fit_steady_problem(problem, eps0, s):
         sol if s.formulation == "standard" else solve_steady(system, res.x, **problem.solve_options)
     )
     if s.uncertainty:
-        unc = _uncertainty(system, M_obs, v, np.asarray(res.x), objective, solve_kw, sigma, free)
+        unc = _uncertainty(
+            system, M_obs, v, np.asarray(res.x), s.formulation, solve_kw, sigma, free, covariance
+        )
     else:
         unc = {"uncertainty_message": "not computed (uncertainty=False)"}
     lam = sol.lam if s.formulation == "ecfm" else np.zeros(0)
@@ -156,6 +229,7 @@ def fit_steady_problem(problem, eps0, s):
         nit=out.nit,
         nfev=out.nfev,
         njev=out.nfev,
+        optimality=out.optimality,
         method=s.formulation,
         optimizer=method,
         eps_history=out.eps_history,
@@ -172,8 +246,8 @@ def fit_steady(
     eps0,
     formulation="ecfm",
     *,
-    method="BFGS",
-    gtol=1e-10,
+    method="auto",
+    gtol=None,
     maxiter=500,
     bounds=None,
     solve_options=None,
@@ -186,7 +260,8 @@ def fit_steady(
     The v0.2 call shape, kept as a thin alias of :func:`~ecfm_uq.inverse.fit`:
     ``gtol`` is ``tol``, ``solve_options`` (``tol``, ``maxiter``, ``solver``) and
     ``gradient`` go to :class:`~ecfm_uq.inverse.SteadyProblem`; the default
-    ``formulation`` is ``"ecfm"`` here (``"standard"`` in ``fit``).
+    ``formulation`` is ``"ecfm"`` here (``"standard"`` in ``fit``). The default method
+    follows ``fit`` (``"auto"``: least squares; v0.2 ran BFGS, still ``method="BFGS"``).
     """
     from .fitting import fit, warn_deprecated
     from .problems import SteadyProblem
@@ -203,12 +278,22 @@ def fit_steady(
     )  # fmt: skip
 
 
-def _uncertainty(system, M_obs, v, eps, objective, solve_kw, sigma, free=None):
-    """Delta-method covariance of the fitted eps (implicit differentiation of grad z = 0);
-    ``free`` is the unforced solve at ``eps`` if the caller has it (its residual
-    estimates sigma)."""
-    from .uncertainty import estimate_uncertainty, residual_variance
+def _uncertainty(
+    system, M_obs, v, eps, formulation, solve_kw, sigma, free=None, covariance="gauss-newton"
+):
+    """Delta-method covariance of the fitted eps; ``free`` is the unforced solve at
+    ``eps`` if the caller has it (its residual estimates sigma).
 
+    ``covariance="gauss-newton"`` (default): the curvature of the sum of squares is
+    :math:`J^TJ` (:math:`J` the residual's Jacobian), so the standard formulation gives
+    :math:`s^2(J^TJ)^{-1}`, the convention of NIST's certified values and of every
+    regression package. ``"sandwich"``: the full Hessian by finite differences of the
+    gradient, :math:`H^{-1}J^TJH^{-1}s^2` (the v0.2 convention).
+    """
+    from ..errors import NonIdentifiableError
+    from .uncertainty import estimate_uncertainty, least_squares_jacobian, residual_variance
+
+    objective = _OBJECTIVES[formulation]
     try:
         if sigma is not None:
             s2, model, dof = float(sigma) ** 2, "known", None
@@ -226,8 +311,21 @@ def _uncertainty(system, M_obs, v, eps, objective, solve_kw, sigma, free=None):
             J = M_obs @ np.einsum("ikm,k->im", dTheta, system.E1)
             r = r - J @ np.linalg.lstsq(J, r, rcond=None)[0]
             s2, model, dof = residual_variance(r, eps.size), "estimated", r.size - eps.size
+        hessian = None
+        if covariance == "gauss-newton":
+            opts = {k: w for k, w in solve_kw.items() if k != "gradient"}
+            _, Jr, _ = _RESIDUALS[formulation](system, M_obs, v, eps, **opts)
+            hessian = Jr.T @ Jr
     except (ConvergenceError, ValueError) as e:
         return {"uncertainty_message": f"uncertainty not computed: {e}"}
+    if covariance == "gauss-newton" and formulation == "standard":
+        # d eps_hat / dv = J^+ exactly (g = J^T (M theta - v)), by the SVD of J
+        try:
+            D = least_squares_jacobian(Jr)
+        except NonIdentifiableError as e:
+            return {"uncertainty_message": f"uncertainty not computed: {e}"}
+        return estimate_uncertainty(None, eps, v, s2, model, dof=dof, deps_dv=D)
     return estimate_uncertainty(
-        lambda e, w: objective(system, M_obs, w, e, **solve_kw)[1], eps, v, s2, model, dof=dof
-    )
+        lambda e, w: objective(system, M_obs, w, e, **solve_kw)[1], eps, v, s2, model,
+        dof=dof, hessian=hessian,
+    )  # fmt: skip

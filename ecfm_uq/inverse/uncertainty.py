@@ -91,7 +91,9 @@ def check_identifiable(info, rcond=IDENTIFIABILITY_RCOND, names=None):
         Information matrix: the derivative of an estimate's optimality condition in eps
         (for least squares the Hessian of the misfit, ``J^T J`` in the linear case).
     rcond : float
-        Singular when ``s_min <= rcond * s_max`` (or every entry is zero).
+        Singular when ``s_min <= rcond * s_max`` for ``info`` scaled to unit diagonal
+        (:math:`D^{-1}AD^{-1}`, :math:`D = \\sqrt{|\\operatorname{diag} A|}`: unit-free in
+        the parameters) when ``info`` is symmetric with a positive diagonal.
     names : list of str, optional
         Parameter names for the message (default ``eps[k]``).
 
@@ -102,17 +104,82 @@ def check_identifiable(info, rcond=IDENTIFIABILITY_RCOND, names=None):
         singular value) the data do not determine.
     """
     A = as_finite_array("info", info, ndim=2)
-    _, s, Vt = np.linalg.svd(A)
+    # the test is on the matrix scaled to unit diagonal, so that it does not depend on
+    # the parameters' units (a parameter of size 1e-4 beside one of size 1e2 is not a
+    # singularity); a zero diagonal entry is a parameter the data do not see at all
+    # (for a symmetric matrix with a positive diagonal, an information matrix; a general
+    # one, e.g. a KKT matrix with its zero blocks, is tested as it is)
+    d = np.sqrt(np.abs(np.diag(A))) if A.shape[0] == A.shape[1] else np.zeros(0)
+    symmetric = d.size and np.allclose(A, A.T, rtol=1e-6, atol=0)
+    if symmetric and np.all(np.diag(A) > 0):
+        As = A / np.outer(d, d)
+    else:
+        As, d = A, np.ones(A.shape[1])
+    _, s, Vt = np.linalg.svd(As)
     if s[0] > 0 and s[-1] > rcond * s[0]:
         return
     ratio = s[-1] / s[0] if s[0] > 0 else 0.0
-    u = Vt[-1]
+    u = Vt[-1] / d
+    u = u / np.linalg.norm(u)
     raise NonIdentifiableError(
         f"the information matrix is singular (smallest/largest singular value {ratio:.1e}): "
         f"the data do not determine the parameter combination {parameter_combination(u, names)}; "
         "fix one of these parameters, reparametrize, or add sensors that see it",
         null_vector=u,
     )
+
+
+#: a sensitivity Jacobian J (exact, not differenced) whose columns scaled to unit norm
+#: have smallest/largest singular value below this does not determine eps (J^T J would
+#: be singular to about its square, 1e-16: round-off)
+JACOBIAN_RCOND = 1e-8
+
+
+def least_squares_jacobian(J, names=None, rcond=JACOBIAN_RCOND):
+    """The estimate's derivative in the data, :math:`d\\hat\\epsilon/dv = J^+ =
+    (J^TJ)^{-1}J^T`, of a least-squares fit with residual Jacobian ``J`` (Gauss-Newton).
+
+    Computed by the SVD of ``J`` with its columns scaled to unit norm, so the accuracy
+    follows the conditioning of ``J`` (not of :math:`J^TJ`, its square) and does not
+    depend on the parameters' units.
+
+    Parameters
+    ----------
+    J : (C, n_eps) ndarray
+    names : list of str, optional
+    rcond : float
+
+    Returns
+    -------
+    (n_eps, C) ndarray
+
+    Raises
+    ------
+    NonIdentifiableError
+        When the scaled ``J`` is singular to ``rcond``, naming the combination.
+    """
+    J = as_finite_array("J", J, ndim=2)
+    d = np.linalg.norm(J, axis=0)
+    if np.any(d == 0):
+        k = int(np.flatnonzero(d == 0)[0])
+        u = np.eye(J.shape[1])[k]
+        raise NonIdentifiableError(
+            f"the data do not see the parameter {parameter_combination(u, names)} at all "
+            "(its sensitivity is zero); fix it or add sensors that see it",
+            null_vector=u,
+        )
+    U, sv, Vt = np.linalg.svd(J / d, full_matrices=False)
+    if sv[-1] <= rcond * sv[0]:
+        u = Vt[-1] / d
+        u = u / np.linalg.norm(u)
+        raise NonIdentifiableError(
+            f"the sensitivity matrix is singular (smallest/largest singular value of its "
+            f"scaled columns {sv[-1] / sv[0]:.1e}): the data do not determine the parameter "
+            f"combination {parameter_combination(u, names)}; fix one of these parameters, "
+            "reparametrize, or add sensors that see it",
+            null_vector=u,
+        )
+    return (Vt.T / sv) @ U.T / d[:, None]
 
 
 def delta_method_covariance(deps_dv, Sigma_v):
@@ -250,7 +317,19 @@ def implicit_covariance(grad, eps, v, Sigma_v, rel_step=1e-6, stencil=2):
 
 
 def estimate_uncertainty(
-    grad, eps, data, Sigma, noise_model, *, dof=None, block=None, hint=None, **fd_options
+    grad,
+    eps,
+    data,
+    Sigma,
+    noise_model,
+    *,
+    dof=None,
+    block=None,
+    hint=None,
+    hessian=None,
+    dg_dv=None,
+    deps_dv=None,
+    **fd_options,
 ):
     """The uncertainty fields of an :class:`~ecfm_uq.inverse.InverseResult`, or why not.
 
@@ -275,6 +354,18 @@ def estimate_uncertainty(
         multipliers, states).
     hint : str, optional
         Added to the message when the data do not determine the estimate.
+    hessian : (n, n) ndarray, optional
+        The condition's derivative in ``x`` to use instead of differencing ``grad``:
+        :math:`J^TJ` for the Gauss-Newton convention of a sum of squares (labelled
+        ``covariance_method="gauss-newton"``; without it the full Hessian by finite
+        differences, the sandwich :math:`H^{-1}J^TJH^{-1}s^2` for least squares,
+        labelled ``"implicit"``).
+    dg_dv : (n, m) ndarray, optional
+        The condition's derivative in the data, when known exactly (else differenced).
+    deps_dv : (n, m) ndarray, optional
+        The estimate's derivative in the data itself, when known (e.g.
+        :func:`least_squares_jacobian`, labelled ``"gauss-newton"``); then ``grad``,
+        ``hessian`` and ``dg_dv`` are not used.
     **fd_options
         ``rel_step``, ``stencil`` of :func:`implicit_covariance`.
 
@@ -285,7 +376,24 @@ def estimate_uncertainty(
         ``uncertainty_message`` when the covariance cannot be computed (never NaN).
     """
     try:
-        cov, D = implicit_covariance(grad, eps, data, Sigma, **fd_options)
+        if deps_dv is not None:
+            D = np.asarray(deps_dv, dtype=float)
+            cov = delta_method_covariance(D, Sigma)
+        elif hessian is None and dg_dv is None:
+            cov, D = implicit_covariance(grad, eps, data, Sigma, **fd_options)
+        else:
+            x = np.asarray(eps, dtype=float)
+            w = np.asarray(data, dtype=float)
+            A = np.asarray(hessian, dtype=float) if hessian is not None else None
+            B = np.asarray(dg_dv, dtype=float) if dg_dv is not None else None
+            if A is None or B is None:
+                if A is None:
+                    A = _fd_jacobian(lambda e: grad(e, w), x, **fd_options)
+                    A = 0.5 * (A + A.T)
+                if B is None:
+                    B = _fd_jacobian(lambda v: grad(x, v), w, **fd_options)
+            D = estimate_jacobian(A, B)
+            cov = delta_method_covariance(D, Sigma)
     except NonIdentifiableError as e:
         where = f" ({hint})" if hint else ""
         return {"uncertainty_message": f"uncertainty not computed{where}: {e}"}
@@ -301,4 +409,27 @@ def estimate_uncertainty(
         "eps_ci95": ci,
         "noise_model": noise_model,
         "eps_jacobian": D,
+        "covariance_method": (
+            "implicit" if hessian is None and deps_dv is None else "gauss-newton"
+        ),
     }
+
+
+def _fd_jacobian(f, x, rel_step=1e-6, stencil=2):
+    """Central-difference Jacobian of ``f`` at ``x`` (the stencil of
+    :func:`implicit_covariance`)."""
+    cols = []
+    for k in range(x.size):
+        h = rel_step * max(abs(x[k]), 1.0)
+
+        def at(t, k=k, h=h):
+            xt = x.copy()
+            xt[k] += t * h
+            return f(xt)
+
+        d1 = at(1.0) - at(-1.0)
+        if stencil == 2:
+            cols.append(d1 / (2 * h))
+        else:
+            cols.append((8 * d1 - (at(2.0) - at(-2.0))) / (12 * h))
+    return np.column_stack(cols)

@@ -346,7 +346,7 @@ class BeamModel:
             self.N, tuple(self.sensors.tolist()), self.force_shape, self.force_width
         )
         # E[omega Psi_k Psi_l]: exact with the default Gauss rule (degree 2 order + 1)
-        self.G_omega = weighted_gram(self.chaos, lambda w: w)
+        self.G_omega = weighted_gram(self.chaos, lambda w: w[:, 0])
         self.system = GalerkinSystem(
             [
                 LinearTerm(self.ops.K0 - self.ops.KBC, name="bending K0 - K_BC"),

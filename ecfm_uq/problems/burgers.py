@@ -269,7 +269,9 @@ class BurgersModel:
             d = self.viscosity_spread
             # enough nodes for the analytic weight 10^(-d (w - 1/2)) at any order used here
             n_points = self.chaos.order + 12
-            G = weighted_gram(self.chaos, lambda w: 10.0 ** (-d * (w - 0.5)), n_points=n_points)
+            G = weighted_gram(
+                self.chaos, lambda w: 10.0 ** (-d * (w[:, 0] - 0.5)), n_points=n_points
+            )
         F0 = self.F0
         terms = [QuadraticTerm(ConvectionForm(self.basis), 1.0, name="convection")]
         if self.viscosity_cells is None:

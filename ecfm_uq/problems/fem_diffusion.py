@@ -272,7 +272,7 @@ def build_fem_diffusion(
     chaos = ChaosBasis(order, len(modes))
     terms = [LinearTerm(K, c, name=name) for K, c, name in mean_terms]
     for k, K in enumerate(K_modes):
-        G = weighted_gram(chaos, lambda w, k=k: (w[:, k] if w.ndim == 2 else w) - 0.5)
+        G = weighted_gram(chaos, lambda w, k=k: w[:, k] - 0.5)
         terms.append(LinearTerm(K, G=G, name=f"random mode {k + 1}"))
     terms.append(LoadTerm.constant(F))
     system = GalerkinSystem(terms, n_eps, basis=chaos, Gamma=Gamma, name="fem-diffusion")

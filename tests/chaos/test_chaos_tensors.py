@@ -283,17 +283,23 @@ def test_weighted_gram_accepts_samples_at_the_nodes():
     )
 
 
-def test_weighted_gram_passes_1d_omega_for_one_variable():
+def test_weighted_gram_passes_omega_as_n_by_dim_for_every_dim():
+    # issue 23: the germ reaches g as (n, dim) whatever dim, so w[:, 0] works for dim = 1
     seen = {}
 
     def g(w):
         seen["shape"] = w.shape
-        return np.ones_like(w[..., 0]) if w.ndim == 2 else np.ones_like(w)
+        return w[:, 0] - 0.5
 
-    weighted_gram(ChaosBasis(2), g)
-    assert len(seen["shape"]) == 1
-    weighted_gram(ChaosBasis(2, dim=2), g)
-    assert seen["shape"][1] == 2
+    for dim in (1, 2):
+        G = weighted_gram(ChaosBasis(2, dim=dim), g)
+        assert len(seen["shape"]) == 2 and seen["shape"][1] == dim
+        # E[(w0 - 1/2) Psi_0 Psi_1] = E[(w0 - 1/2) sqrt(3)(2 w0 - 1)] = sqrt(3) / 6
+        assert G[0, 1] == pytest.approx(np.sqrt(3) / 6, abs=1e-15)
+    # a g returning (n, 1), such as lambda w: w, is one value per node
+    np.testing.assert_array_equal(
+        weighted_gram(ChaosBasis(2), lambda w: w), weighted_gram(ChaosBasis(2), lambda w: w[:, 0])
+    )
 
 
 # --- bad input -------------------------------------------------------------------------

@@ -1,0 +1,320 @@
+"""Whether a fit converged, read from its optimality conditions: one decision, one place.
+
+Every reduced fit (steady, dynamic; standard or ECFM; whatever optimizer ran it) asks
+this module whether its returned point is an optimum, instead of trusting the message of
+the library underneath (in the manner of PETSc's SNES convergence tests: a small, named
+test with a reason a user can read). The tests are unit-free: multiplying the model's
+equations, the data or a parameter by a positive constant changes no decision.
+
+Least squares, :math:`z = \\tfrac12\\|r(\\epsilon)\\|^2` with Jacobian :math:`J`
+(:func:`least_squares_optimality`)
+    With :math:`J = Q_1 R_1` (thin QR, :math:`n` residuals, :math:`p` free parameters),
+    the **relative offset** of Bates and Watts (1981)
+
+    .. math::
+
+        c = \\frac{\\|Q_1^T r\\| / \\sqrt p}{\\|r - Q_1 Q_1^T r\\| / \\sqrt{n - p}}
+
+    compares the part of the residual the model could still remove (the Gauss-Newton
+    step, :math:`R_1\\delta = -Q_1^T r`) with the part it cannot: :math:`c\\sqrt p` bounds
+    the Gauss-Newton step in units of the estimate's own standard errors. It does not
+    depend on how :math:`J` is scaled, so it refuses a point where the gradient vanishes
+    only because the model flattens out (an asymptote: :math:`J \\to 0`, the residual
+    still along :math:`J`). With no residual left to compare with (exact data, ``n == p``)
+    the test is the **Gauss-Newton step** relative to the parameters,
+    :math:`|\\delta_k| \\le` ``xtol`` :math:`|\\epsilon_k|` for every :math:`k` (a
+    parameter at exactly zero: relative to the largest one). The step is computed on the
+    columns of :math:`J` scaled to unit norm, so a parameter the model has become flat in
+    (a rate gone to infinity) keeps its huge step and is refused; the offset test needs
+    :math:`J` of full rank (scaled, to ``RANK_RCOND = 1e-10``). On bounds,
+    parameters held at a bound by a gradient pointing out of the box (a
+    Karush-Kuhn-Tucker multiplier of the right sign) are dropped from :math:`J` first
+    (the projected problem).
+
+General objectives (:func:`gradient_optimality`)
+    The **Newton decrement** :math:`\\tfrac12 g^TH^{-1}g` (the decrease a Newton step
+    would still make) against ``tol`` relative to :math:`\\max(|z|, 1)`, only when
+    :math:`H` is positive definite: an indefinite or singular Hessian is not a minimum.
+
+Defaults (documented floors): relative offset ``OFFSET_TOL = 1e-6`` (Bates and Watts
+suggest 1e-3 for statistical purposes; the Gauss-Newton step is then below
+:math:`10^{-6}\\sqrt p` standard errors), Gauss-Newton step ``XTOL = 1e-8`` relative (the default ``xtol`` of
+``scipy.optimize.least_squares``; a model solved by Newton to 1e-10 puts round-off of
+about that size into the parameters of an exact-data fit).
+
+References: Bates, D. M. and Watts, D. G. (1981), A relative offset orthogonality
+convergence criterion for nonlinear least squares, Technometrics 23, 179-183.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .status import FitStatus
+
+__all__ = [
+    "OFFSET_TOL",
+    "XTOL",
+    "Optimality",
+    "decide_status",
+    "gradient_optimality",
+    "least_squares_optimality",
+    "polish_least_squares",
+]
+
+#: relative-offset tolerance of the least-squares test
+OFFSET_TOL = 1e-6
+#: Gauss-Newton step tolerance, relative to the parameters (exact-fit problems)
+XTOL = 1e-8
+#: a Jacobian whose columns, scaled to unit norm, have smallest/largest singular value
+#: below this is rank-deficient: no point estimate there
+RANK_RCOND = 1e-10
+#: Newton-decrement tolerance of the general test (relative to max(|z|, 1))
+DECREMENT_TOL = 1e-10
+
+
+@dataclass(frozen=True)
+class Optimality:
+    """The verdict of an optimality test at one point.
+
+    Attributes
+    ----------
+    converged : bool
+    value : float
+        The measured optimality (relative offset, relative Gauss-Newton step, or Newton
+        decrement; ``inf`` when it cannot be measured).
+    test : str
+        Which test decided (``"relative offset"``, ``"gauss-newton step"``,
+        ``"newton decrement"``, ``"kkt"``).
+    tol : float
+    message : str
+        One sentence for the result's message.
+    """
+
+    converged: bool
+    value: float
+    test: str
+    tol: float
+    message: str
+
+
+def _active_bounds(eps, g, bounds, rtol=1e-10):
+    """Parameters held at a bound by the gradient ``g`` (KKT multiplier of the right sign)."""
+    active = np.zeros(eps.size, dtype=bool)
+    if bounds is None:
+        return active
+    for k, (lo, hi) in enumerate(bounds):
+        width = 1.0 if lo is None or hi is None else max(hi - lo, 1e-300)
+        near = rtol * max(abs(eps[k]), width)
+        if lo is not None and eps[k] <= lo + near and g[k] >= 0:
+            active[k] = True
+        if hi is not None and eps[k] >= hi - near and g[k] <= 0:
+            active[k] = True
+    return active
+
+
+def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTOL):
+    """Whether ``eps`` minimizes :math:`\\tfrac12\\|r\\|^2` (relative offset / GN step).
+
+    Parameters
+    ----------
+    r : (n,) ndarray
+        Residuals at ``eps``.
+    J : (n, p) ndarray
+        Their Jacobian :math:`\\partial r/\\partial\\epsilon`.
+    eps : (p,) ndarray
+    bounds : list of (lo, hi) or None
+    tol : float
+        Relative-offset tolerance.
+    xtol : float
+        Relative Gauss-Newton step tolerance.
+
+    Returns
+    -------
+    Optimality
+    """
+    r = np.asarray(r, dtype=float).ravel()
+    J = np.asarray(J, dtype=float).reshape(r.size, -1)
+    eps = np.asarray(eps, dtype=float).ravel()
+    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
+        return Optimality(False, np.inf, "relative offset", tol, "non-finite residual or Jacobian")
+    g = J.T @ r
+    free = ~_active_bounds(eps, g, bounds)
+    if not np.any(free):
+        return Optimality(True, 0.0, "kkt", tol, "every parameter held at a bound (KKT)")
+    Jf = J[:, free]
+    n, p = Jf.shape
+    Q, R = np.linalg.qr(Jf)
+    qr = Q.T @ r
+    orth = r - Q @ qr
+    norm_orth = float(np.linalg.norm(orth))
+    if n > p and norm_orth > 0:
+        offset = (np.linalg.norm(qr) / np.sqrt(p)) / (norm_orth / np.sqrt(n - p))
+    elif np.linalg.norm(r) == 0:
+        offset = 0.0
+    else:
+        offset = np.inf  # nothing to compare with: the step test decides
+    offset = float(offset)
+    # rank on the columns scaled to unit norm (parameters' units do not matter): the
+    # offset needs a full-rank J (its Q1 would hold arbitrary directions); the step is
+    # the minimum-norm one on the scaled columns, so a column of tiny norm (a rate gone
+    # to infinity, the model flat in it) still counts, and only exactly parallel columns
+    # (a combination the data cannot see) are left out
+    norms = np.linalg.norm(Jf, axis=0)
+    if np.all(norms > 0):
+        sv = np.linalg.svd(Jf / norms, compute_uv=False)
+        rank_ok = bool(sv[-1] > RANK_RCOND * sv[0])
+        # the Gauss-Newton step, on the scaled columns too (an unscaled least-squares
+        # solve would drop a column of tiny norm as if it were zero)
+        delta = np.linalg.lstsq(Jf / norms, -r, rcond=None)[0] / norms
+    else:
+        rank_ok = False
+        delta = np.full(p, np.inf)
+    # relative to each parameter (a parameter at exactly 0: to the largest, else 1)
+    ref = np.abs(eps[free])
+    ref[ref == 0] = np.abs(eps).max() or 1.0
+    step = float(np.max(np.abs(delta) / ref))
+    if offset <= tol and rank_ok:
+        return Optimality(True, offset, "relative offset", tol,
+                          f"relative offset {offset:.1e} <= {tol:.0e}")  # fmt: skip
+    if step <= xtol:
+        # on exactly parallel (scaled) columns this is a point of a whole set of optima:
+        # first-order optimal, not unique; the uncertainty names the free combination
+        note = "" if rank_ok else " (the Jacobian is rank-deficient: not a unique optimum)"
+        return Optimality(True, step, "gauss-newton step", xtol,
+                          f"Gauss-Newton step {step:.1e} <= {xtol:.0e} relative{note}")  # fmt: skip
+    if np.isfinite(offset):
+        value, test, t = offset, "relative offset", tol
+        msg = (
+            f"relative offset {offset:.1e} > {tol:.0e} and Gauss-Newton step {step:.1e} > "
+            f"{xtol:.0e} relative: not at a least-squares optimum"
+        )
+    else:
+        value, test, t = step, "gauss-newton step", xtol
+        msg = f"Gauss-Newton step {step:.1e} > {xtol:.0e} relative: not at the optimum"
+    if not rank_ok:
+        msg += (
+            " (the Jacobian is rank-deficient there: some parameter combination has no "
+            "effect on the residuals, e.g. a rate gone to infinity)"
+        )
+    elif step > 1e3:
+        msg += (
+            " (the Gauss-Newton step is over 1000 times the parameters: the minimum may lie at "
+            "infinity, where the model flattens out)"
+        )
+    return Optimality(False, value, test, t, msg)
+
+
+def gradient_optimality(z, g, H, *, tol=DECREMENT_TOL):
+    """Whether a point with gradient ``g`` and Hessian ``H`` minimizes a general ``z``.
+
+    The Newton decrement :math:`\\tfrac12 g^TH^{-1}g \\le` ``tol`` :math:`\\max(|z|, 1)`
+    with :math:`H` positive definite.
+
+    Returns
+    -------
+    Optimality
+    """
+    g = np.asarray(g, dtype=float).ravel()
+    H = np.asarray(H, dtype=float).reshape(g.size, g.size)
+    if not (np.isfinite(z) and np.all(np.isfinite(g)) and np.all(np.isfinite(H))):
+        return Optimality(False, np.inf, "newton decrement", tol, "non-finite objective")
+    H = 0.5 * (H + H.T)
+    w = np.linalg.eigvalsh(H)
+    if w[0] <= 1e-12 * max(abs(w[-1]), 1e-300):
+        return Optimality(False, np.inf, "newton decrement", tol,
+                          f"the Hessian is not positive definite (eigenvalues {w[0]:.2e}, "
+                          f"{w[-1]:.2e}): not a minimum")  # fmt: skip
+    dec = 0.5 * float(g @ np.linalg.solve(H, g)) / max(abs(z), 1.0)
+    ok = dec <= tol
+    rel = "<=" if ok else ">"
+    return Optimality(ok, dec, "newton decrement", tol,
+                      f"relative Newton decrement {dec:.1e} {rel} {tol:.0e}")  # fmt: skip
+
+
+def decide_status(opt, exhausted):
+    """:class:`FitStatus` from an :class:`Optimality`: CONVERGED when it holds, else
+    MAX_ITERATIONS when the optimizer's budget ran out (``exhausted``), else STALLED."""
+    if opt.converged:
+        return FitStatus.CONVERGED
+    return FitStatus.MAX_ITERATIONS if exhausted else FitStatus.STALLED
+
+
+def polish_least_squares(residual, eps, *, bounds=None, maxiter=20, tol=OFFSET_TOL, xtol=XTOL):
+    """A few Levenberg-Marquardt steps from ``eps`` until :func:`least_squares_optimality`
+    holds (or they stop decreasing the sum of squares).
+
+    Parameters
+    ----------
+    residual : callable
+        ``eps -> (r (n,), J (n, p), payload)``; may raise
+        :class:`~ecfm_uq.errors.ConvergenceError` (a rejected step).
+    eps : (p,) ndarray
+    bounds : list of (lo, hi) or None
+        Steps are clipped into the box.
+    maxiter : int
+
+    Returns
+    -------
+    eps : (p,) ndarray
+    evaluation : tuple
+        ``(r, J, payload)`` at ``eps``.
+    optimality : Optimality
+    nfev : int
+        Residual evaluations made.
+    """
+    from ..errors import ConvergenceError
+
+    lo = hi = None
+    if bounds is not None:
+        lo = np.array([-np.inf if b[0] is None else b[0] for b in bounds])
+        hi = np.array([np.inf if b[1] is None else b[1] for b in bounds])
+    x = np.asarray(eps, dtype=float).copy()
+    ev = residual(x)
+    nfev = 1
+    opt = least_squares_optimality(ev[0], ev[1], x, bounds=bounds, tol=tol, xtol=xtol)
+    mu = 0.0  # a pure Gauss-Newton step first (quadratic convergence near the optimum)
+    for _ in range(maxiter):
+        if opt.converged:
+            break
+        r, J = ev[0], ev[1]
+        cost = float(r @ r)
+        A = J.T @ J
+        d = np.sqrt(np.maximum(np.diag(A), 1e-300 * max(np.diag(A).max(), 1e-300)))
+        improved = False
+        for _ in range(12):
+            # (J^T J + mu D^2) step = -g, via the augmented least-squares system
+            Aug = np.vstack([J, np.sqrt(mu) * np.diag(d)])
+            step = np.linalg.lstsq(Aug, -np.concatenate([r, np.zeros(x.size)]), rcond=None)[0]
+            xt = x + step
+            if lo is not None:
+                xt = np.clip(xt, lo, hi)
+            if np.array_equal(xt, x):
+                break
+            try:
+                et = residual(xt)
+                nfev += 1
+            except ConvergenceError:
+                nfev += 1
+                mu = max(mu * 10.0, 1e-6)
+                continue
+            ok = np.all(np.isfinite(et[0])) and np.all(np.isfinite(et[1]))
+            cost_t = float(et[0] @ et[0]) if ok else np.inf
+            better = cost_t < cost
+            if ok and not better and cost_t <= cost * (1 + 1e-9):
+                # a change of the sum of squares below its round-off: judge the step by
+                # the optimality it reaches (Q1^T r is computed accurately there)
+                opt_t = least_squares_optimality(et[0], et[1], xt, bounds=bounds, tol=tol,
+                                                 xtol=xtol)  # fmt: skip
+                better = opt_t.value < opt.value
+            if better:
+                x, ev, improved = xt, et, True
+                mu = mu / 10.0 if mu > 1e-9 else 0.0
+                break
+            mu = max(mu * 10.0, 1e-6)
+        if not improved:
+            break
+        opt = least_squares_optimality(ev[0], ev[1], x, bounds=bounds, tol=tol, xtol=xtol)
+    return x, ev, opt, nfev
