@@ -78,9 +78,8 @@ def test_binomial_band_against_scipy():
 @pytest.mark.parametrize("form", ["standard", "ecfm"])
 def test_profile_intervals_are_honest_with_a_parameter_in_the_operator(result, form):
     blk = result["operator"][form]
-    n = 40 - blk["n_failed"]
-    assert n >= 20, blk
-    lo, hi = stats.binom.ppf([0.0005, 0.9995], n, 0.95) / n
+    assert blk["n_failed"] <= 8, blk  # estimates that run to infinity are refused
+    lo, hi = stats.binom.ppf([0.0005, 0.9995], 40, 0.95) / 40
     for cov in blk["profile"]["coverage_per_parameter"]:
         assert lo <= cov <= hi, blk
     ratio = result["operator"]["ecfm_over_standard_profile_width"]

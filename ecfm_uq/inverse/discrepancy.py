@@ -70,7 +70,8 @@ from .verdict import decide
 
 __all__ = ["RandomForceModel", "fit_random_force"]
 
-_FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError)
+# the model cannot be solved there (ValueError: non-finite parameters after an overflow)
+_FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError, ValueError)
 # the scaled variance s = tau^2 * a0^2 / sigma^2 is searched on this log grid, then refined
 _S_GRID = np.concatenate([[0.0], np.logspace(-6, 10, 97)])
 _RESTARTS = 5  # L-BFGS-B restarts of the eps search after a stalled line search
@@ -268,9 +269,12 @@ def fit_random_force(problem, eps0, s):
     model = RandomForceModel(problem, s.sigma)
     eps_std = np.asarray(standard.eps, float)
     se = standard.uncertainty.stderr
-    scale = np.where(
-        np.isfinite(se) & (se > 0), se, 0.1 * np.maximum(1.0, np.abs(eps_std))
-    ) if se is not None else 0.1 * np.maximum(1.0, np.abs(eps_std))  # fmt: skip
+    magnitude = np.maximum(1.0, np.abs(eps_std))
+    scale = 0.1 * magnitude
+    if se is not None:
+        # the standard errors, capped at the parameter's magnitude (a flat direction has
+        # a huge one, and steps of that size leave the range where the model solves)
+        scale = np.where(np.isfinite(se) & (se > 0), np.minimum(se, magnitude), scale)
     nll0, _, _ = _profiled(model, eps_std)
     base = nll0
     nfev = [0]

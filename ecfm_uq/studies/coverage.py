@@ -235,7 +235,7 @@ def _operator(st, R, seed, bar):
             "n_failed": r["n_failed"],
             "n_not_consistent": r["n_not_consistent"],
             "n_at_bound": 0,  # no bounds are given: an estimate cannot sit at one
-            "band": binomial_band(R - r["n_failed"]),
+            "band": binomial_band(R),  # of the profile intervals (every data set)
         }
         for kind in ("delta", "profile"):
             # an open (infinite) median width is recorded as None
