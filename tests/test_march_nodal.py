@@ -8,7 +8,7 @@ import pytest
 from ecfm_uq.chaos import ChaosBasis, GaussNodes, gauss_legendre, weighted_gram
 from ecfm_uq.errors import ConvergenceError
 from ecfm_uq.problems.burgers import BurgersModel
-from ecfm_uq.system import march, solvers
+from ecfm_uq.system import march
 from ecfm_uq.system.linear import NodalPreconditioner, choose_solver, solver_options
 
 EPS = np.array([1.6, 1.5, 1.7, 0.9])
@@ -71,17 +71,16 @@ def test_compiled_march_equals_dense_newton(model, dense):
     assert sum(fast.linear_iterations) > 0  # the sensitivities are GMRES solves
 
 
-def test_newton_krylov_branch_equals_dense_newton(model, dense, monkeypatch):
+def test_newton_krylov_branch_equals_dense_newton(model, dense):
     # chord rate <= 0: every step is Newton-Krylov (the fallback of a slow chord)
-    monkeypatch.setattr(solvers, "_CHORD_RATE", 0.0)
-    nk = _march(model)
+    nk = _march(model, solver={"chord_rate": 0.0})
     assert nk.solver == "gmres+nodal (compiled)" and nk.success
     assert sum(nk.linear_iterations) > 0
     assert nk.nit.sum() <= dense.nit.sum() + model.n_steps  # Newton's iteration count
     np.testing.assert_allclose(nk.Theta, dense.Theta, rtol=0, atol=1e-11)
 
 
-def test_generic_path_with_the_nodal_preconditioner(model, dense, monkeypatch):
+def test_generic_path_with_the_nodal_preconditioner(model, dense):
     # kept factors (an adjoint): the generic Newton-Krylov path with the same preconditioner
     tr = _march(model, solver=NODAL, sensitivities=True, keep_factors=True)
     assert tr.solver == "gmres+nodal"
@@ -90,8 +89,7 @@ def test_generic_path_with_the_nodal_preconditioner(model, dense, monkeypatch):
     g = np.random.default_rng(3).standard_normal(tr.Theta.shape)
     np.testing.assert_allclose(tr.adjoint_gradient(g), dense.adjoint_gradient(g), rtol=1e-8)
     # without the compiled kernels "auto" still answers, through the generic path
-    monkeypatch.setitem(solvers._COMPILED, "disabled", True)
-    slow = _march(model)
+    slow = _march(model, solver={"compiled": False})
     assert slow.solver == "gmres+nodal"
     np.testing.assert_allclose(slow.Theta, dense.Theta, rtol=0, atol=1e-11)
 

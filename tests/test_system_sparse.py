@@ -322,8 +322,7 @@ def test_inverse_layer_takes_a_sparse_sensor_matrix():
 def test_sparse_load_vectors_are_accepted():
     F = np.linspace(0.0, 1.0, 6)
     for Fs in (sp.csr_matrix(F[:, None]), sp.csr_matrix(F[None, :])):
-        term = LoadTerm.constant(Fs)
-        term.bind(np.ones(1))
+        term = LoadTerm.constant(Fs).bind(np.ones(1))
         np.testing.assert_array_equal(term.apply(np.zeros((6, 1)), []), -F[:, None])
     with pytest.raises(ValueError, match="`F` must be a vector"):
         LoadTerm.constant(sp.identity(3))

@@ -2,18 +2,14 @@
 backward_euler, ecfm_solve, discrete_sens, discrete_sens_ecfm, pce, stochastic_sens)."""
 
 from .galerkin import GalerkinSystem
-from .linear import SOLVERS, LinearSolver, SolverOptions, solver_options
+from .linear import LinearSolver
+from .nonlinear import NewtonInfo, newton
 from .operator import AugmentedOperator, GalerkinOperator
-from .solvers import (
-    NewtonInfo,
-    SteadySolution,
-    Trajectory,
-    march,
-    newton,
-    solve_continuation,
-    solve_steady,
-)
+from .options import SOLVERS, SolverOptions, solver_options
+from .steady import SteadySolution, solve_continuation, solve_steady
+from .stepping import march
 from .terms import Coefficient, DenseQuadraticForm, LinearTerm, LoadTerm, QuadraticTerm
+from .trajectory import Trajectory
 
 __all__ = [
     "SOLVERS",

@@ -1,20 +1,22 @@
-"""Compiled backward-Euler march and its adjoint for small deterministic systems (private).
+"""Compiled backward-Euler marches and their adjoint (private; paper Eqs. backward_euler,
+ecfm_solve, discrete_sens, discrete_sens_ecfm).
 
-The whole step loop of :func:`ecfm_uq.system.march` for ``P = 1`` systems made of dense
-linear terms, a quadratic term given by its folded tensor in compressed rows and precomputed loads, with the
-optional ECFM data constraint, forward sensitivities and the discrete adjoint, in numba
-kernels: no Python work per step or per Newton iteration. The maths is the generic
-path's (Eqs. backward_euler, ecfm_solve, discrete_sens, discrete_sens_ecfm); inputs are
-prepared and validated by the caller (``solvers._compiled_march``).
+Two numba kernels run the whole step loop of :func:`ecfm_uq.system.march` with no Python
+work per step or per Newton iteration; :mod:`.plan` decides when, :mod:`.compiled`
+prepares and validates their inputs and translates their status codes (:class:`.plan.SolveStatus`).
 
-Linear algebra: each Newton iteration factorizes the step Jacobian with LAPACK's
-``dgetrf`` (the routine ``numpy.linalg.solve`` uses, reached through numba's own LAPACK
-binding so the kernels stay cacheable); the triangular solves are short loops here. The
-factors at the converged state carry the final Newton correction and the sensitivity
-right-hand sides, as in the generic march, and are kept per step for the adjoint, whose
-transposed solves then cost two triangular sweeps each. The quadratic term is evaluated
-from its folded tensor in compressed rows: ``S = dq/dtheta`` by one sparse pass and
-``q = S theta / 2`` (Euler's identity for a form homogeneous of degree 2).
+:func:`march_p1`
+    ``P = 1``: dense linear terms, at most one quadratic term (its folded tensor in
+    compressed rows: ``S = dq/dtheta`` in one sparse pass, ``q = S theta / 2``), loads,
+    the optional ECFM data constraint, forward sensitivities and the discrete adjoint
+    (:func:`adjoint_p1`, two triangular sweeps per step with the kept factors). The step
+    Jacobian is factorized by LAPACK's ``dgetrf`` through numba's own binding (so the
+    kernels stay cacheable); the converged factors carry the final Newton correction.
+:func:`march_sg`
+    ``P > 1`` one-germ systems (no data constraint, no kept factors): a chord iteration
+    with the node-wise preconditioner (``P`` dense LUs at the germ's Gauss nodes),
+    handing over to Newton-Krylov (right-preconditioned GMRES, :func:`_sg_gmres`) when
+    it converges slowly; sensitivities are GMRES solves with the same preconditioner.
 """
 
 from __future__ import annotations
@@ -23,6 +25,17 @@ import numba
 import numpy as np
 from numba import types
 from numba.np.linalg import ensure_lapack
+
+from .plan import (
+    KRYLOV_ACCEPT,
+    NEWTON_ETA_FACTOR,
+    NEWTON_ETA_MAX,
+    NEWTON_ETA_MIN,
+    ROUNDOFF_FACTOR,
+    SINGULAR_PIVOT,
+    UNIT_ROUNDOFF,
+    SolveStatus,
+)
 
 ensure_lapack()  # scipy's LAPACK behind numba's binding (raises if scipy is missing)
 # numba's LU binding: info = getrf(kind, m, n, a, lda, ipiv), column-major a, 'd' = 100
@@ -37,8 +50,14 @@ _getrf = types.ExternalFunction(
         types.CPointer(types.int32),
     ),
 )
-# a pivot below this fraction of the largest is treated as singular (as dense_lu does)
-_SINGULAR = 1e-14
+# the plan's thresholds and status codes, frozen into the kernels as integer constants
+_SINGULAR = SINGULAR_PIVOT  # a pivot below this fraction of the largest: singular
+_OK = int(SolveStatus.CONVERGED)
+_MAX_ITERATIONS = int(SolveStatus.MAX_ITERATIONS)
+_SINGULAR_JACOBIAN = int(SolveStatus.SINGULAR_JACOBIAN)
+_KRYLOV_FAILED = int(SolveStatus.KRYLOV_FAILED)
+_NON_FINITE = int(SolveStatus.NON_FINITE)
+_ROUNDOFF = ROUNDOFF_FACTOR * UNIT_ROUNDOFF
 
 
 @numba.njit(cache=True)
@@ -136,6 +155,21 @@ def _quadratic(theta, rows, ptr, idx, val, q, S):
 
 
 @numba.njit(cache=True)
+def _p1_floor(th, prev, lam, Mdt, Klin, cq, S, F, Gam, Cobs, V, tol):
+    """:func:`.plan.residual_floor` of the ``P = 1`` step residual (0 below ``tol``)."""
+    a = np.abs(th)
+    scale = np.sqrt(np.sum((np.abs(Mdt) @ (a + np.abs(prev))) ** 2))
+    scale += np.sqrt(np.sum((np.abs(Klin) @ a) ** 2))
+    scale += 0.5 * abs(cq) * np.sqrt(np.sum((np.abs(S) @ a) ** 2))
+    scale += np.sqrt(np.sum(F * F))
+    if Cobs.shape[0] > 0:
+        scale += np.sqrt(np.sum((np.abs(Gam) @ np.abs(lam)) ** 2))
+        scale += np.sqrt(np.sum((np.abs(Cobs) @ a) ** 2)) + np.sqrt(np.sum(V * V))
+    floor = _ROUNDOFF * scale
+    return floor if floor > tol else 0.0
+
+
+@numba.njit(cache=True)
 def march_p1(
     Mdt,
     Klin,
@@ -175,8 +209,9 @@ def march_p1(
     Returns
     -------
     Th (n_t, N), lam (n_t, C), dTh (n_t, N, n_eps), dlam (n_t, C, n_eps), nits (n_t - 1,),
-    failed (index of the failed step or -1), rnorm at failure (-1: singular Jacobian),
-    LUs, pivs (the converged step Jacobians' factors, kept for the adjoint).
+    failed (index of the failed step or -1), status (a :class:`.plan.SolveStatus` code),
+    rnorm at failure, LUs, pivs (the converged step Jacobians' factors, kept for the
+    adjoint).
     """
     n_t = F.shape[0]
     N = theta0.shape[0]
@@ -227,8 +262,11 @@ def march_p1(
             J[:N, :N] = base + cq * S
             nits[s] = k
             if not _lu_factor(J, lu, piv):
-                return Th, lam, dTh, dlam, nits, s, -1.0, LUs, pivs
-            if rnorm < tol:
+                return Th, lam, dTh, dlam, nits, s, _SINGULAR_JACOBIAN, rnorm, LUs, pivs
+            floor = 0.0
+            if rnorm >= tol:  # the plan's round-off floor of the step residual's terms
+                floor = _p1_floor(th, Th[s], z[N:], Mdt, Klin, cq, S, F[t1], Gam, Cobs, V[t1], tol)
+            if rnorm < tol or (floor > 0.0 and rnorm <= floor):
                 # the last Newton correction is taken with the converged Jacobian, whose
                 # factors give the sensitivities (Eqs. discrete_sens / discrete_sens_ecfm)
                 converged = True
@@ -244,7 +282,8 @@ def march_p1(
             if converged:
                 break
         if not converged:
-            return Th, lam, dTh, dlam, nits, s, rnorm, LUs, pivs
+            status = _MAX_ITERATIONS if np.isfinite(rnorm) else _NON_FINITE
+            return Th, lam, dTh, dlam, nits, s, status, rnorm, LUs, pivs
         if keep:
             LUs[s] = lu
             pivs[s] = piv
@@ -257,7 +296,7 @@ def march_p1(
                 dlam[t1, :, j] = x[N:]
         Th[t1] = z[:N]
         lam[t1] = z[N:]
-    return Th, lam, dTh, dlam, nits, -1, 0.0, LUs, pivs
+    return Th, lam, dTh, dlam, nits, -1, _OK, 0.0, LUs, pivs
 
 
 @numba.njit(cache=True)
@@ -387,6 +426,23 @@ def _sg_precond(R, Tn, Tb, LUs, pivs, out):
 
 
 @numba.njit(cache=True)
+def _sg_floor(Z, prev, Mdt, E2, Kc, Gs, cq, rows, ptr, idx, val, E3m, F, tol):
+    """:func:`.plan.residual_floor` of the ``P > 1`` step residual (0 below ``tol``)."""
+    N, P = Z.shape
+    A = np.abs(Z)
+    scale = np.sqrt(np.sum(((np.abs(Mdt) @ (A + np.abs(prev))) @ np.abs(E2)) ** 2))
+    for j in range(Kc.shape[0]):
+        scale += np.sqrt(np.sum(((np.abs(Kc[j]) @ A) @ np.abs(Gs[j])) ** 2))
+    if rows.shape[0] > 0 and cq != 0.0:
+        Sa = np.zeros((N, N * P))
+        _linearize(A, rows, ptr, idx, np.abs(val), Sa)
+        scale += 0.5 * abs(cq) * np.sqrt(np.sum(_sg_quadratic(A, Sa, np.abs(E3m)) ** 2))
+    scale += np.sqrt(np.sum(F * F))
+    floor = _ROUNDOFF * scale
+    return floor if floor > tol else 0.0
+
+
+@numba.njit(cache=True)
 def _sg_gmres(
     b, Mdt, E2, e2_eye, Kc, Gs, cq, Sf, E3m, Tn, Tb, LUs, pivs, rtol, restart, maxiter, x
 ):
@@ -510,8 +566,10 @@ def march_sg(
     per cent for a smooth random input); if the residual falls by less than a factor
     ``chord_rate`` per iteration the rest of the step is Newton-Krylov (GMRES
     preconditioned by ``B`` refreshed every Newton step, linear tolerance
-    ``min(1e-4, 0.05 tol / ||R||)``). Sensitivities (Eq. discrete_sens) are GMRES
-    solves to ``sens_rtol``. ``chord_rate <= 0``: Newton-Krylov from the first iteration.
+    the plan's forcing term, :func:`.plan.newton_rtol`). Sensitivities (Eq. discrete_sens)
+    are GMRES solves to ``sens_rtol``; every GMRES answer is accepted by the plan's rule
+    (true relative residual within ``KRYLOV_ACCEPT * rtol``). ``chord_rate <= 0``:
+    Newton-Krylov from the first iteration.
 
     Parameters (shapes)
     -------------------
@@ -531,7 +589,7 @@ def march_sg(
     -------
     Th (n_t, N, P), dTh (n_t, N, P, n_eps), nits (n_t - 1,) iterations per step,
     kits (n_t - 1,) GMRES iterations per step (sensitivities included), failed step
-    (-1: none), rnorm at failure (-1: a singular node Jacobian, -2: GMRES stalled).
+    (-1: none), status (a :class:`.plan.SolveStatus` code), rnorm at failure.
     """
     n_t = F.shape[0]
     N, P = theta0.shape
@@ -578,7 +636,11 @@ def march_sg(
             nits[s] = k
             if not np.isfinite(rnorm):
                 break
-            if rnorm < tol:
+            floor = 0.0
+            if rnorm >= tol:  # the plan's round-off floor of the step residual's terms
+                floor = _sg_floor(Z, Th[s], Mdt, E2, Kc, Gs, cq_eff, rows, ptr, idx, val, E3m,
+                                  F[t1], tol)  # fmt: skip
+            if rnorm < tol or (floor > 0.0 and rnorm <= floor):
                 converged = True
                 break
             if k == maxiter:
@@ -587,23 +649,25 @@ def march_sg(
                 krylov = True
             if krylov or not factored:
                 if not _sg_factor_nodes(Mdt, Kc, cq_eff, Sf, PhiT, mnode, gnode, LUs, pivs):
-                    return Th, dTh, nits, kits, s, -1.0
+                    return Th, dTh, nits, kits, s, _SINGULAR_JACOBIAN, rnorm
                 factored = True
             if krylov:
-                eta = min(1e-4, max(0.05 * tol / rnorm, 1e-13))
+                eta = max(NEWTON_ETA_FACTOR * tol / rnorm, NEWTON_ETA_MIN, floor / rnorm)
+                eta = min(NEWTON_ETA_MAX, eta)
                 its, rel = _sg_gmres(
                     R, Mdt, E2, e2_eye, Kc, Gs, cq_eff, Sf, E3m, Tn, Tb, LUs, pivs, eta,
                     restart, lin_maxiter, X,
                 )  # fmt: skip
                 kits[s] += its
-                if not rel <= eta:
-                    return Th, dTh, nits, kits, s, -2.0
+                if not rel <= KRYLOV_ACCEPT * eta:
+                    return Th, dTh, nits, kits, s, _KRYLOV_FAILED, rnorm
             else:
                 _sg_precond(R, Tn, Tb, LUs, pivs, X)
             Z -= X
             prev = rnorm
         if not converged:
-            return Th, dTh, nits, kits, s, rnorm
+            status = _MAX_ITERATIONS if np.isfinite(rnorm) else _NON_FINITE
+            return Th, dTh, nits, kits, s, status, rnorm
         Th[t1] = Z
         if not sens:
             continue
@@ -611,7 +675,7 @@ def march_sg(
         # converged state (Sf is), preconditioned by this step's node factors
         if not factored:
             if not _sg_factor_nodes(Mdt, Kc, cq_eff, Sf, PhiT, mnode, gnode, LUs, pivs):
-                return Th, dTh, nits, kits, s, -1.0
+                return Th, dTh, nits, kits, s, _SINGULAR_JACOBIAN, rnorm
         Wq = 0.5 * _sg_quadratic(Z, Sf, E3m) if has_quad else np.zeros((N, P))
         rhs = np.empty((N, P))
         for e in range(n_eps):
@@ -627,7 +691,7 @@ def march_sg(
                 restart, lin_maxiter, X,
             )  # fmt: skip
             kits[s] += its
-            if not rel <= sens_rtol:
-                return Th, dTh, nits, kits, s, -2.0
+            if not rel <= KRYLOV_ACCEPT * sens_rtol:
+                return Th, dTh, nits, kits, s, _KRYLOV_FAILED, rnorm
             dTh[t1, :, :, e] = X
-    return Th, dTh, nits, kits, -1, 0.0
+    return Th, dTh, nits, kits, -1, _OK, 0.0

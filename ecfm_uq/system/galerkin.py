@@ -18,9 +18,25 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._validation import as_finite_array, as_operator, check_int, describe
-from ..memory import check_allocation
 from .operator import GalerkinOperator, _LinearPart, _QuadraticLinearization
-from .terms import LinearTerm, LoadTerm, QuadraticTerm, _symmetric
+from .structure import SystemStructure, triple_product_pairs
+from .terms import LinearTerm, LoadTerm, QuadraticTerm
+
+
+def _check_parameters(terms, n_eps):
+    """Every coefficient must read parameter indices below ``n_eps``."""
+    for term in terms:
+        coef = getattr(term, "coef", None)
+        indices = getattr(coef, "indices", None)
+        if not indices:
+            continue
+        bad = [m for m in indices if m >= n_eps]
+        if bad:
+            raise ValueError(
+                f"term {term.name!r}: coefficient {coef.label} uses parameter index "
+                f"{bad[0]} but the system has n_eps={n_eps} parameters "
+                f"(indices 0..{n_eps - 1}); raise `n_eps` or fix the index"
+            )
 
 
 class GalerkinSystem:
@@ -29,7 +45,9 @@ class GalerkinSystem:
     Parameters
     ----------
     terms : sequence of LinearTerm, QuadraticTerm, LoadTerm
-        Residual contributions; they are summed.
+        Residual contributions; they are summed. The system keeps copies bound to its
+        chaos basis (``system.terms``, a tuple); the terms passed in are left unbound, so
+        they can build systems of other sizes ``P``.
     n_eps : int
         Number of model parameters :math:`\\epsilon`.
     basis : ChaosBasis, optional
@@ -42,15 +60,19 @@ class GalerkinSystem:
 
     Notes
     -----
+    The system is immutable: its terms, basis, operators and expectation tensors are
+    fixed at construction, and what solvers derive from them is computed once in
+    ``system.structure`` (:class:`~.structure.SystemStructure`).
+
     Shapes: :math:`\\Theta` is ``(N, P)``, flattened row-major (index ``i * P + k``) in
     Jacobians; :math:`\\epsilon` is ``(n_eps,)``; :math:`\\lambda` is ``(C,)``.
     """
 
     def __init__(self, terms, n_eps, basis=None, Gamma=None, M=None, name="system"):
-        self.terms = list(terms)
-        if not self.terms:
+        terms = tuple(terms)
+        if not terms:
             raise ValueError("`terms` must contain at least one term")
-        for term in self.terms:
+        for term in terms:
             if not isinstance(term, LinearTerm | QuadraticTerm | LoadTerm):
                 raise TypeError(
                     f"`terms` holds an unsupported {describe(term)}; "
@@ -65,13 +87,16 @@ class GalerkinSystem:
         else:
             from ..chaos import expectation_tensor
 
-            self.E1 = np.asarray(expectation_tensor(basis, 1), dtype=float)
-            self.E2 = np.asarray(expectation_tensor(basis, 2), dtype=float)
-            needs3 = any(isinstance(t, QuadraticTerm) for t in self.terms)
-            self.E3 = np.asarray(expectation_tensor(basis, 3), dtype=float) if needs3 else None
+            self.E1 = np.array(expectation_tensor(basis, 1), dtype=float)
+            self.E2 = np.array(expectation_tensor(basis, 2), dtype=float)
+            needs3 = any(isinstance(t, QuadraticTerm) for t in terms)
+            self.E3 = np.array(expectation_tensor(basis, 3), dtype=float) if needs3 else None
         self.P = self.E1.size
-        sizes = {t.K.shape[0] for t in self.terms if isinstance(t, LinearTerm)}
-        sizes |= {t.form.size for t in self.terms if isinstance(t, QuadraticTerm)}
+        for E in (self.E1, self.E2, self.E3):
+            if E is not None:
+                E.setflags(write=False)
+        sizes = {t.K.shape[0] for t in terms if isinstance(t, LinearTerm)}
+        sizes |= {t.form.size for t in terms if isinstance(t, QuadraticTerm)}
         if not sizes:
             raise ValueError(
                 "`terms` has no LinearTerm or QuadraticTerm, so the state size N is unknown; "
@@ -80,7 +105,7 @@ class GalerkinSystem:
         if len(sizes) != 1:
             named = sorted(
                 f"{t.name!r}: {t.K.shape[0] if isinstance(t, LinearTerm) else t.form.size}"
-                for t in self.terms
+                for t in terms
                 if isinstance(t, LinearTerm | QuadraticTerm)
             )
             raise ValueError(
@@ -88,36 +113,35 @@ class GalerkinSystem:
                 "build every operator on the same discretization"
             )
         self.N = sizes.pop()
-        self._check_parameters()
-        for term in self.terms:
+        _check_parameters(terms, self.n_eps)
+        # the system keeps bound copies: the caller's terms stay unbound and reusable in a
+        # system of another P
+        pairs = None if self.E3 is None else triple_product_pairs(self.E3)
+        bound = []
+        for term in terms:
             if isinstance(term, LinearTerm):
-                term.bind(self.E2)
+                bound.append(term.bind(self.E2))
             elif isinstance(term, QuadraticTerm):
-                term.bind(self.E3)
+                bound.append(term.bind(self.E3, pairs))
             else:
-                term.bind(self.E1)
                 term.check_sizes(self.N, self.n_eps)
+                bound.append(term.bind(self.E1, self.N))
+        self.terms = tuple(bound)
         self.Gamma = None if Gamma is None else as_operator("Gamma", Gamma)
         if self.Gamma is not None and self.Gamma.shape[0] != self.N:
             raise ValueError(f"`Gamma` must have {self.N} rows (N), got {self.Gamma.shape}")
         self.M = None if M is None else as_operator("M", M, shape=(self.N, self.N))
-        self._operator_cache = None
         self.name = name
+        self.structure = SystemStructure(self, pairs)
+        self._frozen = True
 
-    def _check_parameters(self):
-        """Every coefficient must read parameter indices below ``n_eps``."""
-        for term in self.terms:
-            coef = getattr(term, "coef", None)
-            indices = getattr(coef, "indices", None)
-            if not indices:
-                continue
-            bad = [m for m in indices if m >= self.n_eps]
-            if bad:
-                raise ValueError(
-                    f"term {term.name!r}: coefficient {coef.label} uses parameter index "
-                    f"{bad[0]} but the system has n_eps={self.n_eps} parameters "
-                    f"(indices 0..{self.n_eps - 1}); raise `n_eps` or fix the index"
-                )
+    def __setattr__(self, name, value):
+        if getattr(self, "_frozen", False):
+            raise AttributeError(
+                f"GalerkinSystem is immutable: cannot set {name!r}; build a new system "
+                "from the terms (GalerkinSystem(terms, n_eps, ...))"
+            )
+        object.__setattr__(self, name, value)
 
     # -- sizes -------------------------------------------------------------------------
     @property
@@ -167,6 +191,31 @@ class GalerkinSystem:
                 R -= np.outer(self.Gamma @ np.asarray(lam, dtype=float), self.E1)
         return R
 
+    def residual_scale(self, Theta, eps, lam=None, t=None):
+        """The magnitude of the terms that :meth:`residual` adds up, a float.
+
+        :math:`\\sum \\| |c|\\,|K||\\Theta||G| \\| + \\| |c|\\,|A|:|\\Theta||\\Theta| \\|
+        + \\|F\\| + \\|\\Gamma\\lambda\\|`: floating point cannot evaluate :math:`R` (nor
+        drive it) below a small multiple of the unit round-off times this, whatever the
+        model's units (:func:`.plan.residual_floor`).
+        """
+        s = 0.0
+        for term in self.terms:
+            if isinstance(term, LinearTerm | QuadraticTerm):
+                c = abs(float(term.coef.value(eps)))
+                s += c * float(np.linalg.norm(term.magnitude(Theta)))
+            else:
+                s += float(np.linalg.norm(term.apply(Theta, eps, t)))
+        if lam is not None and self.Gamma is not None:
+            s += float(np.linalg.norm(self.Gamma @ np.asarray(lam, dtype=float)))
+        return s
+
+    def mass_scale(self, X):
+        """:math:`\\| |M|\\,|X|\\,|\\mathbb E[\\Psi\\Psi^T]| \\|` for ``X`` (N, P): the round-off
+        scale of the mass term (see :meth:`residual_scale`)."""
+        absM = abs(self.M)
+        return float(np.linalg.norm(np.asarray(absM @ np.abs(X)) @ np.abs(self.E2)))
+
     def jacobian_operator(self, Theta, eps, t=None, dt=None):
         """The Jacobian at ``Theta`` as a structured :class:`~.operator.GalerkinOperator`.
 
@@ -178,8 +227,9 @@ class GalerkinSystem:
         """
         if self.is_linear:
             key = (np.asarray(eps, dtype=float).tobytes(), dt)
-            if self._operator_cache is not None and self._operator_cache[0] == key:
-                return self._operator_cache[1]
+            op = self.structure.cached_operator(key)
+            if op is not None:
+                return op
         parts = []
         for term in self.terms:
             if isinstance(term, LinearTerm):
@@ -188,7 +238,7 @@ class GalerkinSystem:
                 parts.append(_QuadraticLinearization(term, Theta, term.coef.value(eps)))
         op = GalerkinOperator(self, parts, dt=dt)
         if self.is_linear:
-            self._operator_cache = (key, op)
+            self.structure.store_operator(key, op)
         return op
 
     def jacobian(self, Theta, eps, t=None):
@@ -202,18 +252,12 @@ class GalerkinSystem:
     @property
     def is_linear(self):
         """True when no term is quadratic in the state."""
-        if not hasattr(self, "_is_linear"):
-            self._is_linear = not any(isinstance(t, QuadraticTerm) for t in self.terms)
-        return self._is_linear
+        return self.structure.is_linear
 
     @property
     def sparse_input(self):
         """True when any spatial operator, ``M`` or ``Gamma`` is ``scipy.sparse``."""
-        return (
-            any(isinstance(t, LinearTerm) and t.sparse for t in self.terms)
-            or sp.issparse(self.M)
-            or sp.issparse(self.Gamma)
-        )
+        return self.structure.sparse_input
 
     def eps_jacobian(self, Theta, eps, t=None):
         """:math:`\\partial\\,\\mathrm{vec}R / \\partial\\epsilon`, shape (NP, n_eps)."""
@@ -254,21 +298,7 @@ class GalerkinSystem:
         """:math:`M \\otimes \\mathbb E[\\Psi_k\\Psi_\\ell]`, shape (NP, NP) (CSR if ``sparse``)."""
         if self.M is None:
             raise ValueError(f"system {self.name!r} has no mass matrix; pass M= for time stepping")
-        kind = "sparse" if sparse else "dense"
-        cache = self.__dict__.setdefault("_mass_cache", {})  # M is fixed: build once
-        if kind not in cache:
-            if sparse:
-                cache[kind] = sp.kron(self.M, sp.csr_matrix(self.E2.T), format="csr")
-            else:
-                n = self.N * self.P
-                check_allocation(
-                    8.0 * n * n,
-                    f"the dense mass matrix of {self.name!r} (NP = {n})",
-                    "pass a sparse M and solver='cg' or 'gmres'",
-                )
-                M = self.M.toarray() if sp.issparse(self.M) else self.M
-                cache[kind] = np.kron(M, self.E2.T)
-        return cache[kind]
+        return self.structure.mass_matrix(sparse)
 
     def apply_mass(self, X, transpose=False):
         """:math:`M X \\mathbb E[\\Psi\\Psi^T]` (or :math:`M^T X \\ldots`) for ``X`` (N, P), matrix-free."""
@@ -279,7 +309,7 @@ class GalerkinSystem:
 
     def mass_is_symmetric(self):
         """Whether ``M`` is symmetric."""
-        return self.M is not None and _symmetric(self.M)
+        return self.structure.mass_symmetric
 
     # -- structure ---------------------------------------------------------------------
     def decoupling(self):
@@ -298,9 +328,7 @@ class GalerkinSystem:
             ``None`` for nonlinear systems, ``P = 1``, or couplings without a common
             eigenbasis (the dense block solve is used then).
         """
-        if not hasattr(self, "_decoupling"):
-            self._decoupling = self._find_decoupling()
-        return self._decoupling
+        return self.structure.decoupling
 
     def gauss_nodes(self):
         """The one-germ chaos basis at its ``P``-node Gauss rule (cached), or ``None``.
@@ -309,20 +337,7 @@ class GalerkinSystem:
         preconditioner and the compiled stochastic march use it
         (:class:`ecfm_uq.chaos.GaussNodes`).
         """
-        if not hasattr(self, "_gauss_nodes"):
-            from ..chaos.tensors import GaussNodes
-
-            basis = self.basis
-            one_germ = basis is not None and basis.dim == 1 and self.P > 1
-            self._gauss_nodes = GaussNodes(basis) if one_germ else None
-        return self._gauss_nodes
-
-    def _find_decoupling(self):
-        from ..chaos.tensors import common_eigenbasis
-
-        if self.P == 1 or not self.is_linear:
-            return None
-        return common_eigenbasis([t.G for t in self.terms if isinstance(t, LinearTerm)])
+        return self.structure.gauss_nodes
 
     # -- statistics --------------------------------------------------------------------
     def mean(self, Theta):

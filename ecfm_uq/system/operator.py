@@ -56,6 +56,9 @@ class _LinearPart:
     def mean_block(self, E2_00):
         return (self.coef * self.term.G[0, 0] / E2_00) * self.term.K
 
+    def magnitude(self, X):
+        return abs(self.coef) * self.term.magnitude(X)
+
 
 class _QuadraticLinearization:
     """The Jacobian of one quadratic term at a fixed state."""
@@ -68,9 +71,12 @@ class _QuadraticLinearization:
     def apply(self, X):
         return self.coef * self.term.linear_action(self.Theta, X)
 
+    def magnitude(self, X):
+        return abs(self.coef) * self.term.magnitude(self.Theta, X)
+
     def apply_transpose(self, Y):
         # (J^T Y)[j, b] = sum_k sum_a E3[a, b, k] (S_k^T Y)[j, a]
-        E3 = self.term._E3
+        E3 = self.term.E3
         out = np.zeros_like(Y)
         for k, Sk in enumerate(self.term.matrices(self.Theta)):
             Ek = E3[:, :, k]
@@ -84,13 +90,13 @@ class _QuadraticLinearization:
         if P == 1:
             return self.coef * S[0]
         S = np.stack(S)  # (P, N, N)
-        E3 = self.term._E3
+        E3 = self.term.E3
         # J[i, a, j, b] = sum_k E3[a, b, k] S_k[i, j], as one matrix product
         T = (E3.reshape(P * P, P) @ S.reshape(P, N * N)).reshape(P, P, N, N)
         return self.coef * T.transpose(2, 0, 3, 1).reshape(N * P, N * P)
 
     def sparse(self):
-        E3 = self.term._E3
+        E3 = self.term.E3
         out = None
         for k, Sk in enumerate(self.term.matrices(self.Theta)):
             Ek = E3[:, :, k]
@@ -102,7 +108,7 @@ class _QuadraticLinearization:
 
     def mean_block(self, E2_00):
         """The (0, 0) chaos block divided by :math:`\\mathbb E[\\Psi_0^2]`."""
-        E3 = self.term._E3
+        E3 = self.term.E3
         S = None
         for k in np.nonzero(E3[0, 0, :])[0]:
             Sk = E3[0, 0, k] * self.term.form.matrix(self.Theta[:, k])
@@ -138,26 +144,9 @@ class GalerkinOperator:
         return self.shape[0]
 
     @property
-    def sparse_input(self):
-        """True when any spatial operator (or the mass matrix) is ``scipy.sparse``."""
-        mass_sparse = self.dt is not None and sp.issparse(self.system.M)
-        return mass_sparse or any(part.term.sparse for part in self.parts if not part.is_quadratic)
-
-    @property
     def is_linear(self):
         """No quadratic term: the operator does not depend on the state."""
         return not any(part.is_quadratic for part in self.parts)
-
-    def asymmetry(self):
-        """``None`` if the operator is symmetric, else what breaks the symmetry."""
-        for part in self.parts:
-            if part.is_quadratic:
-                return f"the quadratic term {part.term.name!r} is not symmetric"
-            if not part.term.is_symmetric():
-                return f"term {part.term.name!r} has a non-symmetric K or G"
-        if self.dt is not None and not self.system.mass_is_symmetric():
-            return "the mass matrix M is not symmetric"
-        return None
 
     # -- action ----------------------------------------------------------------------
     def apply(self, X):
@@ -168,6 +157,18 @@ class GalerkinOperator:
         if self.dt is not None:
             Y += self.system.apply_mass(X) / self.dt
         return Y
+
+    def magnitude(self, X):
+        """:math:`\\| |J|\\,|\\mathrm{vec}X| \\|` (a float): the round-off scale of :meth:`apply`
+        at ``X`` (N, P), against which a Krylov answer's residual is judged
+        (:func:`.plan.krylov_accepts`)."""
+        Y = np.zeros((self.N, self.P))
+        for part in self.parts:
+            Y += part.magnitude(X)
+        s = float(np.linalg.norm(Y))
+        if self.dt is not None:
+            s += self.system.mass_scale(X) / self.dt
+        return s
 
     def apply_transpose(self, Y):
         """:math:`J^T\\,\\mathrm{vec}(Y)` reshaped (the adjoint action), matrix-free."""
@@ -185,10 +186,6 @@ class GalerkinOperator:
     def rmatvec(self, y):
         """:math:`J^T y` for a flat ``y`` of length NP."""
         return self.apply_transpose(np.reshape(y, (self.N, self.P))).ravel()
-
-    def matmat(self, X):
-        """:math:`J X` for ``X`` of shape (NP, m)."""
-        return np.column_stack([self.matvec(X[:, j]) for j in range(X.shape[1])])
 
     def as_linear_operator(self):
         """A ``scipy.sparse.linalg.LinearOperator`` applying :math:`J` matrix-free."""
@@ -217,12 +214,7 @@ class GalerkinOperator:
         for part in self.parts:
             J += part.dense()
         if self.dt is not None:
-            # M (x) E2 / dt is fixed during a march: divide once, not per Newton step
-            cache = self.system.__dict__.setdefault("_mass_dt_cache", {})
-            if self.dt not in cache:
-                cache.clear()
-                cache[self.dt] = self.system.mass_matrix() / self.dt
-            J = cache[self.dt] + J
+            J = self.system.structure.mass_over_dt(self.dt) + J
         return J
 
     def to_sparse(self):
@@ -264,6 +256,10 @@ class _Transposed:
 
     def apply(self, Y):
         return self.op.apply_transpose(Y)
+
+    def magnitude(self, Y):
+        # |J^T| |y| is estimated by |J| |y|: the same entries, the scale is what matters
+        return self.op.magnitude(Y)
 
     def matvec(self, y):
         return self.op.rmatvec(y)

@@ -18,6 +18,7 @@ system (:mod:`.galerkin`) only adds them up.
 
 from __future__ import annotations
 
+import copy
 import numbers
 
 import numpy as np
@@ -194,6 +195,7 @@ class LinearTerm:
         self.K = as_operator("K", K, square=True)
         self.coef = as_coefficient(coef)
         self.G = None if G is None else as_finite_array("G", G, ndim=2)
+        self._G_given = self.G
         self.name = name
 
     @property
@@ -202,15 +204,28 @@ class LinearTerm:
         return is_sparse(self.K)
 
     def bind(self, E2):
-        """Fill the default stochastic coupling from the system's Gram matrix."""
-        if self.G is None:
-            self.G = E2
-        if self.G.shape != E2.shape:
-            raise ValueError(
-                f"term {self.name!r}: `G` has shape {self.G.shape}, expected {E2.shape}"
-            )
-        self._G_sparse = _sparse_coupling(self.G)
-        self._kron = {}
+        """A copy bound to a system with Gram matrix ``E2`` (P, P); ``self`` is unchanged.
+
+        The copy's ``G`` is the given coupling, or ``E2`` when none was given.
+        """
+        G = E2 if self._G_given is None else self._G_given
+        if G.shape != E2.shape:
+            raise ValueError(f"term {self.name!r}: `G` has shape {G.shape}, expected {E2.shape}")
+        bound = copy.copy(self)
+        bound.G = G
+        bound._G_sparse = _sparse_coupling(G)
+        bound._kron = {}
+        bound._abs = None
+        bound.__dict__.pop("_symmetric", None)
+        return bound
+
+    def magnitude(self, X):
+        """:math:`|K|\\,|X|\\,|G|` (N, P), without the coefficient: the scale of the
+        round-off in :meth:`action` (see :func:`.plan.residual_floor`)."""
+        if self._abs is None:
+            self._abs = (abs(self.K), np.abs(self.G))
+        absK, absG = self._abs
+        return np.asarray(absK @ np.abs(X)) @ absG
 
     def action(self, X):
         """:math:`K X G` (without the coefficient) for ``X`` of shape (N, P)."""
@@ -310,13 +325,52 @@ class QuadraticTerm:
         self.coef = as_coefficient(coef)
         self.name = name
 
-    def bind(self, E3):
-        """Store :math:`\\mathbb E[\\Psi_a\\Psi_b\\Psi_c]` and the (b, c) pairs it couples."""
-        self._E3 = np.asarray(E3, dtype=float)
-        self._P = E3.shape[0]
-        # q(Theta_b, Theta_c) is evaluated once per structurally nonzero pair (b, c)
-        self._bs, self._cs = np.nonzero(np.any(self._E3 != 0.0, axis=0))
-        self._W = self._E3[:, self._bs, self._cs].T  # (n_pairs, P)
+    def bind(self, E3, pairs):
+        """A copy bound to a system with triple products ``E3`` (P, P, P); ``self`` is unchanged.
+
+        ``pairs``: the ``(bs, cs, W)`` of :func:`.structure.triple_product_pairs`, computed
+        once by the system for all its quadratic terms; :math:`q(\\Theta_b, \\Theta_c)` is
+        evaluated once per structurally nonzero pair.
+        """
+        bound = copy.copy(self)
+        bound._E3 = E3
+        bound._P = E3.shape[0]
+        bound._bs, bound._cs, bound._W = pairs
+        return bound
+
+    @property
+    def E3(self):
+        """:math:`\\mathbb E[\\Psi_a\\Psi_b\\Psi_c]` (P, P, P) of the system the term is bound to."""
+        try:
+            return self._E3
+        except AttributeError:
+            raise ValueError(
+                f"term {self.name!r} is not bound to a system; use the copy in system.terms"
+            ) from None
+
+    def _abs_form(self):
+        """The form with :math:`|A|` (a dense form), else the form itself (an estimate)."""
+        if getattr(self, "_form_abs", None) is None:
+            A = getattr(self.form, "A", None)
+            self._form_abs = self.form if A is None else DenseQuadraticForm(np.abs(A))
+        return self._form_abs
+
+    def magnitude(self, Theta, X=None):
+        """The round-off scale of the projected form (no coefficient), (N, P).
+
+        :math:`|A|:|\\Theta||\\Theta|` projected with :math:`|\\mathbb E[\\Psi\\Psi\\Psi]|`; with
+        ``X``, the same for the Jacobian action :meth:`linear_action` along ``X``.
+        """
+        form, T = self._abs_form(), np.abs(Theta)
+        Y = T if X is None else np.abs(X)
+        if self._P == 1:
+            out = np.abs(form.apply(Y, T))
+            return out if X is None else out + np.abs(form.apply(T, Y))
+        bs, cs, W = self._bs, self._cs, np.abs(self._W)
+        out = np.abs(form.apply(Y[:, bs], T[:, cs]))
+        if X is not None:
+            out = out + np.abs(form.apply(T[:, bs], Y[:, cs]))
+        return out @ W
 
     def _raw(self, Theta):
         if self._P == 1:
@@ -477,9 +531,13 @@ class LoadTerm:
         term.size, term.n_eps = B.shape
         return term
 
-    def bind(self, E1):
-        self._E1 = E1
-        self._N = self.size
+    def bind(self, E1, N=None):
+        """A copy bound to a system with :math:`\\mathbb E[\\Psi]` = ``E1`` and state size ``N``
+        (``self`` is unchanged)."""
+        bound = copy.copy(self)
+        bound._E1 = E1
+        bound._N = self.size if N is None else N
+        return bound
 
     def check_sizes(self, N, n_eps):
         """Check the sizes known from arrays against the system's ``N`` and ``n_eps``."""
@@ -493,7 +551,6 @@ class LoadTerm:
                 f"load term {self.name!r}: `B` has {self.n_eps} columns but the system has "
                 f"n_eps={n_eps} parameters; pass B of shape (N, n_eps)"
             )
-        self._N = N
 
     def _chaos(self, v):
         try:

@@ -1,0 +1,154 @@
+"""Newton's method on ``fun(z) -> (r, J)`` with the linear solves of :mod:`.linear`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validation import as_finite_array, as_operator
+from ..errors import KrylovError, ModelEvaluationError
+from .linear import (
+    DenseFactor,
+    dense_lu,
+)
+from .operator import AugmentedOperator
+from .plan import SolveStatus, failure_message, newton_converged, residual_floor
+
+
+@dataclass
+class NewtonInfo:
+    """Outcome of one Newton solve.
+
+    ``solver`` names the linear solver used (e.g. ``"dense"``, ``"cg+mean"``),
+    ``linear_iterations`` the Krylov iterations of each linear solve (empty for direct
+    solvers) and ``status`` why the iteration stopped (:class:`.plan.SolveStatus`).
+    """
+
+    success: bool
+    nit: int
+    residual_norm: float
+    message: str
+    solver: str = "dense"
+    linear_iterations: tuple = ()
+    status: SolveStatus = SolveStatus.CONVERGED
+
+
+def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None, scale=None):
+    """Newton's method on ``fun(z) -> (r, J)``.
+
+    Parameters
+    ----------
+    fun : callable
+        Returns the residual ``r`` (n,) and its Jacobian ``J``: a dense ``(n, n)`` array, or
+        a :class:`~.operator.GalerkinOperator` / :class:`~.operator.AugmentedOperator`
+        handled by ``linear_solver``.
+    z0 : (n,) array_like
+    tol : float
+        Convergence when :math:`\\|r\\|_2 < \\mathrm{tol}`, or (with ``scale``) when
+        :math:`\\|r\\|_2` is at the round-off floor of the model's scale, if that floor is
+        above ``tol`` (:func:`.plan.newton_converged`).
+    maxiter : int
+    linear_solver : LinearSolver, optional
+        How the Jacobians are factorized (dense LU when omitted). With a Krylov solver
+        each step is an inexact Newton step (:meth:`LinearSolver.newton_rtol`).
+    scale : callable, optional
+        ``scale(z) -> float``, the magnitude of the terms the residual sums at ``z``
+        (:meth:`GalerkinSystem.residual_scale`); evaluated only while
+        :math:`\\|r\\| \\ge` ``tol``.
+
+    Returns
+    -------
+    z : (n,) ndarray
+    factor : object with ``solve(rhs)``, or ``None``
+        Factors of the Jacobian at the returned ``z`` (``None`` when the iteration failed);
+        the Jacobian is evaluated at the converged point and used for one final
+        correction, so ``factor`` is exact for sensitivities.
+    info : NewtonInfo
+    """
+    z = np.array(z0, dtype=float)
+    rnorm = np.inf
+    label = "dense" if linear_solver is None else linear_solver.record.solver
+
+    def info(status, k, message):
+        its = () if linear_solver is None else tuple(linear_solver.record.iterations)
+        ok = status == SolveStatus.CONVERGED
+        return NewtonInfo(ok, k, rnorm, message, label, its, status)
+
+    for k in range(maxiter + 1):
+        try:
+            r, J = fun(z)
+            rnorm = float(np.linalg.norm(r))
+            floor = 0.0
+            if scale is not None and rnorm >= tol and np.isfinite(rnorm):
+                floor = residual_floor(scale(z), tol)
+        except ModelEvaluationError as e:
+            return z, None, info(SolveStatus.MODEL_FAILURE, k, f"model evaluation failed: {e}")
+        if not np.isfinite(rnorm):
+            return (
+                z,
+                None,
+                info(SolveStatus.NON_FINITE, k, failure_message(SolveStatus.NON_FINITE, maxiter)),
+            )
+        if linear_solver is None:
+            lu = dense_lu(J)
+            factor = None if lu is None else DenseFactor(lu)
+            rtol = None
+        else:
+            factor = linear_solver.factorize(J)
+            rtol = linear_solver.newton_rtol(rnorm, tol, floor)
+        if factor is None:
+            message = failure_message(SolveStatus.SINGULAR_JACOBIAN, maxiter)
+            return z, None, info(SolveStatus.SINGULAR_JACOBIAN, k, message)
+        try:
+            dz = factor.solve(r, rtol=rtol)
+        except KrylovError as e:
+            message = f"linear solve of Newton step {k} failed: {e}"
+            return z, None, info(SolveStatus.KRYLOV_FAILED, k, message)
+        z = z - dz
+        if newton_converged(rnorm, tol, floor):
+            return z, factor, info(SolveStatus.CONVERGED, k, "converged")
+    message = failure_message(SolveStatus.MAX_ITERATIONS, maxiter)
+    return z, None, info(SolveStatus.MAX_ITERATIONS, maxiter, message)
+
+
+class Bordered:
+    """The ECFM bordered operators of one constrained solve.
+
+    ``Bordered(Jl, Cth)(J)`` wraps ``J`` with the constraint blocks; for a linear ``J``
+    the same object comes back for the same ``J``, so the linear solver reuses its factors
+    (Schur complement included) across steps. The cache lives here, with the solve.
+    """
+
+    def __init__(self, Jl, Cth):
+        self.Jl, self.Cth = Jl, Cth
+        self._last = None
+
+    def __call__(self, J):
+        if self._last is not None and self._last.J is J:
+            return self._last
+        op = AugmentedOperator(J, self.Jl, self.Cth)
+        self._last = op if J.is_linear else None
+        return op
+
+
+def _constraint_scale(Cth, theta, v):
+    """The round-off scale of the data-constraint rows :math:`C\\theta - v`."""
+    return float(np.linalg.norm(abs(Cth) @ np.abs(theta)) + np.linalg.norm(v))
+
+
+def _check_constraint(system, constraint, n_rows=None):
+    if constraint is None:
+        return None, None
+    if system.Gamma is None:
+        raise ValueError("a data `constraint` needs constraint forces: build the system with Gamma")
+    try:
+        M_obs, v = constraint
+    except (TypeError, ValueError) as e:
+        raise TypeError("`constraint` must be a pair (M_obs, v)") from e
+    M_obs = as_operator("M_obs", M_obs, shape=(system.n_forces, system.N))
+    v = as_finite_array("v", v)
+    want = (system.n_forces,) if n_rows is None else (n_rows, system.n_forces)
+    if v.shape != want:
+        raise ValueError(f"`v` must have shape {want}, got {v.shape}")
+    return M_obs, v

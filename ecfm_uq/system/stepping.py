@@ -1,0 +1,249 @@
+"""Backward-Euler marches with forward sensitivities and kept factors for the adjoint.
+
+Steady problems solve :math:`R(\\Theta;\\epsilon,\\lambda) = 0`, optionally augmented with
+the data constraint :math:`\\mathcal M\\,\\mathbb E[\\theta] - v = 0` for the unknowns
+:math:`(\\Theta, \\lambda)` (the ECFM inner problem, Eq. ecfm and ecfm_solve).
+Dynamic problems march
+
+.. math::
+
+    \\frac{M}{\\Delta t}(\\Theta_{t+1} - \\Theta_t) + R(\\Theta_{t+1}; \\epsilon,
+    \\lambda_{t+1}, t_{t+1}) = 0
+
+(Eq. backward_euler), with the same optional constraint at every step. Forward
+sensitivities (Eqs. discrete_sens, discrete_sens_ecfm, stochastic_sens) reuse the
+factorized Jacobian at the converged state: after convergence the Jacobian is evaluated
+and factorized once more, used for one last Newton correction and for all
+sensitivity right-hand sides.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._validation import as_finite_array, check_int, check_positive
+from ..errors import ConvergenceError
+from .compiled import compiled_march
+from .linear import LinearSolver
+from .nonlinear import Bordered, _check_constraint, _constraint_scale, newton
+from .options import solver_options
+from .trajectory import Trajectory, _generic_adjoint
+
+
+def march(
+    system,
+    eps,
+    Theta0,
+    dt,
+    n_steps,
+    *,
+    t0=0.0,
+    constraint=None,
+    sensitivities=False,
+    tol=1e-10,
+    maxiter=30,
+    strict=False,
+    solver="auto",
+    keep_factors=False,
+    guess=None,
+):
+    """Integrate :math:`M\\dot\\Theta + R(\\Theta; \\epsilon, \\lambda, t) = 0` by backward Euler.
+
+    Parameters
+    ----------
+    system : GalerkinSystem
+        Must have a mass matrix ``M``.
+    eps : (n_eps,) array_like
+    Theta0 : (N, P) or (N,) array_like
+        Initial state (independent of :math:`\\epsilon`).
+    dt : float
+    n_steps : int
+    t0 : float
+    constraint : (M_obs, V), optional
+        Data constraint at every step, ``V`` of shape (n_steps + 1, C) with row ``t`` the
+        data at time ``t0 + t dt`` (row 0 unused). :math:`\\lambda_t` become unknowns
+        (Eq. ecfm_solve).
+    sensitivities : bool
+        Also integrate :math:`\\partial\\Theta/\\partial\\epsilon` (and
+        :math:`\\partial\\lambda/\\partial\\epsilon`) with the factorized step Jacobian.
+    tol, maxiter : Newton settings per step.
+    strict : bool
+        Raise :class:`ConvergenceError` on failure instead of returning ``success=False``.
+    solver : str, SolverOptions or dict
+        Linear solver for the step Jacobians :math:`M/\\Delta t + J`, as for
+        :func:`solve_steady` (``"decoupled"`` is for steady solves only).
+    keep_factors : bool
+        Keep every step's factorized Jacobian for :meth:`Trajectory.adjoint_gradient`.
+    guess : Trajectory, optional
+        A trajectory on the same time grid (e.g. at the previous parameters of an
+        optimizer) whose states start each step's Newton iteration instead of the
+        previous step's state (a warm start: fewer Newton iterations, same solution to
+        ``tol``).
+
+    Notes
+    -----
+    Small systems are marched by a compiled kernel (:mod:`._kernels`) with the same
+    maths and no Python work per step when the solve plan (:mod:`.plan`) says so:
+    ``P = 1`` with the dense solver (``Trajectory.solver`` then reads
+    ``"dense (compiled)"``), or a nonlinear one-germ ``P > 1`` system with GMRES and the
+    nodal preconditioner (``"gmres+nodal (compiled)"``). ``solver={"compiled": False}``
+    takes the generic path, ``True`` demands a kernel.
+
+    Returns
+    -------
+    Trajectory
+    """
+    eps = system.check_eps(eps)
+    dt = check_positive("dt", dt)
+    n_steps = check_int("n_steps", n_steps, minimum=1)
+    tol = check_positive("tol", tol)
+    maxiter = check_int("maxiter", maxiter, minimum=1)
+    N, P = system.shape
+    n = N * P
+    Theta0 = as_finite_array("Theta0", Theta0)
+    if Theta0.shape == (N,):
+        Theta0 = np.outer(Theta0, np.eye(P)[0])
+    if Theta0.shape != (N, P):
+        raise ValueError(f"`Theta0` must have shape {(N, P)} or {(N,)}, got {Theta0.shape}")
+    M_obs, V = _check_constraint(system, constraint, n_rows=n_steps + 1)
+    constrained = M_obs is not None
+    C = system.n_forces if constrained else 0
+    if system.M is None:
+        system.mass_matrix()  # raises the "no mass matrix" error
+    opts = solver_options(solver)
+    plan = dict(constrained=constrained, steady=False, keep_factors=keep_factors)
+    linear = LinearSolver(system, opts, **plan)
+    if guess is not None:
+        if not isinstance(guess, Trajectory) or guess.Theta.shape != (n_steps + 1, N, P):
+            raise ValueError(
+                f"`guess` must be a Trajectory of shape {(n_steps + 1, N, P)} (a previous "
+                "march on the same grid)"
+            )
+        if constrained and guess.lam.shape != (n_steps + 1, C):
+            raise ValueError("`guess` must come from a march under the same data constraint")
+    args = (system, eps, Theta0, dt, n_steps, t0, M_obs, V, sensitivities, tol, maxiter)
+    if linear.plan.path != "generic":
+        traj = compiled_march(linear, *args, keep_factors, guess)
+        if traj is not None:
+            if strict and not traj.success:
+                raise ConvergenceError(traj.message)
+            return traj
+        # the kernel did not compile with this numba: the same solve on the generic path
+        linear = LinearSolver(system, solver_options(opts, compiled=False), **plan)
+    if linear.name == "dense":
+        Mdt = system.mass_matrix() / dt
+
+        def mass(X):  # (NP,) or (NP, m)
+            return Mdt @ X
+
+        def mass_T(x):
+            return Mdt.T @ x
+    else:
+
+        def mass(X):
+            Xr = X.reshape(N, P, -1)
+            out = np.stack([system.apply_mass(Xr[:, :, j]) for j in range(Xr.shape[2])], -1)
+            return out.reshape(X.shape) / dt
+
+        def mass_T(x):
+            return system.apply_mass(x.reshape(N, P), transpose=True).ravel() / dt
+
+    if constrained:
+        Cth = system.constraint_jacobian(M_obs)
+        Jl = system.lam_jacobian()
+        bordered = Bordered(Jl, Cth)
+
+    times = t0 + dt * np.arange(n_steps + 1)
+    Th = np.zeros((n_steps + 1, N, P))
+    Th[0] = Theta0
+    lam = np.zeros((n_steps + 1, C))
+    dTh = np.zeros((n_steps + 1, n, system.n_eps)) if sensitivities else None
+    dlam = np.zeros((n_steps + 1, C, system.n_eps)) if sensitivities and constrained else None
+    nits = np.zeros(n_steps, dtype=int)
+    factors = [] if keep_factors else None
+
+    for s in range(n_steps):
+        t1 = times[s + 1]
+        prev = Th[s].ravel()
+
+        if constrained:
+            v1 = V[s + 1]
+
+            def fun(z, prev=prev, t1=t1, v1=v1):
+                T1, l1 = z[:n].reshape(N, P), z[n:]
+                r1 = mass(z[:n] - prev) + system.residual(T1, eps, l1, t1).ravel()
+                J = bordered(system.jacobian_operator(T1, eps, t1, dt=dt))
+                return np.concatenate([r1, Cth @ z[:n] - v1]), J
+
+            z0 = np.concatenate([prev, lam[s]])
+            if guess is not None:
+                z0 = np.concatenate([guess.Theta[s + 1].ravel(), guess.lam[s + 1]])
+        else:
+
+            def fun(z, prev=prev, t1=t1):
+                T1 = z.reshape(N, P)
+                r1 = mass(z - prev) + system.residual(T1, eps, None, t1).ravel()
+                return r1, system.jacobian_operator(T1, eps, t1, dt=dt)
+
+            z0 = prev if guess is None else guess.Theta[s + 1].ravel()
+
+        def scale(z, prev=prev, t1=t1, v1=V[s + 1] if constrained else None):
+            T1 = z[:n].reshape(N, P)
+            mag = np.abs(T1) + np.abs(prev.reshape(N, P))
+            sc = system.residual_scale(T1, eps, z[n:] if constrained else None, t1)
+            sc += system.mass_scale(mag) / dt
+            return sc + (_constraint_scale(Cth, z[:n], v1) if constrained else 0.0)
+
+        z, lu, info = newton(fun, z0, tol, maxiter, linear_solver=linear, scale=scale)
+        nits[s] = info.nit
+        if not info.success:
+            msg = (
+                f"{system.name}: Newton failed at step {s + 1} (t={t1:.6g}) with "
+                f"||R||={info.residual_norm:.3e}: {info.message}"
+            )
+            if strict:
+                raise ConvergenceError(msg)
+            k = s + 1
+            return Trajectory(
+                times[:k],
+                Th[:k],
+                lam[:k],
+                None if dTh is None else dTh[:k].reshape(k, N, P, -1),
+                None if dlam is None else dlam[:k],
+                False,
+                msg,
+                s + 1,
+                nits[: s + 1],
+                linear.record.solver,
+                list(linear.record.iterations),
+                status=info.status,
+            )
+        Th[s + 1] = z[:n].reshape(N, P)
+        if keep_factors:
+            factors.append(lu)
+        if constrained:
+            lam[s + 1] = z[n:]
+        if sensitivities:
+            T1 = Th[s + 1]
+            rhs = mass(dTh[s]) - system.eps_jacobian(T1, eps, t1)
+            if constrained:
+                rhs = np.vstack([rhs, np.zeros((C, system.n_eps))])
+            S = lu.solve(rhs)
+            dTh[s + 1] = S[:n]
+            if constrained:
+                dlam[s + 1] = S[n:]
+
+    return Trajectory(
+        times,
+        Th,
+        lam,
+        None if dTh is None else dTh.reshape(n_steps + 1, N, P, system.n_eps),
+        dlam,
+        True,
+        "converged at every step",
+        None,
+        nits,
+        linear.record.solver,
+        list(linear.record.iterations),
+        _generic_adjoint(system, eps, Th, times, factors, mass_T) if keep_factors else None,
+    )

@@ -1,0 +1,123 @@
+"""The result of a backward-Euler march and its discrete adjoint (paper Eq. discrete_sens)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._validation import as_finite_array
+from ..errors import ConvergenceError
+from .plan import SolveStatus
+
+
+@dataclass
+class Trajectory:
+    """Result of :func:`march`.
+
+    Attributes
+    ----------
+    times : (n_steps + 1,) ndarray
+    Theta : (n_steps + 1, N, P) ndarray
+        States. After a failure the arrays stop at the last converged step, so no
+        unconverged state is ever returned.
+    lam : (n_steps + 1, C) ndarray
+        Constraint forces (zero at t = 0).
+    dTheta : (n_steps + 1, N, P, n_eps) ndarray or None
+        :math:`\\partial\\Theta_t/\\partial\\epsilon` (Eq. discrete_sens / discrete_sens_ecfm).
+    dlam : (n_steps + 1, C, n_eps) ndarray or None
+    success : bool
+    message : str
+    failed_step : int or None
+        Index of the step whose Newton solve failed.
+    nit : (n_steps,) ndarray
+        Newton iterations per step.
+    solver : str
+        The linear solver used.
+    linear_iterations : list of int
+        Krylov iterations of every linear solve (empty for direct solvers).
+    status : SolveStatus
+        ``CONVERGED``, or why the failed step stopped (:class:`.plan.SolveStatus`; the
+        same codes whichever path marched).
+    """
+
+    times: np.ndarray
+    Theta: np.ndarray
+    lam: np.ndarray
+    dTheta: np.ndarray | None
+    dlam: np.ndarray | None
+    success: bool
+    message: str
+    failed_step: int | None
+    nit: np.ndarray
+    solver: str = "dense"
+    linear_iterations: list = field(default_factory=list)
+    _adjoint: object = field(default=None, repr=False)
+    status: SolveStatus = SolveStatus.CONVERGED
+
+    def adjoint_gradient(self, g_theta, g_lam=None):
+        """Gradient in :math:`\\epsilon` of :math:`z = \\sum_t z_t(\\Theta_t, \\lambda_t)` by the
+        discrete adjoint of backward Euler (needs ``march(..., keep_factors=True)``).
+
+        Backward in time, with :math:`A_t` the (augmented) step Jacobian,
+
+        .. math::
+
+            A_t^T\\mu_t = \\frac{\\partial z}{\\partial(\\Theta_t, \\lambda_t)}
+                + \\begin{bmatrix}(M/\\Delta t)^T\\mu_{t+1,\\Theta}\\\\0\\end{bmatrix},
+            \\qquad
+            \\frac{dz}{d\\epsilon} = -\\sum_t
+                \\Bigl(\\frac{\\partial R_t}{\\partial\\epsilon}\\Bigr)^T\\mu_{t,\\Theta},
+
+        one transposed solve per step with the factors kept from the forward march,
+        whatever the number of parameters (the forward sensitivities of Eq.
+        discrete_sens need ``n_eps`` right-hand sides per step).
+
+        Parameters
+        ----------
+        g_theta : (n_steps + 1, N, P) array_like
+            :math:`\\partial z/\\partial\\Theta_t` (row 0 is ignored: the initial state
+            does not depend on :math:`\\epsilon`).
+        g_lam : (n_steps + 1, C) array_like, optional
+            :math:`\\partial z/\\partial\\lambda_t` (constrained marches).
+
+        Returns
+        -------
+        (n_eps,) ndarray
+        """
+        if self._adjoint is None:
+            raise ValueError("march with keep_factors=True to compute adjoint gradients")
+        if not self.success:
+            raise ConvergenceError(f"adjoint of a failed march: {self.message}")
+        n_t, N, P = self.Theta.shape
+        g_theta = as_finite_array("g_theta", g_theta, shape=(n_t, N, P)).reshape(n_t, N * P)
+        C = self.lam.shape[1]
+        if C:
+            g_lam = np.zeros((n_t, C)) if g_lam is None else g_lam
+            g_lam = as_finite_array("g_lam", g_lam, shape=(n_t, C))
+            g_theta = np.concatenate([g_theta, g_lam], axis=1)
+        elif g_lam is not None:
+            raise ValueError("`g_lam` is only defined for a march under a data constraint")
+        return self._adjoint(g_theta)
+
+
+def _generic_adjoint(system, eps, Theta, times, factors, mass_T):
+    """The backward pass of :meth:`Trajectory.adjoint_gradient` with kept factors.
+
+    Returns ``adjoint(g)``, ``g`` of shape (n_t, NP + C) holding
+    :math:`\\partial z/\\partial(\\Theta_t, \\lambda_t)`.
+    """
+    n = Theta[0].size
+
+    def adjoint(g):
+        grad = np.zeros(system.n_eps)
+        carry = np.zeros(n)
+        for t in range(len(times) - 1, 0, -1):
+            rhs = g[t].copy()
+            rhs[:n] += carry
+            mu = factors[t - 1].solve_transpose(rhs)[:n]
+            grad -= system.eps_vjp(Theta[t], eps, mu, times[t])
+            carry = mass_T(mu)
+        return grad
+
+    return adjoint

@@ -1,0 +1,118 @@
+"""Newton's termination does not depend on the model's units (issue 21, item 1).
+
+A 1-D finite-difference Poisson matrix in plain units has entries 1/h^2 ~ 4e6 at
+N = 2000, so round-off alone leaves a residual ~1e-8, above the absolute tol = 1e-10:
+every solver must still stop at the round-off floor of the model's own scale and match
+scipy's spsolve, in plain units and scaled by 1e-9 and 1e9.
+"""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ecfm_uq.chaos import ChaosBasis, weighted_gram
+from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm, QuadraticTerm, march, solve_steady
+from ecfm_uq.system.plan import SolveStatus, newton_converged, residual_floor
+
+
+def _poisson(N):
+    h = 1.0 / (N + 1)
+    K = sp.diags([-np.ones(N - 1), 2 * np.ones(N), -np.ones(N - 1)], [-1, 0, 1], format="csr")
+    x = np.linspace(h, 1 - h, N)
+    return K / h**2, np.pi**2 * np.sin(np.pi * x) + 1.0
+
+
+@pytest.mark.parametrize("units", [1.0, 1e-9, 1e9])
+@pytest.mark.parametrize("solver", ["auto", "dense", "sparse-direct", "cg", "gmres"])
+def test_poisson_in_any_units_matches_spsolve(units, solver):
+    K, F = _poisson(2000)
+    K = units * K
+    ref = spla.spsolve(K.tocsc(), F)
+    system = GalerkinSystem([LinearTerm(K), LoadTerm.constant(F)], 0)
+    sol = solve_steady(system, [], solver=solver)
+    assert sol.success and sol.status == SolveStatus.CONVERGED, sol.message
+    np.testing.assert_allclose(sol.Theta[:, 0], ref, rtol=0, atol=1e-8 * np.abs(ref).max())
+    # the absolute test alone could not have stopped: round-off sits above tol = 1e-10
+    assert sol.residual_norm > 1e-10
+
+
+@pytest.mark.parametrize("units", [1.0, 1e-9, 1e9])
+def test_random_poisson_in_any_units_matches_spsolve_of_the_galerkin_matrix(units):
+    # conductivity 1 + 0.3 w1 + 0.2 w2 (two germs): "auto" takes a Krylov method
+    N = 400
+    K, F = _poisson(N)
+    K = units * K
+    basis = ChaosBasis(2, dim=2)
+    G1 = weighted_gram(basis, lambda w: 1.0 + 0.3 * w[:, 0])
+    G2 = weighted_gram(basis, lambda w: 0.2 * w[:, 1])
+    terms = [LinearTerm(K, G=G1), LinearTerm(K, G=G2), LoadTerm.constant(F)]
+    system = GalerkinSystem(terms, 0, basis=basis)
+    sol = solve_steady(system, [])
+    assert sol.success, sol.message
+    assert sol.solver.startswith(("cg", "gmres"))
+    A = system.jacobian_operator(system.zeros(), []).to_sparse().tocsc()
+    b = -system.residual(system.zeros(), []).ravel()
+    ref = spla.spsolve(A, b).reshape(N, system.P)
+    np.testing.assert_allclose(sol.Theta, ref, rtol=0, atol=1e-8 * np.abs(ref).max())
+
+
+def test_well_scaled_models_still_stop_on_the_absolute_tol():
+    # the floor only counts where it exceeds tol: here it is far below
+    assert residual_floor(1.0, 1e-10) == 0.0
+    assert not newton_converged(2e-10, 1e-10, residual_floor(1.0, 1e-10))
+    # a model of scale 1e8 cannot get below ~2e-7: that is converged
+    floor = residual_floor(1e8, 1e-10)
+    assert floor == pytest.approx(10 * np.finfo(float).eps * 1e8)
+    assert newton_converged(1e-7, 1e-10, floor) and not newton_converged(1e-5, 1e-10, floor)
+
+
+@pytest.mark.parametrize("units", [1.0, 1e-9, 1e9])
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_march_of_the_whole_model_in_any_units_matches_backward_euler(units, compiled):
+    # M, K and F all scaled: the states are the same, the residual's round-off scales
+    N, dt, n_steps = 100, 1e-3, 5
+    K, F = _poisson(N)
+    M = sp.identity(N, format="csr")
+    x = np.linspace(0, 1, N + 2)[1:-1]
+    theta0 = np.sin(2 * np.pi * x)
+    A = (M / dt + K).tocsc()
+    ref = [theta0]
+    for _ in range(n_steps):
+        ref.append(spla.spsolve(A, M @ ref[-1] / dt + F))
+    terms = [LinearTerm((units * K).toarray()), LoadTerm.constant(units * F)]
+    system = GalerkinSystem(terms, 0, M=units * M.toarray())
+    tr = march(system, [], theta0, dt, n_steps, solver={"compiled": compiled})
+    assert tr.success and tr.solver == ("dense (compiled)" if compiled else "dense"), tr.message
+    scale = np.abs(ref).max()
+    np.testing.assert_allclose(tr.Theta[:, :, 0], ref, rtol=0, atol=1e-8 * scale)
+
+
+def _random_burgers_like(units, N=24):
+    """A nonlinear one-germ model (the compiled P > 1 march takes it), all terms x units."""
+    K, F = _poisson(N)
+    A = np.zeros((N, N, N))
+    for i in range(1, N - 1):  # a centred u u_x
+        A[i, i, i + 1], A[i, i, i - 1] = 0.25 * (N + 1), -0.25 * (N + 1)
+    basis = ChaosBasis(3)
+    G = weighted_gram(basis, lambda w: 1.0 + 0.3 * np.ravel(w))
+    terms = [
+        LinearTerm(units * 0.05 * K.toarray(), G=G),
+        QuadraticTerm(units * A),
+        LoadTerm.constant(units * 10 * F),
+    ]
+    return GalerkinSystem(terms, 0, basis=basis, M=units * np.eye(N))
+
+
+@pytest.mark.parametrize("units", [1e3, 1e9])
+def test_the_compiled_stochastic_march_in_large_units_matches_the_dense_march(units):
+    # x1e9: the round-off floor (~1e-5 here) is far above tol = 1e-10. (The whole model
+    # x1e-9 is the other side, an absolute tol that is loose for it: not covered by the
+    # floor, which only ever relaxes tol to what round-off allows.)
+    dt, n_steps = 2e-3, 4
+    ref = march(_random_burgers_like(1.0), [], np.zeros(24), dt, n_steps, solver="dense")
+    tr = march(_random_burgers_like(units), [], np.zeros(24), dt, n_steps)
+    assert ref.success and tr.success, tr.message
+    assert tr.solver == "gmres+nodal (compiled)"
+    scale = np.abs(ref.Theta).max()
+    np.testing.assert_allclose(tr.Theta, ref.Theta, rtol=0, atol=1e-8 * scale)
