@@ -36,6 +36,8 @@ import warnings
 from dataclasses import dataclass, field, replace
 
 from .._validation import check_int, check_positive
+from ..system.plan import dense_unknowns
+from ..threads import library_threads
 from .loglik import likelihood_of
 from .verdict import DEFAULT_ALPHA, check_alpha, check_bounds
 
@@ -96,6 +98,7 @@ def _check_sigma(sigma):
         raise type(e)(f"{e}; `sigma` is the known sensor noise standard deviation") from e
 
 
+@library_threads(size=lambda problem, *a, **k: dense_unknowns(problem.system))
 def fit(
     problem,
     eps0,
