@@ -73,3 +73,24 @@ def test_binomial_band_against_scipy():
     k = np.arange(201)
     p = stats.binom.pmf(k, 200, 0.95)
     assert p[(k >= lo * 200) & (k <= hi * 200)].sum() >= 0.95
+
+
+@pytest.mark.parametrize("form", ["standard", "ecfm"])
+def test_profile_intervals_are_honest_with_a_parameter_in_the_operator(result, form):
+    blk = result["operator"][form]
+    assert blk["n_failed"] <= 8, blk  # estimates that run to infinity are refused
+    lo, hi = stats.binom.ppf([0.0005, 0.9995], 40, 0.95) / 40
+    for cov in blk["profile"]["coverage_per_parameter"]:
+        assert lo <= cov <= hi, blk
+    ratio = result["operator"]["ecfm_over_standard_profile_width"]
+    assert all(r is None or r <= 1.5 for r in ratio)
+    assert (result["_dir"] / "operator.png").stat().st_size > 0
+
+
+def test_discrepancy_test_grows_from_its_size_to_full_power(result):
+    rows = result["discrepancy"]["rows"]
+    rejects = [r["tau_test_rejects"] for r in rows]
+    assert rows[0]["amplitude"] == 0.0 and rejects[0] <= 0.15  # 40 data sets at alpha 0.05
+    assert rejects == sorted(rejects) and rejects[-1] >= 0.8
+    rms = [r["residual_rms_over_sigma"] for r in rows]
+    assert rms == sorted(rms)

@@ -68,3 +68,14 @@ def test_uncertainty_page_example_runs_and_reports_intervals():
     half = 1.959963984540054 * res.eps_stderr  # normal 97.5 % quantile (sigma known)
     np.testing.assert_allclose(res.eps_ci95[:, 1] - res.eps, half, rtol=1e-12)
     np.testing.assert_allclose(res.eps - res.eps_ci95[:, 0], half, rtol=1e-12)
+
+
+def test_calibration_page_example_runs_and_says_the_lower_end_is_open():
+    text = (DOCS / "calibration.md").read_text()
+    code = re.findall(r"```python\n(.*?)```", text, re.S)[0]
+    ns = {}
+    exec(compile(code, "calibration.md", "exec"), ns)
+    summary = ns["summary"]
+    lo, hi = summary.intervals[0]
+    assert lo == -np.inf and hi > 0.0 and "not identifiable" in summary.message
+    assert summary.intervals[1, 0] < 20.0 < summary.intervals[1, 1]

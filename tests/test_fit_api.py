@@ -51,7 +51,10 @@ def test_steady_fit_reports_status_counts_uncertainty_and_verdict(formulation):
     assert isinstance(res.uncertainty, Uncertainty) and res.uncertainty.success
     np.testing.assert_array_equal(res.eps_cov, res.uncertainty.cov)  # the v0.2 name
     assert isinstance(res.verdict, Verdict) and res.extra["verdict"] is res.verdict
-    assert res.verdict.alpha == 0.05 and res.verdict.test == "chi2"
+    # with sigma, ECFM is the random-force marginal likelihood: its verdict is the
+    # likelihood-ratio test of tau = 0 (issue 20 item 3); the standard fit's the chi2 test
+    test = "chi2" if formulation == "standard" else "likelihood-ratio tau=0"
+    assert res.verdict.alpha == 0.05 and res.verdict.test == test
 
 
 def test_chi2_verdict_is_the_chi2_test_at_the_stated_size():

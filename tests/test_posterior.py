@@ -80,3 +80,59 @@ def test_pair_plot(runs, tmp_path):
     fig = pair_plot(post.samples, laplace=(lap.eps, lap.eps_cov), truth=[3.0, -2.0])
     save_figure(fig, tmp_path / "pair.png")
     assert (tmp_path / "pair.png").stat().st_size > 0
+
+
+def test_posterior_of_a_random_force_ecfm_fit_is_its_laplace_approximation():
+    """Missing source, tau > 0: the likelihood with the estimated discrepancy covariance
+    S0 is Gaussian in the readings; near-linear in eps, its posterior under a wide flat
+    prior is N(eps_hat, (J^T S0^-1 J)^-1)."""
+    from ecfm_uq.inverse import SteadyProblem, fit
+    from ecfm_uq.problems.reaction import ReactionRod
+
+    rod = ReactionRod(9)
+    clean = rod.data([1.5, 20.0], source=10.0)
+    sigma = 0.002 * np.abs(clean).mean()
+    v = clean + sigma * np.random.default_rng(3).standard_normal(clean.size)
+    res = fit(SteadyProblem(rod.system, rod.M_obs, v), [1.0, 10.0], formulation="ecfm",
+              sigma=sigma)  # fmt: skip
+    assert res.extra["tau"] > 0 and not res.verdict.consistent
+    post = sample_posterior(res, bounds=[(0.0, 3.0), (5.0, 40.0)], n_steps=3000, seed=1)
+    assert post.success, post.message
+    # Laplace covariance from the likelihood's exact gradient (central differences)
+    ell = res.likelihood
+    h = 1e-5 * np.maximum(1.0, np.abs(res.eps))
+    H = np.column_stack(
+        [(ell(res.eps + h[j] * e)[1] - ell(res.eps - h[j] * e)[1]) / (2 * h[j])
+         for j, e in enumerate(np.eye(2))]
+    )  # fmt: skip
+    cov = np.linalg.inv(0.5 * (H + H.T))
+    se = np.sqrt(np.diag(cov))
+    # Monte Carlo error of the mean ~ se / sqrt(ess): allow 4 of those
+    assert np.all(np.abs(post.mean - res.eps) < 4 * se / np.sqrt(post.ess) + 0.05 * se)
+    np.testing.assert_allclose(np.sqrt(np.diag(post.cov)), se, rtol=0.15)
+
+
+def test_posterior_of_a_dynamic_fit_and_refusals():
+    from ecfm_uq.inverse import DynamicInverseProblem, SteadyProblem, fit
+    from ecfm_uq.problems.burgers import BurgersModel
+
+    m = BurgersModel(n_modes=8, n_steps=10, T=0.5)
+    V = m.true_data([1.75, 1.0])
+    V = V + 1e-3 * np.random.default_rng(1).standard_normal(V.shape)
+    dyn = DynamicInverseProblem(m.system, m.Theta0, m.dt, m.n_steps, m.M_obs, V)
+    res = fit(dyn, [1.7, 0.9], sigma=1e-3, uncertainty=False)
+    short = sample_posterior(res, bounds=[(1.0, 2.5), (0.5, 1.5)], n_steps=60, seed=0)
+    assert not short.success and "NOT converged" in short.message
+    assert short.nfev > 0 and np.all(np.abs(short.mean - res.eps) < 0.05)
+    unknown = fit(dyn, [1.7, 0.9], uncertainty=False)  # sigma profiled: not a density
+    with pytest.raises(ValueError, match="not a density"):
+        sample_posterior(unknown, bounds=[(1.0, 2.5), (0.5, 1.5)])
+    from ecfm_uq.problems.reaction import ReactionRod
+
+    rod = ReactionRod(4)
+    ecfm = fit(SteadyProblem(rod.system, rod.M_obs, rod.data([1.5, 20.0])), [1.0, 10.0],
+               formulation="ecfm")  # fmt: skip
+    with pytest.raises(ValueError, match="no likelihood"):
+        sample_posterior(ecfm, bounds=[(0, 5), (0, 50)])
+    with pytest.raises(TypeError, match="takes the data and sigma from the fit"):
+        sample_posterior(res, m.M_obs, bounds=[(1.0, 2.5), (0.5, 1.5)])

@@ -34,10 +34,12 @@ from .likelihood import (
     optimal_forces,
     sensor_moments,
 )
+from .loglik import LogLikelihood
 from .noise import ConsistencyTest, consistency_test, noise_bounds, sample_moments
 from .noisy import ConstrainedInverse, fit_noisy_ecfm, fit_standard_slsqp
 from .optimizers import adam
 from .problems import ReplicatedProblem, SteadyProblem
+from .profile import likelihood_ratio_test, profile_intervals, profile_likelihood
 from .result import InverseResult, Uncertainty, Verdict
 from .status import FitStatus
 from .steady import ecfm_objective, fit_steady, standard_objective
@@ -49,6 +51,10 @@ __all__ = [
     "Uncertainty",
     "Verdict",
     "fit",
+    "LogLikelihood",
+    "likelihood_ratio_test",
+    "profile_intervals",
+    "profile_likelihood",
     "ConsistencyTest",
     "ConstrainedInverse",
     "DegenerateVarianceError",

@@ -33,9 +33,12 @@ from __future__ import annotations
 
 import numbers
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from .._validation import check_int, check_positive
+from ..system.plan import dense_unknowns
+from ..threads import library_threads
+from .loglik import likelihood_of
 from .verdict import DEFAULT_ALPHA, check_alpha, check_bounds
 
 __all__ = ["FitSettings", "fit"]
@@ -95,6 +98,7 @@ def _check_sigma(sigma):
         raise type(e)(f"{e}; `sigma` is the known sensor noise standard deviation") from e
 
 
+@library_threads(size=lambda problem, *a, **k: dense_unknowns(problem.system))
 def fit(
     problem,
     eps0,
@@ -180,17 +184,27 @@ def fit(
         uncertainty=bool(uncertainty),
         alpha=check_alpha(alpha),
     )
-    if kind == "steady":
-        from .steady import fit_steady_problem
-
-        return fit_steady_problem(problem, eps0, settings)
-    if kind == "dynamic":
-        from .dynamic import fit_dynamic_problem
-
-        return fit_dynamic_problem(problem, eps0, settings)
-    from .replicated import fit_replicated_problem
-
-    return fit_replicated_problem(problem, eps0, settings)
+    forces = settings.options.get("forces", "random") if formulation == "ecfm" else None
+    if forces not in (None, "random", "exact"):
+        raise ValueError(f"`options['forces']` must be 'random' or 'exact', got {forces!r}")
+    if forces is not None and "forces" in settings.options:
+        settings = replace(
+            settings, options={k: v for k, v in settings.options.items() if k != "forces"}
+        )
+    if kind == "steady" and forces == "random" and settings.sigma is not None:
+        from .discrepancy import fit_random_force as fitter
+    elif kind == "steady":
+        from .steady import fit_steady_problem as fitter
+    elif kind == "dynamic":
+        from .dynamic import fit_dynamic_problem as fitter
+    else:
+        from .replicated import fit_replicated_problem as fitter
+    result = fitter(problem, eps0, settings)
+    # what the profile likelihood needs: the likelihood (or why there is none), the bounds
+    if result.likelihood is None:
+        result.likelihood = likelihood_of(problem, settings.formulation, settings.sigma)
+    result.bounds = settings.bounds
+    return result
 
 
 _WARNED = set()

@@ -108,10 +108,10 @@ def uniform_box_prior(bounds):
 
 def sample_posterior(
     system,
-    M_obs,
-    v,
-    sigma,
-    eps0,
+    M_obs=None,
+    v=None,
+    sigma=None,
+    eps0=None,
     *,
     prior=None,
     bounds=None,
@@ -123,9 +123,16 @@ def sample_posterior(
 ):
     """Sample :math:`p(\\epsilon\\mid v)` of the standard Gaussian likelihood with emcee.
 
+    ``sample_posterior(result, prior=..., ...)`` samples the likelihood a fit carries
+    (``result.likelihood`` of :func:`~ecfm_uq.inverse.fit`): steady and dynamic least
+    squares with ``sigma`` known, and the random-force ECFM (its likelihood with the
+    estimated discrepancy covariance held fixed), starting at the estimate. Likelihoods
+    that are not a density of the data given eps are refused: sigma profiled out, the
+    replicated pseudo-likelihood, the force objectives.
+
     Parameters
     ----------
-    system : GalerkinSystem
+    system : GalerkinSystem or InverseResult
     M_obs : (C, N) array_like or scipy.sparse matrix
     v : (C,) array_like
     sigma : float
@@ -163,11 +170,25 @@ def sample_posterior(
     except ImportError as e:  # pragma: no cover - emcee is in the test extra
         raise ImportError("sample_posterior needs emcee: pip install 'ecfm-uq[bayes]'") from e
     from ..system import solve_steady
+    from .result import InverseResult
 
-    sigma = check_positive("sigma", sigma)
-    M_obs = as_operator("M_obs", M_obs, shape=(None, system.N))
-    v = as_finite_array("v", v, shape=(M_obs.shape[0],))
-    eps0 = system.check_eps(eps0)
+    if isinstance(system, InverseResult):
+        log_like, eps0 = _result_likelihood(system, M_obs, v, sigma, eps0)
+    else:
+        sigma = check_positive("sigma", sigma)
+        M_obs = as_operator("M_obs", M_obs, shape=(None, system.N))
+        v = as_finite_array("v", v, shape=(M_obs.shape[0],))
+        eps0 = system.check_eps(eps0)
+        opts = dict(solve_options or {})
+
+        def log_like(eps):
+            try:
+                sol = solve_steady(system, eps, strict=True, **opts)
+            except (ConvergenceError, ValueError):
+                return -np.inf
+            r = (M_obs @ system.mean(sol.Theta) - v) / sigma
+            return -0.5 * float(r @ r)
+
     n = eps0.size
     if prior is None:
         if bounds is None:
@@ -186,7 +207,6 @@ def sample_posterior(
         raise ValueError(f"`n_walkers` must be even and >= 2 n_eps = {2 * n}, got {n_walkers}")
     n_steps = check_int("n_steps", n_steps, minimum=10)
     init_scale = check_positive("init_scale", init_scale)
-    opts = dict(solve_options or {})
     nfev = [0]
 
     def log_post(eps):
@@ -194,12 +214,7 @@ def sample_posterior(
         if not np.isfinite(lp):
             return -np.inf
         nfev[0] += 1
-        try:
-            sol = solve_steady(system, eps, strict=True, **opts)
-        except (ConvergenceError, ValueError):
-            return -np.inf
-        r = (M_obs @ system.mean(sol.Theta) - v) / sigma
-        return lp - 0.5 * float(r @ r)
+        return lp + log_like(eps)
 
     rng = np.random.default_rng(seed)
     start = []
@@ -239,3 +254,29 @@ def sample_posterior(
         status=FitStatus.CONVERGED if converged else FitStatus.MAX_ITERATIONS,
         nfev=nfev[0],
     )
+
+
+def _result_likelihood(result, *unused):
+    """``log p(v | eps)`` (up to a constant) of a fit, and its estimate as the start."""
+    if any(u is not None for u in unused):
+        raise TypeError(
+            "sample_posterior(result, ...) takes the data and sigma from the fit; pass only "
+            "keywords (prior, bounds, n_walkers, n_steps, seed, init_scale)"
+        )
+    like = getattr(result, "likelihood", None)
+    if like is None or isinstance(like, str):
+        raise ValueError(f"`result` has no likelihood to sample: {like or 'not made by fit'}")
+    if like.noise not in ("known sigma", "random forces"):
+        raise ValueError(
+            f"`result`'s likelihood ({like.description}) is not a density of the data given "
+            "eps; refit with `sigma` known (formulation 'standard' or 'ecfm')"
+        )
+    failures = (ConvergenceError, ValueError, np.linalg.LinAlgError)
+
+    def log_like(eps):
+        try:
+            return -like.value(eps)
+        except failures:
+            return -np.inf
+
+    return log_like, np.asarray(result.eps, dtype=float)

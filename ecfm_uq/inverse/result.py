@@ -193,6 +193,11 @@ class InverseResult:
         is :attr:`verdict`.
     uncertainty : Uncertainty
     verdict : Verdict or None
+    likelihood : LogLikelihood, str or None
+        The fit's negative log-likelihood in :math:`\\epsilon` (for
+        :func:`~ecfm_uq.inverse.profile_intervals`), or why it has none.
+    bounds : list of (lo, hi) or None
+        The bounds the fit ran with.
 
     Notes
     -----
@@ -260,6 +265,8 @@ class InverseResult:
         if verdict is None and "verdict" in self.extra:
             verdict = self.extra["verdict"]
         self.verdict = verdict
+        self.likelihood = None  # set by fit: a LogLikelihood, or why there is none
+        self.bounds = None  # the bounds the fit ran with
 
     # -- status ---------------------------------------------------------------------------
     @property

@@ -270,6 +270,8 @@ def fit_steady(
     if not isinstance(solve_options, dict | type(None)):
         raise TypeError(f"`solve_options` must be a dict, got {solve_options!r}")
     problem = SteadyProblem(system, M_obs, v, gradient=gradient, **dict(solve_options or {}))
+    if isinstance(formulation, str) and formulation == "ecfm":  # v0.2: exact-match forces
+        options = {"forces": "exact", **dict(options or {})}
     return fit(
         problem, eps0, formulation=formulation, method=method, sigma=sigma, bounds=bounds,
         tol=gtol, maxiter=maxiter, options=options,

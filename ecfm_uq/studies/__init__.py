@@ -11,12 +11,22 @@
 
 import argparse
 import importlib
+import importlib.util
 import time
 from pathlib import Path
 
 from ._common import write_json
 
-STUDY_NAMES = ("burgers", "kpp", "beam", "mc", "boundary", "geometry", "coverage")
+STUDY_NAMES = (
+    "burgers",
+    "kpp",
+    "beam",
+    "mc",
+    "boundary",
+    "geometry",
+    "coverage",
+    "missing-physics",
+)
 
 __all__ = [
     "STUDY_NAMES",
@@ -28,9 +38,13 @@ __all__ = [
 ]
 
 
+def _module_name(name):
+    return name.replace("-", "_")
+
+
 def load_study(name):
     """Import ``ecfm_uq.studies.<name>``."""
-    return importlib.import_module(f"ecfm_uq.studies.{name}")
+    return importlib.import_module(f"ecfm_uq.studies.{_module_name(name)}")
 
 
 def available_studies():
@@ -38,12 +52,14 @@ def available_studies():
     names = []
     for name in STUDY_NAMES:
         try:
-            load_study(name)
+            mod = load_study(name)
         except ModuleNotFoundError as e:
-            if e.name != f"ecfm_uq.studies.{name}":
+            if e.name != f"ecfm_uq.studies.{_module_name(name)}":
                 raise
             continue
-        names.append(name)
+        # a study needing an optional extra (e.g. scikit-fem) is skipped without it
+        if all(importlib.util.find_spec(req) is not None for req in getattr(mod, "REQUIRES", ())):
+            names.append(name)
     return names
 
 

@@ -397,3 +397,12 @@ def _march_path(system, options, solver, precond, constrained, keep_factors):
             )
         return "generic"
     return "compiled-p1" if system.P == 1 else "compiled-sg"
+
+
+def dense_unknowns(system, *args, **kwargs):
+    """Unknowns of the largest dense system a solve of ``system`` factorizes, or ``None``
+    for sparse or matrix-free work (its BLAS calls are small): the size
+    :func:`ecfm_uq.threads.blas_threads` decides the BLAS threads by."""
+    if system.structure.sparse_input:
+        return None
+    return system.N * system.P

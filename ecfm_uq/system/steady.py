@@ -10,12 +10,13 @@ import numpy as np
 
 from .._validation import as_finite_array, check_choice, check_int, check_positive
 from ..errors import ConvergenceError
+from ..threads import library_threads
 from .linear import (
     LinearSolver,
     solver_options,
 )
 from .nonlinear import Bordered, _check_constraint, _constraint_scale, newton
-from .plan import SolveStatus
+from .plan import SolveStatus, dense_unknowns
 
 
 @dataclass
@@ -170,6 +171,7 @@ class SteadySolution:
         return S.reshape(sysm.N, sysm.P, sysm.n_forces)
 
 
+@library_threads(size=dense_unknowns)
 def solve_steady(
     system,
     eps,

@@ -23,13 +23,16 @@ import numpy as np
 
 from .._validation import as_finite_array, check_int, check_positive
 from ..errors import ConvergenceError
+from ..threads import library_threads
 from .compiled import compiled_march
 from .linear import LinearSolver
 from .nonlinear import Bordered, _check_constraint, _constraint_scale, newton
 from .options import solver_options
+from .plan import dense_unknowns
 from .trajectory import Trajectory, _generic_adjoint
 
 
+@library_threads(size=dense_unknowns)
 def march(
     system,
     eps,

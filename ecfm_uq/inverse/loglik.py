@@ -1,0 +1,170 @@
+"""The negative log-likelihood of a fit as a function of :math:`\\epsilon`.
+
+A fit "has a likelihood" when its objective is (up to a constant and a positive factor) the
+negative log-likelihood of the data under a stated noise model. :func:`likelihood_of`
+decides that once, for every problem kind and formulation, and returns a
+:class:`LogLikelihood` (or the reason there is none); the profile-likelihood intervals and
+likelihood-ratio tests of :mod:`.profile` are built on it.
+
+=====================  ==================  ==============================================
+problem                formulation         :math:`\\ell(\\epsilon)` (negative log-likelihood)
+=====================  ==================  ==============================================
+SteadyProblem          ``"standard"``      :math:`\\|r\\|^2/(2\\sigma^2)` with ``sigma``;
+                                           :math:`\\tfrac n2\\log\\|r\\|^2` (σ profiled out)
+DynamicInverseProblem  ``"standard"``      the same over the ``n = P C`` readings
+ReplicatedProblem      ``"standard"``      :math:`\\Lambda(\\epsilon, 0)` (Eq. Lam)
+=====================  ==================  ==============================================
+
+:math:`r = \\mathcal M\\,\\mathbb E[\\theta(\\epsilon)] - v` are the residuals at the sensors.
+With :math:`\\sigma` unknown it is profiled out, :math:`\\hat\\sigma^2 = \\|r\\|^2/n`, which
+leaves :math:`\\tfrac n2\\log\\|r\\|^2` up to a constant (the usual profile likelihood of a
+Gaussian regression). The paper's ECFM objective :math:`\\tfrac12\\|\\lambda\\|^2` and the
+noisy-ECFM / penalty formulations are not likelihoods of the data: their results carry
+no :class:`LogLikelihood` and :func:`~ecfm_uq.inverse.profile_intervals` says so.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["LogLikelihood", "likelihood_of"]
+
+
+@dataclass(frozen=True)
+class LogLikelihood:
+    """:math:`\\ell(\\epsilon)`, a negative log-likelihood up to an additive constant.
+
+    Attributes
+    ----------
+    evaluate : callable
+        ``evaluate(eps) -> (value, gradient)``; raises the model's own errors
+        (``ConvergenceError``, ``ModelEvaluationError``) where the model cannot be solved.
+    n_eps : int
+    n_data : int
+        Number of data values the likelihood is built on.
+    noise : str
+        ``"known sigma"``, ``"profiled sigma"`` or ``"replicated"``.
+    description : str
+        One line for messages and plots.
+    exact_gradient : bool
+        Whether ``evaluate``'s gradient is exact (else finite differences: optimizers on it
+        stop at a correspondingly looser tolerance).
+    """
+
+    evaluate: Callable
+    n_eps: int
+    n_data: int
+    noise: str
+    description: str
+    exact_gradient: bool = True  # False: finite differences, accurate to about 1e-6
+    value_only: Callable | None = None  # the value without the gradient's extra solves
+
+    def __call__(self, eps):
+        return self.evaluate(np.asarray(eps, dtype=float))
+
+    def value(self, eps):
+        """:math:`\\ell(\\epsilon)` alone (cheaper where ``value_only`` is given)."""
+        eps = np.asarray(eps, dtype=float)
+        return float(self.value_only(eps) if self.value_only else self.evaluate(eps)[0])
+
+
+def _least_squares(rss_and_grad, n_data, n_eps, sigma, what, rss_only=None):
+    """``rss_and_grad(eps) -> (||r||^2, d||r||^2/deps)`` to :class:`LogLikelihood`."""
+    if sigma is not None:
+        s2 = float(sigma) ** 2
+
+        def evaluate(eps):
+            rss, g = rss_and_grad(eps)
+            return 0.5 * rss / s2, 0.5 * g / s2
+
+        return LogLikelihood(
+            evaluate, n_eps, n_data, "known sigma", f"{what}, Gaussian noise sigma={sigma:g}",
+            value_only=None if rss_only is None else (lambda eps: 0.5 * rss_only(eps) / s2),
+        )  # fmt: skip
+    if n_data <= n_eps:
+        return (
+            f"sigma is unknown and the {n_data} data leave no residual degrees of freedom "
+            f"for {n_eps} parameters to estimate it; pass `sigma=` to fit"
+        )
+
+    def evaluate(eps):
+        rss, g = rss_and_grad(eps)
+        if not rss > 0.0:
+            # an exact fit: the profiled likelihood is unbounded there
+            return -np.inf, np.zeros(n_eps)
+        return 0.5 * n_data * np.log(rss), 0.5 * n_data * g / rss
+
+    return LogLikelihood(
+        evaluate, n_eps, n_data, "profiled sigma", f"{what}, Gaussian noise, sigma profiled out"
+    )
+
+
+def likelihood_of(problem, formulation, sigma):
+    """The :class:`LogLikelihood` of a fit, or a string saying why it has none.
+
+    Parameters
+    ----------
+    problem : SteadyProblem, DynamicInverseProblem or ReplicatedProblem
+    formulation : str
+        The formulation the fit ran.
+    sigma : float or None
+        The known noise standard deviation given to the fit.
+    """
+    from .dynamic import DynamicInverseProblem
+    from .problems import ReplicatedProblem, SteadyProblem
+
+    n_eps = problem.system.n_eps
+    if isinstance(problem, ReplicatedProblem):
+        if formulation != "standard":
+            return (
+                f"formulation={formulation!r} of the pseudo-likelihood optimizes constraint "
+                "forces, not the likelihood of eps; refit with formulation='standard' for "
+                "likelihood intervals"
+            )
+        like = problem.likelihood
+
+        def evaluate(eps):
+            p = like.evaluate(eps, None, order=1)
+            return p.value, p.grad_eps
+
+        return LogLikelihood(
+            evaluate, n_eps, like.C * like.D, "replicated", "pseudo-likelihood of replicated data"
+        )
+    if formulation != "standard":
+        return (
+            f"formulation={formulation!r} minimizes constraint forces, not a likelihood of "
+            "the data; refit with formulation='standard' (with `sigma`) for likelihood "
+            "intervals"
+        )
+    if isinstance(problem, SteadyProblem):
+        from ..system import solve_steady
+        from .steady import standard_objective
+
+        solve_kw = {**problem.solve_options, "gradient": problem.gradient}
+
+        def rss(eps):
+            z, g, _ = standard_objective(problem.system, problem.M_obs, problem.v, eps, **solve_kw)
+            return 2.0 * z, 2.0 * g
+
+        def rss_only(eps):
+            sol = solve_steady(problem.system, eps, strict=True, **problem.solve_options)
+            r = problem.M_obs @ problem.system.mean(sol.Theta) - problem.v
+            return float(r @ r)
+
+        return _least_squares(rss, problem.v.size, n_eps, sigma, "steady least squares", rss_only)
+    if isinstance(problem, DynamicInverseProblem):
+        dt = problem.dt
+
+        def rss(eps):  # z = dt/2 * sum of squared residuals over the P readings
+            z, g, _ = problem.standard_objective(eps, gradient=True)
+            return 2.0 * z / dt, 2.0 * g / dt
+
+        def rss_only(eps):
+            return 2.0 * problem.loss(eps, "standard") / dt
+
+        n_data = int(np.size(problem.V[1:]))
+        return _least_squares(rss, n_data, n_eps, sigma, "trajectory least squares", rss_only)
+    return f"no likelihood is defined for a {type(problem).__name__}"

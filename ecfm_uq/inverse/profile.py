@@ -1,0 +1,569 @@
+"""Profile-likelihood intervals and likelihood-ratio tests of a fit.
+
+The delta-method interval :math:`\\hat\\epsilon_i \\pm z\\,\\mathrm{se}_i` assumes the
+log-likelihood is quadratic in :math:`\\epsilon` over the interval. With a parameter inside
+the operator it often is not (a curved, banana-shaped likelihood) and the quick interval
+covers the truth far less often than it says. The profile likelihood does not assume it
+(Raue et al. 2009; lmfit's ``conf_interval``, pyPESTO, Data2Dynamics): for each parameter
+:math:`\\epsilon_i`,
+
+.. math::
+
+    \\ell_p(t) = \\min_{\\epsilon:\\ \\epsilon_i = t} \\ell(\\epsilon), \\qquad
+    \\{t : 2(\\ell_p(t) - \\ell(\\hat\\epsilon)) \\le \\chi^2_{1,\\,\\mathrm{level}}\\}
+
+is the likelihood-ratio interval (Wilks). Each profile point re-optimizes the other
+parameters (L-BFGS-B on the exact gradient: the adjoint where the problem uses it),
+warm-started from the previous point; the profile walks out from the estimate with steps
+sized by the delta-method standard error, growing where the profile is flat, and the
+crossing is refined by Brent's method. A profile that does not reach the threshold
+before the parameter's bound, before the model fails, or within ``max_steps`` steps
+gives that end as the bound or :math:`\\pm\\infty` with the reason: the data do not
+bound the parameter on that side (practical non-identifiability) — never a made-up
+finite end.
+
+:func:`profile_likelihood` returns the profiles (for plotting) beside the intervals and
+the delta-method intervals, flagging where the two disagree; :func:`profile_intervals` is
+its (n_eps, 2) array; :func:`likelihood_ratio_test` tests a given :math:`\\epsilon`
+(a point of a joint confidence region) with the others fixed or re-optimized.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import optimize, stats
+
+from ..errors import ConvergenceError, ModelEvaluationError
+
+__all__ = [
+    "LikelihoodRatioTest",
+    "Profile",
+    "ProfileSummary",
+    "likelihood_ratio_test",
+    "profile_intervals",
+    "profile_likelihood",
+]
+
+_MODEL_FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError)
+# two interval ends "agree" when they differ by less than this fraction of the
+# delta-method half-width
+AGREEMENT_RTOL = 0.1
+_WALL = 1e12
+_MAX_RECENTRE = 3  # profiles redone from a better point found along them  # the likelihood increase standing in for "the model fails here"
+
+
+@dataclass(frozen=True)
+class Profile:
+    """The profile of one parameter.
+
+    Attributes
+    ----------
+    index : int
+    values : (k,) ndarray
+        The fixed values :math:`t` of :math:`\\epsilon_i`, increasing (the estimate included).
+    delta : (k,) ndarray
+        :math:`\\ell_p(t) - \\ell(\\hat\\epsilon)`.
+    eps : (k, n_eps) ndarray
+        The re-optimized parameters along the profile.
+    threshold : float
+        :math:`\\tfrac12\\chi^2_{1,\\mathrm{level}}`, the crossing level of ``delta``.
+    interval : (2,) ndarray
+        The likelihood-ratio interval (an end may be a bound or infinite).
+    reasons : tuple of str
+        Why each end is where it is (``"crossed"`` or the reason it is open).
+    delta_method : (2,) ndarray
+        :math:`\\hat\\epsilon_i \\pm z\\,\\mathrm{se}_i` at the same level (NaN without
+        standard errors).
+    """
+
+    index: int
+    values: np.ndarray
+    delta: np.ndarray
+    eps: np.ndarray
+    threshold: float
+    interval: np.ndarray
+    reasons: tuple
+    delta_method: np.ndarray
+
+    @property
+    def agrees(self):
+        """True when both ends are within ``AGREEMENT_RTOL`` of the delta-method half-width."""
+        lo, hi = self.delta_method
+        if not (np.isfinite(lo) and np.isfinite(hi)) or not np.all(np.isfinite(self.interval)):
+            return False
+        half = 0.5 * (hi - lo)
+        return bool(np.all(np.abs(self.interval - self.delta_method) <= AGREEMENT_RTOL * half))
+
+    def plot(self, ax=None, name=None):
+        """Plot :math:`2\\Delta\\ell_p` with the threshold and both intervals."""
+        from ..plotting import pyplot
+
+        if ax is None:
+            _, ax = pyplot().subplots(figsize=(4.5, 3.2))
+        name = name or f"eps[{self.index}]"
+        ax.plot(self.values, 2 * self.delta, "o-", ms=3, label="profile likelihood")
+        ax.axhline(2 * self.threshold, color="k", lw=0.8, ls=":")
+        for x in self.interval:
+            if np.isfinite(x):
+                ax.axvline(x, color="C0", lw=0.8)
+        for x in self.delta_method:
+            if np.isfinite(x):
+                ax.axvline(x, color="C1", lw=0.8, ls="--")
+        ax.plot([], [], color="C1", ls="--", label="delta method")
+        ax.set_xlabel(name)
+        ax.set_ylabel(r"$2\,\Delta\ell$")
+        ax.legend(fontsize=7)
+        return ax
+
+
+@dataclass(frozen=True)
+class ProfileSummary:
+    """Every profile of a fit, its intervals and the delta-method intervals beside them.
+
+    Attributes
+    ----------
+    level : float
+    intervals : (n_eps, 2) ndarray
+        Likelihood-ratio intervals (NaN rows for parameters not profiled).
+    delta_intervals : (n_eps, 2) ndarray
+    profiles : dict of int -> Profile
+    disagree : (n_eps,) bool ndarray
+        True where the delta-method interval is not to be trusted (an end off by more than
+        ``AGREEMENT_RTOL`` of its half-width, or an open profile end).
+    message : str
+    """
+
+    level: float
+    intervals: np.ndarray
+    delta_intervals: np.ndarray
+    profiles: dict = field(default_factory=dict)
+    disagree: np.ndarray = None
+    message: str = ""
+
+    def plot(self, names=None):
+        """One panel per profiled parameter; returns the figure."""
+        from ..plotting import pyplot
+
+        idx = sorted(self.profiles)
+        fig, axes = pyplot().subplots(1, len(idx), figsize=(4.2 * len(idx), 3.2), squeeze=False)
+        for ax, i in zip(axes[0], idx, strict=True):
+            self.profiles[i].plot(ax, None if names is None else names[i])
+        fig.tight_layout()
+        return fig
+
+
+@dataclass(frozen=True)
+class LikelihoodRatioTest:
+    """:math:`2(\\ell(\\epsilon_0) - \\ell(\\hat\\epsilon))` against :math:`\\chi^2_{\\mathrm{dof}}`."""
+
+    statistic: float
+    dof: int
+    p_value: float
+    eps: np.ndarray
+
+
+def _likelihood(result):
+    like = getattr(result, "likelihood", None)
+    if like is None or isinstance(like, str):
+        why = like or "it was not made by ecfm_uq.inverse.fit"
+        raise ValueError(f"`result` has no likelihood to profile: {why}")
+    return like
+
+
+def _check_level(level):
+    try:
+        level = float(level)
+    except (TypeError, ValueError):
+        raise TypeError(f"`level` must be a number in (0, 1), got {level!r}") from None
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"`level` must be in (0, 1) (e.g. 0.95), got {level}")
+    return level
+
+
+def _bounds(result, bounds, n):
+    if bounds is None:
+        bounds = getattr(result, "bounds", None)
+    if bounds is None:
+        return [(-np.inf, np.inf)] * n
+    if len(bounds) != n:
+        raise ValueError(f"`bounds` must have one (lo, hi) pair per parameter ({n})")
+    out = []
+    for lo, hi in bounds:
+        out.append((-np.inf if lo is None else float(lo), np.inf if hi is None else float(hi)))
+    return out
+
+
+def _observed_information(like, eps_hat, step):
+    """:math:`\\nabla^2\\ell(\\hat\\epsilon)` by central differences of the exact gradient
+    (symmetrized), or None where the model cannot be solved around the estimate."""
+    n = eps_hat.size
+    H = np.empty((n, n))
+    try:
+        for j in range(n):
+            e = np.zeros(n)
+            e[j] = step[j]
+            H[:, j] = (like(eps_hat + e)[1] - like(eps_hat - e)[1]) / (2 * step[j])
+    except _MODEL_FAILURES:
+        return None
+    return 0.5 * (H + H.T)
+
+
+def _scales(result, like, eps_hat):
+    """The fit's delta-method standard errors (NaN where it has none), the observed
+    information's inverse (None if not positive definite) and each parameter's step scale."""
+    unc = result.uncertainty
+    se = None if unc is None else unc.stderr
+    se = np.full(eps_hat.size, np.nan) if se is None else np.asarray(se, dtype=float)
+    have = np.isfinite(se) & (se > 0)
+    step = 1e-4 * np.where(have, se, np.maximum(1.0, np.abs(eps_hat)))
+    H = _observed_information(like, eps_hat, step)
+    naive = None
+    if H is not None and np.all(np.isfinite(H)):
+        w = np.linalg.eigvalsh(H)
+        if w[0] > 1e-12 * max(w[-1], 0.0):
+            naive = np.linalg.inv(H)
+    fallback = 0.1 * np.maximum(1.0, np.abs(eps_hat))
+    if naive is not None:
+        fallback = np.where(have, se, np.sqrt(np.diag(naive)))
+    # a flat direction (practically non-identifiable) has a huge standard error: cap the
+    # step scale at the parameter's magnitude so steps stay where the model can be solved
+    scale = np.minimum(np.where(have, se, fallback), np.maximum(1.0, np.abs(eps_hat)))
+    return se, naive, scale
+
+
+class _Profiler:
+    """Minimizes the likelihood over the other parameters at fixed :math:`\\epsilon_i`."""
+
+    def __init__(self, like, eps_hat, ell_hat, scale, bounds):
+        self.like, self.eps_hat, self.ell_hat = like, eps_hat, ell_hat
+        self.scale, self.bounds = scale, bounds
+        self.nfev = 0
+        self.visited = []  # optima of the inner problems, reused as starting points
+        exact = like.exact_gradient
+        self.inner_options = {
+            "ftol": 1e-15 if exact else 1e-12,
+            "gtol": 1e-9 if exact else 1e-6,
+            "maxiter": 500,
+        }
+
+    def at(self, fixed, values, start):
+        """:math:`\\ell` minimized over the free parameters with ``eps[fixed] = values``.
+
+        Returns (delta, eps) with the re-optimized parameters; raises the model's error
+        where it cannot be solved.
+        """
+        fixed = np.atleast_1d(fixed)
+        free = np.setdiff1d(np.arange(self.like.n_eps), fixed)
+        eps = np.array(start, dtype=float)
+        eps[fixed] = values
+        if free.size == 0:
+            self.nfev += 1
+            return self.like(eps)[0] - self.ell_hat, eps
+        s = self.scale[free]
+        x0 = (eps[free] - self.eps_hat[free]) / s
+
+        def fun(x):
+            e = eps.copy()
+            e[free] = self.eps_hat[free] + s * x
+            self.nfev += 1
+            try:
+                val, g = self.like(e)
+            except _MODEL_FAILURES:
+                # where the model cannot be solved: a wall the line search backs off from
+                return self.ell_hat + _WALL, np.zeros(free.size)
+            return val, g[free] * s
+
+        bnds = [
+            ((lo - self.eps_hat[j]) / self.scale[j], (hi - self.eps_hat[j]) / self.scale[j])
+            for j, (lo, hi) in zip(free, (self.bounds[j] for j in free), strict=True)
+        ]
+        best = None
+        # the inner problem need not be convex (a flat direction can hide a lower valley):
+        # besides the warm start, start from the visited optimum nearest in the fixed
+        # coordinates (e.g. the other parameters' profiles); the estimate's values last
+        starts = [x0]
+        if self.visited:
+            far = np.array(
+                [np.max(np.abs(v[fixed] - eps[fixed]) / self.scale[fixed]) for v in self.visited]
+            )
+            near = self.visited[int(np.argmin(far))]
+            x1 = (near[free] - self.eps_hat[free]) / s
+            if np.max(np.abs(x1 - x0)) > 1e-3:
+                starts.append(x1)
+        for k, x_start in enumerate([*starts, np.zeros(free.size)]):
+            if k == len(starts) and best is not None and best.success:
+                break
+            res = optimize.minimize(
+                fun, x_start, jac=True, method="L-BFGS-B", bounds=bnds,
+                options=self.inner_options,
+            )  # fmt: skip
+            if best is None or res.fun < best.fun:
+                best = res
+        res = best
+        if res.fun >= self.ell_hat + 0.5 * _WALL:
+            raise ConvergenceError(
+                f"the model cannot be solved anywhere the profile searched at eps{fixed.tolist()}"
+                f"={np.round(values, 6).tolist()}"
+            )
+        eps[free] = self.eps_hat[free] + s * res.x
+        self.visited.append(eps.copy())
+        return float(res.fun) - self.ell_hat, eps
+
+
+def _walk(prof, i, direction, threshold, start_step, bound, max_steps):
+    """Points of one half-profile and its end: (points, end, reason).
+
+    ``points`` are (t, delta, eps) from the estimate outward.
+    """
+    t0 = prof.eps_hat[i]
+    points, start = [], prof.eps_hat.copy()
+    h, t_prev, d_prev = start_step, t0, 0.0
+    for _ in range(max_steps):
+        t = t0 + direction * (abs(t_prev - t0) + h)
+        at_bound = direction * (t - bound) >= 0
+        if at_bound:
+            t = bound
+        try:
+            d, eps = prof.at(i, t, start)
+        except _MODEL_FAILURES as e:
+            if h > 1e-6 * start_step:
+                h *= 0.25  # approach the region where the model fails more carefully
+                continue
+            return (
+                points,
+                direction * np.inf,
+                (
+                    f"the model cannot be solved at eps[{i}]={t:.6g} ({type(e).__name__}) "
+                    "before the profile reaches the threshold"
+                ),
+            )
+        points.append((t, d, eps))
+        if d >= threshold:
+            return points, _crossing(prof, i, t_prev, t, start, threshold), "crossed"
+        if at_bound:
+            return (
+                points,
+                bound,
+                (
+                    f"the profile stays below the threshold up to the bound eps[{i}]={bound:g} "
+                    f"(2*delta = {2 * d:.3g} < {2 * threshold:.3g}): the data do not bound "
+                    "it on that side"
+                ),
+            )
+        # grow the step where the profile is flat (a quadratic profile needs ~3 steps)
+        rise = d - d_prev
+        if rise < 0.25 * threshold:
+            h *= 2.0
+        t_prev, d_prev, start = t, d, eps
+    return (
+        points,
+        direction * np.inf,
+        (
+            f"the profile of eps[{i}] is still below the threshold at {t_prev:.6g} after "
+            f"{max_steps} steps (2*delta = {2 * d_prev:.3g} < {2 * threshold:.3g}): not "
+            "identifiable from these data on that side"
+        ),
+    )
+
+
+def _crossing(prof, i, t_in, t_out, start, threshold):
+    """The t between t_in (below threshold) and t_out (above) where delta = threshold."""
+    warm = {"eps": start}
+
+    def g(t):
+        d, eps = prof.at(i, t, warm["eps"])
+        warm["eps"] = eps
+        return d - threshold
+
+    xtol = 1e-8 * max(abs(t_out - t_in), 1e-300)
+    return optimize.brentq(g, t_in, t_out, xtol=xtol, rtol=1e-12)
+
+
+def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci):
+    """Every requested profile, and (decrease, eps) of the lowest point found below the
+    estimate's likelihood (None when the estimate is the minimum)."""
+    profiles, best = {}, None
+    for i in which:
+        # a quadratic profile crosses z standard errors out: ~3 steps
+        step = z * prof.scale[i] / 3
+        ends, reasons, pts = [], [], [(prof.eps_hat[i], 0.0, prof.eps_hat)]
+        for direction, bound in ((-1, bnds[i][0]), (1, bnds[i][1])):
+            p, end, why = _walk(prof, i, direction, threshold[i], step, bound, max_steps)
+            pts += p
+            ends.append(end)
+            reasons.append(why)
+        pts.sort(key=lambda q: q[0])
+        k = int(np.argmin([q[1] for q in pts]))
+        if pts[k][1] < -1e-6 * max(1.0, threshold[i]) and (best is None or pts[k][1] < best[0]):
+            best = (pts[k][1], pts[k][2])
+        profiles[i] = Profile(
+            i,
+            np.array([q[0] for q in pts]),
+            np.array([q[1] for q in pts]),
+            np.array([q[2] for q in pts]),
+            threshold[i],
+            np.array(ends, dtype=float),
+            tuple(reasons),
+            delta_ci[i],
+        )
+    return profiles, best
+
+
+def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps=40):
+    """Profiles, likelihood-ratio intervals and delta-method intervals of a fit.
+
+    Parameters
+    ----------
+    result : InverseResult
+        From :func:`~ecfm_uq.inverse.fit` of a formulation with a likelihood (see
+        :mod:`ecfm_uq.inverse.loglik`): ``result.likelihood``.
+    level : float
+        Confidence level in (0, 1).
+    which : sequence of int, optional
+        Parameters to profile (default: all).
+    bounds : sequence of (lo, hi), optional
+        Where the profiles stop (default: the fit's ``bounds``; open otherwise).
+    max_steps : int
+        Steps per side before an end is declared open.
+
+    Returns
+    -------
+    ProfileSummary
+
+    Raises
+    ------
+    ValueError
+        If ``result`` has no likelihood (ECFM's force objective, the penalty form, ...)
+        or ``level`` is not in (0, 1).
+    """
+    like = _likelihood(result)
+    level = _check_level(level)
+    n = like.n_eps
+    which = list(range(n)) if which is None else [int(i) for i in np.atleast_1d(which)]
+    for i in which:
+        if not 0 <= i < n:
+            raise ValueError(f"`which` holds {i}, not a parameter index in [0, {n})")
+    bnds = _bounds(result, bounds, n)
+    eps_hat = np.asarray(result.eps, dtype=float)
+    ell_hat, _ = like(eps_hat)
+    if not np.isfinite(ell_hat):
+        raise ValueError(
+            f"the likelihood is not finite at the estimate ({ell_hat}); an exact fit with "
+            "sigma unknown has no likelihood interval: pass `sigma` to fit"
+        )
+    se, naive, scale = _scales(result, like, eps_hat)
+    threshold = np.full(n, 0.5 * stats.chi2.ppf(level, 1))
+    if like.noise == "replicated" and naive is not None:
+        # a pseudo-likelihood is not the data's likelihood: its curvature is not the
+        # estimate's precision. Magnitude adjustment (Chandler & Bate 2007): scale the
+        # threshold by the robust (sandwich) over the naive (inverse-Hessian) variance
+        robust = np.where(np.isfinite(se), se**2, np.diag(naive))
+        threshold = threshold * robust / np.diag(naive)
+    z = stats.norm.ppf(0.5 + 0.5 * level)
+    delta_ci = np.column_stack([eps_hat - z * se, eps_hat + z * se])
+
+    recentred = []
+    for _ in range(_MAX_RECENTRE + 1):
+        profiles, best = _profiles(
+            _Profiler(like, eps_hat, ell_hat, scale, bnds), which, threshold, z, bnds,
+            max_steps, delta_ci,
+        )  # fmt: skip
+        if best is None:
+            break
+        # a profile found a lower likelihood: the fit did not end at its optimum; the
+        # intervals are relative to the best point found, so profile again from there
+        recentred.append(f"{best[0]:.3g} lower at eps={np.round(best[1], 6).tolist()}")
+        ell_hat, eps_hat = ell_hat + best[0], best[1]
+    notes = []
+    if recentred:
+        notes.append(
+            "the fit did not end at its optimum: the profiles found a likelihood "
+            + ", then ".join(recentred)
+            + "; the intervals are around the best point found"
+        )
+    intervals = np.full((n, 2), np.nan)
+    for i, prof_i in profiles.items():
+        intervals[i] = prof_i.interval
+        notes += [
+            f"eps[{i}] {side} end open: {r}"
+            for side, r in zip(("lower", "upper"), prof_i.reasons, strict=True)
+            if r != "crossed"
+        ]
+    disagree = np.array([i in profiles and not profiles[i].agrees for i in range(n)])
+    for i in np.flatnonzero(disagree & ~np.isfinite(se)):
+        notes.append(f"eps[{i}]: the fit has no delta-method standard error to compare with")
+    for i in np.flatnonzero(disagree & np.isfinite(se)):
+        notes.append(
+            f"eps[{i}]: the likelihood interval {intervals[i].round(6).tolist()} and the "
+            f"delta-method interval {delta_ci[i].round(6).tolist()} disagree: the quadratic "
+            "approximation behind the standard error is not to be trusted here"
+        )
+    summary = ProfileSummary(level, intervals, delta_ci, profiles, disagree, "; ".join(notes))
+    result.extra["profile"] = summary
+    return summary
+
+
+def profile_intervals(result, level=0.95, **kw):
+    """Likelihood-ratio (profile-likelihood) intervals of a fit, an (n_eps, 2) array.
+
+    See :func:`profile_likelihood` for the parameters and the method. An end the data do
+    not bound is the parameter's bound or infinite (the reason is in
+    ``result.extra["profile"].message``). A ``UserWarning`` says when an interval
+    disagrees with the delta-method one.
+    """
+    summary = profile_likelihood(result, level, **kw)
+    if summary.disagree.any():
+        warnings.warn(summary.message, UserWarning, stacklevel=2)
+    return summary.intervals
+
+
+def likelihood_ratio_test(result, eps, *, free=None):
+    """Test :math:`H_0: \\epsilon = \\epsilon_0` (or a subset of it) by the likelihood ratio.
+
+    Parameters
+    ----------
+    result : InverseResult
+        A fit with a likelihood.
+    eps : (n_eps,) array_like
+        The hypothesized parameters; ``eps[free]`` are only starting values.
+    free : sequence of int, optional
+        Parameters re-optimized under :math:`H_0` (nuisance parameters); the test then has
+        ``n_eps - len(free)`` degrees of freedom.
+
+    Returns
+    -------
+    LikelihoodRatioTest
+        ``p_value`` of :math:`2(\\ell_0 - \\hat\\ell)` against :math:`\\chi^2_{\\mathrm{dof}}`;
+        ``eps`` is the point tested (with its free parameters re-optimized). ``eps`` lies
+        in the joint ``level`` confidence region iff ``p_value >= 1 - level``.
+    """
+    like = _likelihood(result)
+    n = like.n_eps
+    eps = np.asarray(eps, dtype=float)
+    if eps.shape != (n,) or not np.all(np.isfinite(eps)):
+        raise ValueError(f"`eps` must be {n} finite parameter values, got {eps.tolist()}")
+    free = [] if free is None else sorted({int(j) for j in np.atleast_1d(free)})
+    if any(not 0 <= j < n for j in free) or len(free) >= n:
+        raise ValueError(f"`free` must name fewer than {n} parameter indices in [0, {n})")
+    fixed = np.setdiff1d(np.arange(n), free)
+    eps_hat = np.asarray(result.eps, dtype=float)
+    ell_hat, _ = like(eps_hat)
+    se, naive, scale = _scales(result, like, eps_hat)
+    prof = _Profiler(like, eps_hat, ell_hat, scale, _bounds(result, None, n))
+    start = eps_hat.copy()
+    start[fixed] = eps[fixed]
+    d, at = prof.at(fixed, eps[fixed], start)
+    stat = max(2.0 * d, 0.0)
+    if like.noise == "replicated":
+        if fixed.size > 1 or naive is None or not np.isfinite(se[fixed[0]]):
+            raise ValueError(
+                "a pseudo-likelihood ratio is calibrated (Chandler & Bate's adjustment) for "
+                "one tested parameter with a sandwich standard error only; pass `free` with "
+                "all other parameters"
+            )
+        stat *= naive[fixed[0], fixed[0]] / se[fixed[0]] ** 2
+    dof = len(fixed)
+    return LikelihoodRatioTest(stat, dof, float(stats.chi2.sf(stat, dof)), at)
