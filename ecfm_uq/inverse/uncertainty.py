@@ -293,21 +293,7 @@ def implicit_covariance(grad, eps, v, Sigma_v, rel_step=1e-6, stencil=2):
     v = np.asarray(v, dtype=float)
 
     def fd(f, x):
-        cols = []
-        for k in range(x.size):
-            h = rel_step * max(abs(x[k]), 1.0)
-
-            def at(t, k=k, h=h):
-                xt = x.copy()
-                xt[k] += t * h
-                return f(xt)
-
-            d1 = at(1.0) - at(-1.0)
-            if stencil == 2:
-                cols.append(d1 / (2 * h))
-            else:
-                cols.append((8 * d1 - (at(2.0) - at(-2.0))) / (12 * h))
-        return np.column_stack(cols)
+        return _fd_jacobian(f, x, rel_step, stencil)
 
     dg_deps = fd(lambda e: grad(e, v), eps)
     dg_deps = 0.5 * (dg_deps + dg_deps.T)
