@@ -25,8 +25,15 @@ from __future__ import annotations
 import numpy as np
 
 from .._validation import as_dense_rows, as_finite_array
+from .verdict import DEFAULT_ALPHA, check_alpha, decide
 
-__all__ = ["DegenerateVarianceError", "negative_log_pseudo_likelihood", "sensor_moments"]
+__all__ = [
+    "DegenerateVarianceError",
+    "moment_verdict",
+    "negative_log_pseudo_likelihood",
+    "replicate_statistics",
+    "sensor_moments",
+]
 
 
 class DegenerateVarianceError(ValueError):
@@ -189,3 +196,82 @@ def negative_log_pseudo_likelihood(mu, var, v, dmu=None, dvar=None):
     dmu = as_finite_array("dmu", dmu, shape=(mu.size, None))
     dvar = as_finite_array("dvar", dvar, shape=dmu.shape)
     return float(f.sum()), f_mu @ dmu + f_s @ dvar
+
+
+def replicate_statistics(v):
+    """The statistics the pseudo-likelihood sees, and their sample covariance.
+
+    :math:`\\Lambda` depends on the data only through the sensor means
+    :math:`\\bar v_i` and the centred second moments :math:`m_i = \\frac1D\\sum_j
+    (v_{ij} - \\bar v_i)^2`. Both are (asymptotically) means over the replicates of
+    :math:`y_j = (v_{\\cdot j},\\ (v_{\\cdot j} - \\bar v)^2)`, whose covariance is
+    estimated by the sample covariance of the :math:`y_j` divided by D (the sensors of one
+    replicate may be correlated; replicates are independent).
+
+    Parameters
+    ----------
+    v : (C, D) array_like
+        Replicated data, ``D >= 2``.
+
+    Returns
+    -------
+    w : (2C,) ndarray
+        ``(vbar, m)``.
+    Sigma_w : (2C, 2C) ndarray
+        Sample covariance of ``w``.
+    """
+    v = as_finite_array("v", v, ndim=2)
+    if v.shape[1] < 2:
+        raise ValueError(
+            f"`v` needs at least 2 replicates per sensor for a sample covariance, got "
+            f"D={v.shape[1]}"
+        )
+    D = v.shape[1]
+    vbar = v.mean(axis=1)
+    dev = v - vbar[:, None]
+    y = np.vstack([v, dev**2])  # (2C, D): one column per replicate
+    return np.concatenate([vbar, (dev**2).mean(axis=1)]), np.atleast_2d(np.cov(y, ddof=1)) / D
+
+
+def moment_verdict(mu, var, v, alpha=DEFAULT_ALPHA):
+    """Whether the fitted model's sensor means agree with the replicated data.
+
+    z-scores :math:`z_i = (\\bar v_i - \\mu_i)/\\sqrt{\\sigma_i^2/D}` of the sample means
+    against the model's moments (Eq. stats), combined by Bonferroni into one p-value
+    :math:`\\min(1, C\\,\\min_i p_i)` (valid however the sensors of a replicate are
+    correlated), judged at size ``alpha`` by the one rule of :func:`~.verdict.decide`.
+
+    Parameters
+    ----------
+    mu, var : (C,) array_like
+        Model mean and variance at the sensors.
+    v : (C, D) array_like
+        Replicated data.
+    alpha : float
+
+    Returns
+    -------
+    Verdict
+        ``details``: ``z`` (C,), ``z_limit`` (the Bonferroni quantile
+        :math:`z_{1-\\alpha/(2C)}`), ``peak_sensor_index``.
+    """
+    from scipy import stats
+
+    mu = as_finite_array("mu", mu, ndim=1)
+    var = as_finite_array("var", var, shape=mu.shape)
+    v = _check_data(v, mu.size)
+    alpha = check_alpha(alpha)
+    C, D = v.shape
+    z = (v.mean(axis=1) - mu) / np.sqrt(var / D)
+    limit = float(stats.norm.ppf(1 - alpha / (2 * C)))
+    peak = int(np.argmax(np.abs(z)))
+    p_value = min(1.0, C * 2.0 * float(stats.norm.sf(abs(z[peak]))))
+    parts = [
+        f"largest |z| of the sensor means {abs(z[peak]):.3g} at sensor {peak} "
+        f"({'<=' if abs(z[peak]) <= limit else '>'} {limit:.3g}; Bonferroni p = "
+        f"{p_value:.3g}, size {alpha:g})"
+    ]
+    return decide(
+        "moments z (Bonferroni)", p_value, alpha, parts, statistic=abs(z[peak]),
+        details={"z": z, "z_limit": limit, "peak_sensor_index": peak},
+    )  # fmt: skip

@@ -58,13 +58,17 @@ import warnings
 import numpy as np
 import scipy.optimize as sopt
 
-from .._validation import as_finite_array, check_positive
+from .._validation import check_positive
 from ..errors import ConvergenceError
 from .forces import optimal_forces
-from .moments import DegenerateVarianceError, _check_data
+from .moments import (  # noqa: F401  (moment_verdict, replicate_statistics: v0.2 home)
+    DegenerateVarianceError,
+    _check_data,
+    moment_verdict,
+    replicate_statistics,
+)
 from .result import InverseResult
 from .status import FitStatus
-from .verdict import DEFAULT_ALPHA, check_alpha, decide
 
 __all__ = [
     "fit_pseudo_likelihood",
@@ -583,41 +587,6 @@ def fit_pseudo_likelihood(
 # --------------------------------------------------------------------------------------
 # uncertainty of the estimates (issue 13): delta method on the replicate statistics
 # --------------------------------------------------------------------------------------
-def replicate_statistics(v):
-    """The statistics the pseudo-likelihood sees, and their sample covariance.
-
-    :math:`\\Lambda` depends on the data only through the sensor means
-    :math:`\\bar v_i` and the centred second moments :math:`m_i = \\frac1D\\sum_j
-    (v_{ij} - \\bar v_i)^2`. Both are (asymptotically) means over the replicates of
-    :math:`y_j = (v_{\\cdot j},\\ (v_{\\cdot j} - \\bar v)^2)`, whose covariance is
-    estimated by the sample covariance of the :math:`y_j` divided by D (the sensors of one
-    replicate may be correlated; replicates are independent).
-
-    Parameters
-    ----------
-    v : (C, D) array_like
-        Replicated data, ``D >= 2``.
-
-    Returns
-    -------
-    w : (2C,) ndarray
-        ``(vbar, m)``.
-    Sigma_w : (2C, 2C) ndarray
-        Sample covariance of ``w``.
-    """
-    v = as_finite_array("v", v, ndim=2)
-    if v.shape[1] < 2:
-        raise ValueError(
-            f"`v` needs at least 2 replicates per sensor for a sample covariance, got "
-            f"D={v.shape[1]}"
-        )
-    D = v.shape[1]
-    vbar = v.mean(axis=1)
-    dev = v - vbar[:, None]
-    y = np.vstack([v, dev**2])  # (2C, D): one column per replicate
-    return np.concatenate([vbar, (dev**2).mean(axis=1)]), np.atleast_2d(np.cov(y, ddof=1)) / D
-
-
 def _at_statistics(like, w):
     """A copy of ``like`` whose data statistics are ``w = (vbar, m)`` (see
     :func:`replicate_statistics`); the estimate as a function of the data."""
@@ -669,47 +638,3 @@ def _likelihood_uncertainty(like, formulation, eps, lam):
     return estimate_uncertainty(
         grad, eps, w, Sigma_w, "replicates", dof=like.D - 1, rel_step=1e-4, stencil=4
     )
-
-
-def moment_verdict(mu, var, v, alpha=DEFAULT_ALPHA):
-    """Whether the fitted model's sensor means agree with the replicated data.
-
-    z-scores :math:`z_i = (\\bar v_i - \\mu_i)/\\sqrt{\\sigma_i^2/D}` of the sample means
-    against the model's moments (Eq. stats), combined by Bonferroni into one p-value
-    :math:`\\min(1, C\\,\\min_i p_i)` (valid however the sensors of a replicate are
-    correlated), judged at size ``alpha`` by the one rule of :func:`~.verdict.decide`.
-
-    Parameters
-    ----------
-    mu, var : (C,) array_like
-        Model mean and variance at the sensors.
-    v : (C, D) array_like
-        Replicated data.
-    alpha : float
-
-    Returns
-    -------
-    Verdict
-        ``details``: ``z`` (C,), ``z_limit`` (the Bonferroni quantile
-        :math:`z_{1-\\alpha/(2C)}`), ``peak_sensor_index``.
-    """
-    from scipy import stats
-
-    mu = as_finite_array("mu", mu, ndim=1)
-    var = as_finite_array("var", var, shape=mu.shape)
-    v = _check_data(v, mu.size)
-    alpha = check_alpha(alpha)
-    C, D = v.shape
-    z = (v.mean(axis=1) - mu) / np.sqrt(var / D)
-    limit = float(stats.norm.ppf(1 - alpha / (2 * C)))
-    peak = int(np.argmax(np.abs(z)))
-    p_value = min(1.0, C * 2.0 * float(stats.norm.sf(abs(z[peak]))))
-    parts = [
-        f"largest |z| of the sensor means {abs(z[peak]):.3g} at sensor {peak} "
-        f"({'<=' if abs(z[peak]) <= limit else '>'} {limit:.3g}; Bonferroni p = "
-        f"{p_value:.3g}, size {alpha:g})"
-    ]
-    return decide(
-        "moments z (Bonferroni)", p_value, alpha, parts, statistic=abs(z[peak]),
-        details={"z": z, "z_limit": limit, "peak_sensor_index": peak},
-    )  # fmt: skip

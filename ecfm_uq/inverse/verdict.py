@@ -13,7 +13,7 @@ carry:
 * the paper's noisy ECFM: its z and chi-squared moment bounds (Eq. ecfm_noise), combined
   by Bonferroni (:func:`moments_bounds_verdict`);
 * replicated data: z-tests of the sensor means against the model's moments, Bonferroni
-  over the sensors (:func:`~ecfm_uq.inverse.replicated.moment_verdict`);
+  over the sensors (:func:`~ecfm_uq.inverse.moments.moment_verdict`);
 * noise-free data (no noise model): no test has a size; the rule is that the constraint
   forces change the observations by at most ``rtol`` of the data (for ECFM, paper Eq.
   ecfm: they vanish at a consistent fit and stay large on data the model cannot
