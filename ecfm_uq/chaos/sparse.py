@@ -15,10 +15,11 @@ the leave-one-out error, per output component.
 Sizes and memory. The default candidate degree is the largest whose total-degree basis
 (P terms) satisfies all of: :math:`P \\le 10 n`; the selection's working set
 :math:`4 \\cdot 8\\,P \\min(n, P)` bytes within half the memory budget
-(:mod:`ecfm_uq.memory`); its work :math:`n P \\min(n, P) \\le 10^{12}`; degree
-:math:`\\le 30`. Small or wide problems (:math:`P \\ge n`, or the n x P design under
-128 MiB) select on the design matrix exactly as before; tall large ones select on the
-candidates' Gram matrix :math:`\\Psi^T\\Psi` and :math:`\\Psi^T y`, accumulated in blocks
+(:mod:`ecfm_uq.memory`); its work
+:math:`W = 3\\,n P \\min(n, P) + 15\\,P \\min(P, n/2)^2 \\le 2 \\cdot 10^{12}`
+(:func:`candidate_degree`); degree :math:`\\le 30`. Small or wide problems
+(:math:`P \\ge n`, or the n x P design under 128 MiB) select on the design matrix
+exactly as before; tall large ones select on the candidates' Gram matrix :math:`\\Psi^T\\Psi` and :math:`\\Psi^T y`, accumulated in blocks
 of rows (LARS / OMP in their Gram forms), and compute the corrected leave-one-out errors
 from the selected columns only, again in blocks of rows: the n x P candidate matrix is
 never formed.
@@ -44,16 +45,16 @@ __all__ = ["candidate_degree", "compress_outputs"]
 _CANDIDATES_PER_RUN = 10
 _MAX_DEGREE = 30
 # The default candidate set also fits the memory budget and a work limit: the selection
-# holds about _SELECTION_COPIES arrays of P * min(n, P) floats (design or Gram form) and
-# costs about n * P * min(n, P) multiply-adds (the Gram build, or the LARS path on a wide
-# design); both are kept below these limits (the work limit: about a minute of one core).
+# holds about _SELECTION_COPIES arrays of P * min(n, P) floats (design or Gram form); its
+# work is modelled by _selection_work and kept below _WORK_LIMIT (a few minutes of one core).
 _SELECTION_COPIES = 4
 _SELECTION_SHARE = 0.5
-_WORK_LIMIT = 1e12
+_WORK_LIMIT = 2e12
 # Below this design size (or when P >= n) the selection runs on the design matrix, exactly
 # as in earlier releases; above it, on the Gram matrix built in blocks of rows.
 _EXACT_DESIGN_BYTES = 128 * 2**20
-# Rows per block in the Gram path: a block of this many bytes per array.
+# Rows per block in the Gram path: a block of this many bytes per array (or 1/64 of the
+# budget if that is smaller).
 _BLOCK_BYTES = 16 * 2**20
 # Gram path: a selected column whose Cholesky pivot falls below this share of its norm is
 # numerically dependent on the earlier ones (the Gram squares the conditioning).
@@ -70,6 +71,11 @@ def _selection_bytes(n, P):
     return 8.0 * _SELECTION_COPIES * P * min(n, P)
 
 
+def _selection_work(n, P):
+    """Work model of the selection (see :func:`candidate_degree`)."""
+    return 3.0 * n * P * min(n, P) + 15.0 * P * min(P, n // 2) ** 2
+
+
 def candidate_degree(n, dim, budget=None):
     """Default largest candidate degree of the sparse methods, and the limit that set it.
 
@@ -79,7 +85,10 @@ def candidate_degree(n, dim, budget=None):
     * :math:`P \\le 10\\,n` (no more candidates than ten per run);
     * :math:`4 \\cdot 8\\,P \\min(n, P)` bytes (the selection's working set in its design
       or Gram form) within half the memory budget;
-    * :math:`n P \\min(n, P) \\le 10^{12}` (its work: the Gram build or a wide LARS path);
+    * its work :math:`W = 3\\,n P \\min(n, P) + 15\\,P \\min(P, n/2)^2 \\le 2 \\cdot 10^{12}`:
+      the first term the Gram build and the blocked leave-one-out passes (or the LARS
+      path on a wide design), the second the path's matrix-vector steps in Gram form
+      (measured about 15 times slower per operation than the blocked products);
     * :math:`p \\le 30`.
 
     Parameters
@@ -105,7 +114,7 @@ def candidate_degree(n, dim, budget=None):
             return order, "samples"
         if _selection_bytes(n, P) > _SELECTION_SHARE * budget:
             return order, "memory"
-        if n * P * min(n, P) > _WORK_LIMIT:
+        if _selection_work(n, P) > _WORK_LIMIT:
             return order, "work"
         order += 1
 
@@ -211,7 +220,8 @@ def _sparse_select(Psi, y, candidates, n, solver):
 # --------------------------------------------------------------------------------------
 def _row_blocks(n, width):
     """Row ranges [a, b) holding about _BLOCK_BYTES of ``width`` floats each."""
-    step = max(1, _BLOCK_BYTES // (8 * max(width, 1)))
+    block = min(_BLOCK_BYTES, memory_budget() / 64)
+    step = max(1, int(block // (8 * max(width, 1))))
     return [(a, min(a + step, n)) for a in range(0, n, step)]
 
 
@@ -277,20 +287,76 @@ class _GramDesign:
         return np.array([self.position[int(c)] for c in cols], dtype=np.int64)
 
 
+def _lar_order_gram(G, c, max_steps):
+    """Entry order of least-angle regression (LAR) from the Gram matrix of unit-norm columns.
+
+    The LAR of Efron et al. (2004) in Gram form: the correlations
+    :math:`c = X^T r` are updated as :math:`c \\leftarrow c - \\gamma\\,G_{:,A} w` without
+    the design. The inverse :math:`L^{-1}` of the Cholesky factor of :math:`G_{AA}` grows
+    by one row per step and the rows :math:`G_{A,:}` are kept contiguous, so a step is a
+    few matrix-vector products, O(k P). Stops at ``max_steps``, when the correlations
+    vanish, or at a column numerically dependent on the active ones.
+    """
+    P = len(c)
+    max_steps = min(max_steps, P)
+    c = np.array(c, dtype=float)
+    inactive = np.ones(P, dtype=bool)
+    GA = np.empty((max_steps, P))
+    Linv = np.zeros((max_steps, max_steps))
+    z = np.empty(max_steps)  # L^{-1} s_A, s_A the signs of the active correlations
+    v = np.empty(max_steps)  # L^{-T} z = G_AA^{-1} s_A (signs never change in LAR)
+    active = []
+    j = int(np.argmax(np.abs(c)))
+    C = abs(c[j])
+    floor = 1e3 * np.finfo(float).eps * max(C, np.finfo(float).tiny)
+    for k in range(max_steps):
+        if C <= floor:
+            break
+        GA[k] = G[j]
+        l = Linv[:k, :k] @ GA[:k, j]
+        d2 = G[j, j] - l @ l
+        if not d2 > _CHOLESKY_RTOL**2 * G[j, j]:
+            break  # dependent on the active columns
+        d = math.sqrt(d2)
+        Linv[k, :k] = -(l @ Linv[:k, :k]) / d
+        Linv[k, k] = 1.0 / d
+        z[k] = (math.copysign(1.0, c[j]) - l @ z[:k]) / d
+        v[:k] += z[k] * Linv[k, :k]
+        v[k] = z[k] / d
+        active.append(j)
+        inactive[j] = False
+        if k + 1 == max_steps:
+            break
+        AA = 1.0 / math.sqrt(z[: k + 1] @ z[: k + 1])
+        a = AA * (v[: k + 1] @ GA[: k + 1])
+        idx = np.flatnonzero(inactive)
+        ci, ai = c[idx], a[idx]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g = np.concatenate([(C - ci) / (AA - ai), (C + ci) / (AA + ai)])
+        g[~(g > 1e-14 * C)] = np.inf
+        m = int(np.argmin(g))
+        gamma = min(g[m], C / AA)
+        if not np.isfinite(gamma):
+            break
+        c -= gamma * a
+        C -= gamma * AA
+        j = int(idx[m % len(idx)])
+    return active
+
+
 def _path_order_gram(Gs, Xys, n, max_steps, solver):
     """:func:`_path_order` from the Gram matrix and correlations of the scaled columns."""
     from sklearn.exceptions import ConvergenceWarning
-    from sklearn.linear_model import lars_path_gram, orthogonal_mp_gram
+    from sklearn.linear_model import orthogonal_mp_gram
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         warnings.simplefilter("ignore", RuntimeWarning)
         if solver == "lars":
-            _, active, _ = lars_path_gram(
-                Xys, Gs, n_samples=n, method="lar", max_iter=max_steps, return_path=False
-            )
-            return list(active)[:max_steps]
-        path = orthogonal_mp_gram(Gs, Xys, n_nonzero_coefs=max_steps, return_path=True)
+            return _lar_order_gram(Gs, Xys, max_steps)
+        path = orthogonal_mp_gram(
+            Gs, Xys, n_nonzero_coefs=max_steps, return_path=True, copy_Gram=False
+        )
     path = path.reshape(Gs.shape[0], -1)
     nz = path != 0
     first = np.where(nz.any(axis=1), np.argmax(nz, axis=1), path.shape[1])
@@ -478,20 +544,22 @@ def _fit_sparse(
     order = check_int("order", order, minimum=1)
     basis = ChaosBasis(order, dim, germ=inputs.germs)
     P = basis.size
+    alpha = np.asarray(basis.indices, dtype=float)
+    qn = (np.sum(alpha**q_norm, axis=1)) ** (1.0 / q_norm)
     gram = _uses_gram(n, P)
-    if not gram:
-        check_allocation(
-            8.0 * _SELECTION_COPIES * n * P,
-            f"the sparse-regression design of n = {n} runs by P = {P} candidates "
-            f"(order {order}, {dim} inputs)",
-            "leave `order` to its default (sized by n and the memory budget), or pass a "
-            "smaller `order` or `q_norm` < 1",
-        )
+    # checked before the model runs: the largest array the selection may need (the
+    # design path evaluates all P terms, the Gram path only the candidates)
+    P_sel = int(np.count_nonzero(qn <= order + 1e-12)) if gram else P
+    check_allocation(
+        _selection_bytes(n, P_sel),
+        f"the sparse-regression {'Gram matrix' if gram else 'design'} of {P_sel} candidates "
+        f"from n = {n} runs (order {order}, {dim} inputs)",
+        "leave `order` to its default (sized by n and the memory budget), or pass a "
+        f"smaller `order`{' or `q_norm` < 1' if gram else ''}",
+    )
     if y is None:
         y = ev(x, "regression")
     yf = y.reshape(n, -1)
-    alpha = np.asarray(basis.indices, dtype=float)
-    qn = (np.sum(alpha**q_norm, axis=1)) ** (1.0 / q_norm)
     m = yf.shape[1]
     shape = y.shape[1:]
     extra = {}
