@@ -19,10 +19,10 @@ Sizes and memory. The default candidate degree is the largest whose total-degree
 :math:`W = 3\\,n P \\min(n, P) + 15\\,P \\min(P, n/2)^2 \\le 2 \\cdot 10^{12}`
 (:func:`candidate_degree`); degree :math:`\\le 30`. Small or wide problems
 (:math:`P \\ge n`, or the n x P design under 128 MiB) select on the design matrix
-exactly as before; tall large ones select on the candidates' Gram matrix :math:`\\Psi^T\\Psi` and :math:`\\Psi^T y`, accumulated in blocks
-of rows (LARS / OMP in their Gram forms), and compute the corrected leave-one-out errors
-from the selected columns only, again in blocks of rows: the n x P candidate matrix is
-never formed.
+exactly as before; tall large ones select on the candidates' Gram matrix
+:math:`\\Psi^T\\Psi` and :math:`\\Psi^T y`, accumulated in blocks of rows (LARS / OMP
+in their Gram forms), and compute the corrected leave-one-out errors from the selected
+columns only, again in blocks of rows: the n x P candidate matrix is never formed.
 """
 
 from __future__ import annotations
