@@ -16,7 +16,7 @@ Sizes and memory. The default candidate degree is the largest whose total-degree
 (P terms) satisfies all of: :math:`P \\le 10 n`; the selection's working set
 :math:`4 \\cdot 8\\,P \\min(n, P)` bytes within half the memory budget
 (:mod:`ecfm_uq.memory`); its work
-:math:`W = 3\\,n P \\min(n, P) + 15\\,P \\min(P, n/2)^2 \\le 2 \\cdot 10^{12}`
+:math:`W = 3\\,n P \\min(n, P) + 15\\,P \\min(P, n/2)^2 \\le 4 \\cdot 10^{12}`
 (:func:`candidate_degree`); degree :math:`\\le 30`. Small or wide problems
 (:math:`P \\ge n`, or the n x P design under 128 MiB) select on the design matrix
 exactly as before; tall large ones select on the candidates' Gram matrix
@@ -49,7 +49,7 @@ _MAX_DEGREE = 30
 # work is modelled by _selection_work and kept below _WORK_LIMIT (a few minutes of one core).
 _SELECTION_COPIES = 4
 _SELECTION_SHARE = 0.5
-_WORK_LIMIT = 2e12
+_WORK_LIMIT = 4e12
 # Below this design size (or when P >= n) the selection runs on the design matrix, exactly
 # as in earlier releases; above it, on the Gram matrix built in blocks of rows.
 _EXACT_DESIGN_BYTES = 128 * 2**20
@@ -85,7 +85,7 @@ def candidate_degree(n, dim, budget=None):
     * :math:`P \\le 10\\,n` (no more candidates than ten per run);
     * :math:`4 \\cdot 8\\,P \\min(n, P)` bytes (the selection's working set in its design
       or Gram form) within half the memory budget;
-    * its work :math:`W = 3\\,n P \\min(n, P) + 15\\,P \\min(P, n/2)^2 \\le 2 \\cdot 10^{12}`:
+    * its work :math:`W = 3\\,n P \\min(n, P) + 15\\,P \\min(P, n/2)^2 \\le 4 \\cdot 10^{12}`:
       the first term the Gram build and the blocked leave-one-out passes (or the LARS
       path on a wide design), the second the path's matrix-vector steps in Gram form
       (measured about 15 times slower per operation than the blocked products);

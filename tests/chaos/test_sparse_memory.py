@@ -40,9 +40,9 @@ def test_candidate_degree_keeps_the_ten_per_run_rule_when_memory_is_plentiful():
 
 
 def test_candidate_degree_is_limited_by_work_and_by_memory():
-    # n = 1e5, 8 inputs: W = 3 n P^2 + 15 P (n/2 > P) P^2 is 5.3e11 at degree 5 (P = 1287)
-    # and 3.1e12 > 2e12 at degree 6 (P = 3003): degree 5, not 16
-    assert candidate_degree(100_000, 8, budget=2**40) == (5, "work")
+    # n = 1e5, 8 inputs: W = 3 n P^2 + 15 P (n/2 > P) P^2 is 3.1e12 <= 4e12 at degree 6
+    # (P = 3003) and 1.6e13 at degree 7 (P = 6435): degree 6, not 16
+    assert candidate_degree(100_000, 8, budget=2**40) == (6, "work")
     # n = 2 000: W(degree 8, P = 12 870 > n) = 3 n^2 P + 15 P (n/2)^2 = 3.5e11: the ten-per-run
     # rule still decides (degree 9 has 24 310 > 20 000 terms), as before
     assert candidate_degree(2_000, 8, budget=2**40) == (8, "samples")
