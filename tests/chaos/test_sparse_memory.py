@@ -117,6 +117,16 @@ def test_covariance_check_names_variance(budget):
     assert check_covariance(100) == 2 * 8 * 100**2
 
 
+def test_pce_covariance_of_a_large_field_is_refused_naming_variance(budget):
+    from ecfm_uq.chaos import PolynomialChaosExpansion
+
+    pce = PolynomialChaosExpansion(ChaosBasis(2, 2), np.ones((6, 1000)), [(0.0, 1.0)] * 2)
+    budget(2**20)
+    with pytest.raises(MemoryBudgetError, match="pce.variance"):
+        _ = pce.covariance
+    np.testing.assert_allclose(pce.variance, 5.0)  # the cheaper call still answers
+
+
 @pytest.mark.xfail(
     strict=True,
     reason="system/galerkin.py covariance does not call memory.check_covariance yet "
