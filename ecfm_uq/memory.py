@@ -1,7 +1,8 @@
 """Memory budget: refuse an allocation before making it, with the size and the way out.
 
 Every large allocation in the engine (a dense ``(NP)^2`` Jacobian, its LU factors, an
-assembled sparse block matrix, Krylov work vectors) is checked here first. The budget
+assembled sparse block matrix, Krylov work vectors, an (N, N) covariance, the Gram
+matrices and designs of the chaos regressions) is checked here first. The budget
 defaults to 80 % of the machine's physical memory; change it with
 :func:`set_memory_budget` or the environment variable ``ECFM_UQ_MEMORY_BUDGET`` (bytes,
 or with a suffix ``K``, ``M``, ``G``).
@@ -14,7 +15,13 @@ import os
 
 from .errors import MemoryBudgetError
 
-__all__ = ["check_allocation", "format_bytes", "memory_budget", "set_memory_budget"]
+__all__ = [
+    "check_allocation",
+    "check_covariance",
+    "format_bytes",
+    "memory_budget",
+    "set_memory_budget",
+]
 
 _DEFAULT_FRACTION = 0.8
 _budget_override = None
@@ -91,3 +98,40 @@ def check_allocation(nbytes, what, alternatives):
             "ecfm_uq.memory.set_memory_budget)"
         )
     return nbytes
+
+
+def check_covariance(N, what="covariance", cheaper="variance(Theta)", copies=2):
+    """Refuse an (N, N) covariance matrix that would not fit, naming the cheaper call.
+
+    Forming :math:`\\Theta\\,\\mathbb E[\\Psi\\Psi^T]\\,\\Theta^T - \\mu\\mu^T` holds two
+    (N, N) float arrays at its peak (the product and the outer product), so
+    ``copies = 2`` by default.
+
+    Parameters
+    ----------
+    N : int
+        Number of field values (rows of the covariance).
+    what : str
+        The call that would allocate it, for the message.
+    cheaper : str
+        The call that gives what is usually wanted without the (N, N) matrix.
+    copies : int
+        (N, N) arrays alive at the peak.
+
+    Returns
+    -------
+    float
+        The bytes that will be allocated.
+
+    Raises
+    ------
+    MemoryBudgetError
+        If ``copies * 8 * N**2`` bytes exceed the budget; the message names ``cheaper``.
+    """
+    N = int(N)
+    return check_allocation(
+        8.0 * copies * N * N,
+        f"the ({N}, {N}) {what}",
+        f"call {cheaper} for the pointwise variances (shape ({N},)), or take the "
+        "covariance of the few rows you need (e.g. Theta[idx] or M_obs @ Theta)",
+    )

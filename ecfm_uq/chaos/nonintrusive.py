@@ -41,6 +41,7 @@ import scipy.linalg as sla
 
 from .._validation import as_finite_array, check_choice, check_int
 from ..executor import NonFiniteOutputError, evaluate_samples
+from ..memory import check_allocation
 from ._kernels import legendre_table
 from .basis import ChaosBasis
 from .germs import as_germs
@@ -324,6 +325,11 @@ def _fit_lstsq(model, inputs, order, index_set, data, ev):
             f"(order {order}, dim {dim}); least squares needs more than P (about 2P = {2 * P} "
             "is the usual choice), or lower `order`"
         )
+    check_allocation(
+        8.0 * (3 * n * P + 2 * P * P),
+        f"least squares on n = {n} runs by P = {P} terms (order {order}, {dim} inputs)",
+        "pass a smaller `order`, or use method='lars' (candidates sized by the memory budget)",
+    )
     if y is None:
         y = ev(x, "regression")
     Psi = basis.evaluate(omega)

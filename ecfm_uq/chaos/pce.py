@@ -20,6 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._validation import as_finite_array, check_choice, check_int
+from ..memory import check_covariance
 from .basis import ChaosBasis
 from .inputs import UniformInputs, as_inputs, draw_germs
 from .projection import project
@@ -271,6 +272,7 @@ class PolynomialChaosExpansion:
     def covariance(self):
         """:math:`\\operatorname{Cov}[y_i, y_j]`, shape ``output_shape + output_shape``."""
         c = self._flat()[1:]
+        check_covariance(c.shape[1], "output covariance", "pce.variance", copies=1)
         n2 = np.asarray(self.basis.norms2)[1:, None]
         cov = c.T @ (c * n2)
         return cov.reshape(self.output_shape + self.output_shape)

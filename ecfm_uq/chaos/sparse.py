@@ -11,6 +11,18 @@ principal components until every component's discarded variance is below ``pca_t
 of its own variance; the selection runs on those few score columns and the expansion of
 every component is :math:`c = c_Z V_K^T`. The compression's own error is reported beside
 the leave-one-out error, per output component.
+
+Sizes and memory. The default candidate degree is the largest whose total-degree basis
+(P terms) satisfies all of: :math:`P \\le 10 n`; the selection's working set
+:math:`4 \\cdot 8\\,P \\min(n, P)` bytes within half the memory budget
+(:mod:`ecfm_uq.memory`); its work
+:math:`W = 3\\,n P \\min(n, P) + 15\\,P \\min(P, n/2)^2 \\le 4 \\cdot 10^{12}`
+(:func:`candidate_degree`); degree :math:`\\le 30`. Small or wide problems
+(:math:`P \\ge n`, or the n x P design under 128 MiB) select on the design matrix
+exactly as before; tall large ones select on the candidates' Gram matrix
+:math:`\\Psi^T\\Psi` and :math:`\\Psi^T y`, accumulated in blocks of rows (LARS / OMP
+in their Gram forms), and compute the corrected leave-one-out errors from the selected
+columns only, again in blocks of rows: the n x P candidate matrix is never formed.
 """
 
 from __future__ import annotations
@@ -22,17 +34,98 @@ import numpy as np
 import scipy.linalg as sla
 
 from .._validation import check_int
+from ..memory import check_allocation, memory_budget
 from .basis import ChaosBasis
 from .pce import PolynomialChaosExpansion
 
-__all__ = ["compress_outputs"]
+__all__ = ["candidate_degree", "compress_outputs"]
 
 # Sparse regression: largest candidate basis per model run, and the highest degree tried
 # (the degree loop stops earlier when the corrected LOO error stops improving).
 _CANDIDATES_PER_RUN = 10
 _MAX_DEGREE = 30
+# The default candidate set also fits the memory budget and a work limit: the selection
+# holds about _SELECTION_COPIES arrays of P * min(n, P) floats (design or Gram form); its
+# work is modelled by _selection_work and kept below _WORK_LIMIT (a few minutes of one core).
+_SELECTION_COPIES = 4
+_SELECTION_SHARE = 0.5
+_WORK_LIMIT = 4e12
+# Below this design size (or when P >= n) the selection runs on the design matrix, exactly
+# as in earlier releases; above it, on the Gram matrix built in blocks of rows.
+_EXACT_DESIGN_BYTES = 128 * 2**20
+# Rows per block in the Gram path: a block of this many bytes per array (or 1/64 of the
+# budget if that is smaller).
+_BLOCK_BYTES = 16 * 2**20
+# Gram path: a selected column whose Cholesky pivot falls below this share of its norm is
+# numerically dependent on the earlier ones (the Gram squares the conditioning).
+_CHOLESKY_RTOL = 1e-6
 # Field outputs: above this many components the evaluations are compressed by default.
 _COMPRESS_ABOVE = 64
+
+
+# --------------------------------------------------------------------------------------
+# sizes
+# --------------------------------------------------------------------------------------
+def _selection_bytes(n, P):
+    """Working set of the selection on P candidates from n runs (design or Gram form)."""
+    return 8.0 * _SELECTION_COPIES * P * min(n, P)
+
+
+def _selection_work(n, P):
+    """Work model of the selection (see :func:`candidate_degree`)."""
+    return 3.0 * n * P * min(n, P) + 15.0 * P * min(P, n // 2) ** 2
+
+
+def candidate_degree(n, dim, budget=None):
+    """Default largest candidate degree of the sparse methods, and the limit that set it.
+
+    The largest total degree p (at least 1) whose basis of
+    :math:`P = \\binom{p + d}{d}` terms satisfies
+
+    * :math:`P \\le 10\\,n` (no more candidates than ten per run);
+    * :math:`4 \\cdot 8\\,P \\min(n, P)` bytes (the selection's working set in its design
+      or Gram form) within half the memory budget;
+    * its work :math:`W = 3\\,n P \\min(n, P) + 15\\,P \\min(P, n/2)^2 \\le 4 \\cdot 10^{12}`:
+      the first term the Gram build and the blocked leave-one-out passes (or the LARS
+      path on a wide design), the second the path's matrix-vector steps in Gram form
+      (measured about 15 times slower per operation than the blocked products);
+    * :math:`p \\le 30`.
+
+    Parameters
+    ----------
+    n, dim : int
+        Regression runs and inputs.
+    budget : float, optional
+        Memory budget in bytes (default :func:`ecfm_uq.memory.memory_budget`).
+
+    Returns
+    -------
+    order : int
+    limit : {"samples", "memory", "work", "max_degree"}
+        Which rule stopped the degree from growing.
+    """
+    budget = memory_budget() if budget is None else float(budget)
+    order = 1
+    while True:
+        if order >= _MAX_DEGREE:
+            return order, "max_degree"
+        P = math.comb(order + 1 + dim, dim)
+        if P > _CANDIDATES_PER_RUN * n:
+            return order, "samples"
+        if _selection_bytes(n, P) > _SELECTION_SHARE * budget:
+            return order, "memory"
+        if _selection_work(n, P) > _WORK_LIMIT:
+            return order, "work"
+        order += 1
+
+
+def _uses_gram(n, P, budget=None):
+    """Select on the Gram matrix (True) or on the n x P design (False)?"""
+    if P >= n:
+        return False
+    budget = memory_budget() if budget is None else float(budget)
+    design = 8.0 * n * P
+    return design > _EXACT_DESIGN_BYTES or _SELECTION_COPIES * design > _SELECTION_SHARE * budget
 
 
 # --------------------------------------------------------------------------------------
@@ -99,13 +192,16 @@ def _sparse_select(Psi, y, candidates, n, solver):
     always kept); every nested active set along it is then refitted by OLS, and the one
     with the smallest corrected leave-one-out error wins (Blatman & Sudret 2011).
     """
-    X = Psi[:, candidates]
-    Xc = X - X.mean(axis=0)
+    # centred and scaled in place: one copy of the candidate columns, not three
+    Xc = Psi[:, candidates]
+    Xc -= Xc.mean(axis=0)
     scale = np.linalg.norm(Xc, axis=0)
     scale[scale == 0] = 1.0
+    Xc /= scale
     # beyond n / 2 terms the LOO correction factor exceeds 2: such fits never win
     max_steps = min(len(candidates), max(n // 2, 2))
-    active = _path_order(Xc / scale, y - y.mean(), max_steps, solver)
+    active = _path_order(Xc, y - y.mean(), max_steps, solver)
+    del Xc
     cols = [0] + [int(candidates[j]) for j in active]
     Q, R = sla.qr(Psi[:, cols], mode="economic")
     d = np.abs(np.diag(R))
@@ -119,9 +215,238 @@ def _sparse_select(Psi, y, candidates, n, solver):
     return cols[:k], coef, float(corrected[k - 1])
 
 
-def _select_columns(Psi, Y, qn, order, n, solver, early_stop):
-    """Degree-adaptive sparse selection for each column of Y (n, m) on the candidates Psi."""
-    coeffs = np.zeros((Psi.shape[1], Y.shape[1]))
+# --------------------------------------------------------------------------------------
+# Gram form: the candidates' Gram matrix built in blocks of rows, never the design
+# --------------------------------------------------------------------------------------
+def _row_blocks(n, width):
+    """Row ranges [a, b) holding about _BLOCK_BYTES of ``width`` floats each."""
+    block = min(_BLOCK_BYTES, memory_budget() / 64)
+    step = max(1, int(block // (8 * max(width, 1))))
+    return [(a, min(a + step, n)) for a in range(0, n, step)]
+
+
+class _GramDesign:
+    """:math:`G = \\Psi_B^T \\Psi_B` and :math:`\\Psi_B^T Y` of the built columns B.
+
+    The columns are added degree by degree (:meth:`extend`), each time in one pass over
+    blocks of rows that evaluates only the columns needed, so only the degrees the
+    selection reaches are paid for and no (n, P) array exists.
+    """
+
+    def __init__(self, basis, omega, Y):
+        self.basis = basis
+        self.omega = omega
+        self.Y = Y
+        self.n = len(omega)
+        self.cols = np.zeros(0, dtype=np.int64)  # basis indices, in order of addition
+        self.position = {}
+        self.G = np.zeros((0, 0))
+        self.XtY = np.zeros((0, Y.shape[1]))
+        self.extend([0])
+
+    def rows(self, a, b, cols):
+        """:math:`\\Psi` at runs a..b-1, only the basis columns ``cols``: (b - a, len(cols))."""
+        tables = self.basis.univariate(self.omega[a:b])
+        alpha = self.basis.indices[np.asarray(cols, dtype=np.int64)]
+        B = tables[0][:, alpha[:, 0]]
+        for d in range(1, self.basis.dim):
+            B *= tables[d][:, alpha[:, d]]
+        return B
+
+    def extend(self, candidates):
+        """Add the columns of ``candidates`` (basis indices) not built yet."""
+        new = [int(c) for c in candidates if int(c) not in self.position]
+        if not new:
+            return
+        s0, s1 = len(self.cols), len(self.cols) + len(new)
+        check_allocation(
+            8.0 * _SELECTION_COPIES * s1 * s1,
+            f"the Gram matrix of {s1} sparse-regression candidates",
+            "leave `order` to its default (sized by n and the memory budget), or pass a "
+            "smaller `order` or `q_norm` < 1",
+        )
+        cols = np.concatenate([self.cols, np.asarray(new, dtype=np.int64)])
+        G_new = np.zeros((s1, s1 - s0))
+        XtY_new = np.zeros((s1 - s0, self.Y.shape[1]))
+        for a, b in _row_blocks(self.n, s1):
+            B = self.rows(a, b, cols)
+            Bn = B[:, s0:]
+            G_new += B.T @ Bn
+            XtY_new += Bn.T @ self.Y[a:b]
+        G = np.empty((s1, s1))
+        G[:s0, :s0] = self.G
+        G[:, s0:] = G_new
+        G[s0:, :s0] = G_new[:s0].T
+        self.G = G
+        self.XtY = np.vstack([self.XtY, XtY_new])
+        for k, c in enumerate(new):
+            self.position[c] = s0 + k
+        self.cols = cols
+
+    def positions(self, cols):
+        return np.array([self.position[int(c)] for c in cols], dtype=np.int64)
+
+
+def _lar_order_gram(G, c, max_steps):
+    """Entry order of least-angle regression (LAR) from the Gram matrix of unit-norm columns.
+
+    The LAR of Efron et al. (2004) in Gram form: the correlations
+    :math:`c = X^T r` are updated as :math:`c \\leftarrow c - \\gamma\\,G_{:,A} w` without
+    the design. The inverse :math:`L^{-1}` of the Cholesky factor of :math:`G_{AA}` grows
+    by one row per step and the rows :math:`G_{A,:}` are kept contiguous, so a step is a
+    few matrix-vector products, O(k P). Stops at ``max_steps``, when the correlations
+    vanish, or at a column numerically dependent on the active ones.
+    """
+    P = len(c)
+    max_steps = min(max_steps, P)
+    c = np.array(c, dtype=float)
+    inactive = np.ones(P, dtype=bool)
+    GA = np.empty((max_steps, P))
+    Linv = np.zeros((max_steps, max_steps))
+    z = np.empty(max_steps)  # L^{-1} s_A, s_A the signs of the active correlations
+    v = np.empty(max_steps)  # L^{-T} z = G_AA^{-1} s_A (signs never change in LAR)
+    active = []
+    j = int(np.argmax(np.abs(c)))
+    C = abs(c[j])
+    floor = 1e3 * np.finfo(float).eps * max(C, np.finfo(float).tiny)
+    for k in range(max_steps):
+        if C <= floor:
+            break
+        GA[k] = G[j]
+        l = Linv[:k, :k] @ GA[:k, j]
+        d2 = G[j, j] - l @ l
+        if not d2 > _CHOLESKY_RTOL**2 * G[j, j]:
+            break  # dependent on the active columns
+        d = math.sqrt(d2)
+        Linv[k, :k] = -(l @ Linv[:k, :k]) / d
+        Linv[k, k] = 1.0 / d
+        z[k] = (math.copysign(1.0, c[j]) - l @ z[:k]) / d
+        v[:k] += z[k] * Linv[k, :k]
+        v[k] = z[k] / d
+        active.append(j)
+        inactive[j] = False
+        if k + 1 == max_steps:
+            break
+        AA = 1.0 / math.sqrt(z[: k + 1] @ z[: k + 1])
+        a = AA * (v[: k + 1] @ GA[: k + 1])
+        idx = np.flatnonzero(inactive)
+        ci, ai = c[idx], a[idx]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g = np.concatenate([(C - ci) / (AA - ai), (C + ci) / (AA + ai)])
+        g[~(g > 1e-14 * C)] = np.inf
+        m = int(np.argmin(g))
+        gamma = min(g[m], C / AA)
+        if not np.isfinite(gamma):
+            break
+        c -= gamma * a
+        C -= gamma * AA
+        j = int(idx[m % len(idx)])
+    return active
+
+
+def _path_order_gram(Gs, Xys, n, max_steps, solver):
+    """:func:`_path_order` from the Gram matrix and correlations of the scaled columns."""
+    from sklearn.exceptions import ConvergenceWarning
+    from sklearn.linear_model import orthogonal_mp_gram
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        if solver == "lars":
+            return _lar_order_gram(Gs, Xys, max_steps)
+        path = orthogonal_mp_gram(
+            Gs, Xys, n_nonzero_coefs=max_steps, return_path=True, copy_Gram=False
+        )
+    path = path.reshape(Gs.shape[0], -1)
+    nz = path != 0
+    first = np.where(nz.any(axis=1), np.argmax(nz, axis=1), path.shape[1])
+    entered = np.flatnonzero(first < path.shape[1])
+    return entered[np.argsort(first[entered], kind="stable")].tolist()
+
+
+def _cholesky_prefix(G):
+    """Upper Cholesky factor of the longest leading block of G that is well conditioned.
+
+    Returns R (s, s) with :math:`R^T R = G_{:s,:s}`, stopping before the first column whose
+    pivot is below ``_CHOLESKY_RTOL`` of its norm (dependent on the earlier columns).
+    """
+    from scipy.linalg.lapack import dpotrf
+
+    s = G.shape[0]
+    while s > 0:
+        R, info = dpotrf(G[:s, :s], lower=0, clean=1)
+        if info > 0:
+            s = info - 1
+            continue
+        d = np.abs(np.diag(R))
+        bad = np.flatnonzero(d < _CHOLESKY_RTOL * np.sqrt(np.abs(np.diag(G)[:s])))
+        if bad.size:
+            s = int(bad[0])
+            continue
+        return R
+    raise ValueError("the constant regression column is zero; check the samples")
+
+
+def _loo_nested_gram(gd, cols, R, z, j):
+    """:func:`_loo_nested` from the selected columns, in blocks of rows (Q = X R^{-1})."""
+    n, s = gd.n, len(cols)
+    y = gd.Y[:, j]
+    sum_e2 = np.zeros(s)
+    for a, b in _row_blocks(n, 4 * s):
+        Q = sla.solve_triangular(R, gd.rows(a, b, cols).T, trans="T").T
+        fitted = np.cumsum(Q * z[None, :], axis=1)
+        h = np.cumsum(Q**2, axis=1)
+        one_h = 1.0 - h
+        with np.errstate(divide="ignore", invalid="ignore"):
+            e = np.where(one_h > 1e-10, (y[a:b, None] - fitted) / one_h, np.inf)
+        sum_e2 += np.sum(e**2, axis=0)
+    var = np.var(y) if np.var(y) > 0 else 1.0
+    loo = sum_e2 / n / var
+    Rinv = sla.solve_triangular(R, np.eye(s))
+    trace = np.cumsum(np.sum(np.triu(Rinv) ** 2, axis=0))
+    k = np.arange(1, s + 1)
+    with np.errstate(divide="ignore"):
+        T = np.where(k < n, n / np.maximum(n - k, 1) * (1.0 + trace), np.inf)
+    return loo * T
+
+
+def _sparse_select_gram(gd, j, candidates, solver):
+    """:func:`_sparse_select` on the Gram matrix: (columns, coefficients, corrected LOO)."""
+    n = gd.n
+    gd.extend(candidates)
+    G = gd.G
+    b = gd.XtY[:, j]
+    ybar = float(np.mean(gd.Y[:, j]))
+    pc = gd.positions(candidates)
+    # centring: Psi_0 = 1, so the column sums are the Gram's first row
+    mu = G[0, pc] / n
+    Gc = G[np.ix_(pc, pc)] - n * np.outer(mu, mu)
+    Xyc = b[pc] - n * mu * ybar
+    scale = np.sqrt(np.maximum(np.diag(Gc), 0.0))
+    scale[scale == 0] = 1.0
+    Gc /= scale[:, None]
+    Gc /= scale[None, :]
+    max_steps = min(len(candidates), max(n // 2, 2))
+    active = _path_order_gram(Gc, Xyc / scale, n, max_steps, solver)
+    del Gc
+    cols = [0] + [int(candidates[a]) for a in active]
+    pos = gd.positions(cols)
+    R = _cholesky_prefix(G[np.ix_(pos, pos)])
+    s = R.shape[0]
+    cols, pos = cols[:s], pos[:s]
+    z = sla.solve_triangular(R, b[pos], trans="T")
+    corrected = _loo_nested_gram(gd, cols, R, z, j)
+    k = int(np.argmin(corrected)) + 1
+    coef = sla.solve_triangular(R[:k, :k], z[:k])
+    return cols[:k], coef, float(corrected[k - 1])
+
+
+def _select_columns(select, P, Y, qn, order, early_stop):
+    """Degree-adaptive sparse selection for each column of Y (n, m) among P terms.
+
+    ``select(j, candidates)`` runs the path and the LOO scoring on column j.
+    """
+    coeffs = np.zeros((P, Y.shape[1]))
     chosen_deg, errors, n_terms = [], [], []
     for j in range(Y.shape[1]):
         if np.all(Y[:, j] == Y[0, j]):
@@ -135,7 +460,7 @@ def _select_columns(Psi, Y, qn, order, n, solver, early_stop):
         worse = 0
         for p in range(1, order + 1):
             candidates = np.flatnonzero((qn <= p + 1e-12) & (qn > 0))
-            cols, coef, err = _sparse_select(Psi, Y[:, j], candidates, n, solver)
+            cols, coef, err = select(j, candidates)
             if best is None or err < best[2]:
                 best = (cols, coef, err, p)
                 worse = 0
@@ -177,6 +502,12 @@ def compress_outputs(Y, tol):
     :math:`\\sum_j S_j^2 V_{jm}^2`; keeping K directions discards
     :math:`\\sum_{j \\ge K} S_j^2 V_{jm}^2` of it, exactly.
     """
+    n, m = Y.shape
+    check_allocation(
+        8.0 * (2 * n * m + (n + m) * min(n, m)),
+        f"the principal components of {n} runs of a {m}-component output",
+        "pass compress=False (one selection per component) or fit fewer components",
+    )
     ybar = Y.mean(axis=0)
     Yc = Y - ybar
     U, S, Vt = np.linalg.svd(Yc, full_matrices=False)
@@ -205,26 +536,46 @@ def _fit_sparse(
     if n < 4:
         raise ValueError(f"too few regression samples: `{name}` gives {n} points; pass at least 4")
     if order is None:
-        # candidate degrees while the candidate set stays below _CANDIDATES_PER_RUN * n
-        order = 1
-        while math.comb(order + 1 + dim, dim) <= _CANDIDATES_PER_RUN * n and order < _MAX_DEGREE:
-            order += 1
+        # candidate degrees while the candidate set stays below _CANDIDATES_PER_RUN * n,
+        # the selection within the memory budget and its work within _WORK_LIMIT
+        order, limit = candidate_degree(n, dim)
+    else:
+        limit = "order"
     order = check_int("order", order, minimum=1)
+    basis = ChaosBasis(order, dim, germ=inputs.germs)
+    P = basis.size
+    alpha = np.asarray(basis.indices, dtype=float)
+    qn = (np.sum(alpha**q_norm, axis=1)) ** (1.0 / q_norm)
+    gram = _uses_gram(n, P)
+    # checked before the model runs: the largest array the selection may need (the
+    # design path evaluates all P terms, the Gram path only the candidates)
+    P_sel = int(np.count_nonzero(qn <= order + 1e-12)) if gram else P
+    check_allocation(
+        _selection_bytes(n, P_sel),
+        f"the sparse-regression {'Gram matrix' if gram else 'design'} of {P_sel} candidates "
+        f"from n = {n} runs (order {order}, {dim} inputs)",
+        "leave `order` to its default (sized by n and the memory budget), or pass a "
+        f"smaller `order`{' or `q_norm` < 1' if gram else ''}",
+    )
     if y is None:
         y = ev(x, "regression")
     yf = y.reshape(n, -1)
-    basis = ChaosBasis(order, dim, germ=inputs.germs)
-    Psi = basis.evaluate(omega)
-    alpha = np.asarray(basis.indices, dtype=float)
-    qn = (np.sum(alpha**q_norm, axis=1)) ** (1.0 / q_norm)
     m = yf.shape[1]
     shape = y.shape[1:]
     extra = {}
     if compress is None:
         compress = m > _COMPRESS_ABOVE
+
+    def selector(Y):
+        if gram:
+            gd = _GramDesign(basis, omega, Y)
+            return lambda j, candidates: _sparse_select_gram(gd, j, candidates, solver)
+        Psi = basis.evaluate(omega)
+        return lambda j, candidates: _sparse_select(Psi, Y[:, j], candidates, n, solver)
+
     if compress:
         Z, V, ybar, comp_err = compress_outputs(yf, tol)
-        cz, deg, err, nt = _select_columns(Psi, Z, qn, order, n, solver, early_stop)
+        cz, deg, err, nt = _select_columns(selector(Z), P, Z, qn, order, early_stop)
         # only the terms up to the highest selected degree are nonzero (graded order)
         P_top = ChaosBasis(max(int(deg.max()), 1), dim).size
         coeffs = cz[:P_top] @ V
@@ -246,7 +597,7 @@ def _fit_sparse(
         n_terms = np.count_nonzero(coeffs, axis=0)
     else:
         coeffs, chosen_deg, errors, n_terms = _select_columns(
-            Psi, yf, qn, order, n, solver, early_stop
+            selector(yf), P, yf, qn, order, early_stop
         )
     top = max(max(chosen_deg), 1)
     basis_out = ChaosBasis(top, dim, germ=inputs.germs)
@@ -264,6 +615,9 @@ def _fit_sparse(
         corrected_loo_error=np.array(errors).reshape(shape),
         q_norm=q_norm,
         compressed=bool(compress),
+        candidate_degree=order,
+        candidate_limit=limit,
+        selection="gram" if gram else "design",
         **extra,
     )
     return pce, n
