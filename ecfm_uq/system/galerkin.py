@@ -18,6 +18,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._validation import as_finite_array, as_operator, check_int, describe
+from ..memory import check_covariance
 from .operator import GalerkinOperator, _LinearPart, _QuadraticLinearization
 from .structure import SystemStructure, triple_product_pairs
 from .terms import LinearTerm, LoadTerm, QuadraticTerm
@@ -345,7 +346,15 @@ class GalerkinSystem:
         return Theta @ self.E1
 
     def covariance(self, Theta):
-        """:math:`\\mathrm{Cov}[\\theta] = \\Theta\\,\\mathbb E[\\Psi\\Psi^T]\\,\\Theta^T - \\mu\\mu^T`, (N, N)."""
+        """:math:`\\mathrm{Cov}[\\theta] = \\Theta\\,\\mathbb E[\\Psi\\Psi^T]\\,\\Theta^T - \\mu\\mu^T`, (N, N).
+
+        Raises
+        ------
+        MemoryBudgetError
+            When the (N, N) matrix does not fit the memory budget; the pointwise
+            :meth:`variance` needs only (N,).
+        """
+        check_covariance(np.shape(Theta)[0], "covariance of the field", "system.variance(Theta)")
         mu = self.mean(Theta)
         return Theta @ self.E2 @ Theta.T - np.outer(mu, mu)
 

@@ -127,11 +127,6 @@ def test_pce_covariance_of_a_large_field_is_refused_naming_variance(budget):
     np.testing.assert_allclose(pce.variance, 5.0)  # the cheaper call still answers
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="system/galerkin.py covariance does not call memory.check_covariance yet "
-    "(integration pending; see the memory branch report)",
-)
 def test_galerkin_covariance_is_refused_over_the_budget(budget):
     from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm
 
