@@ -54,6 +54,21 @@ def gauss_legendre(n):
     return 0.5 * (x + 1.0), 0.5 * w
 
 
+def _check_tensor_size(n, dim, family):
+    """Refuse a tensor rule of ``n**dim`` nodes over the node limit or the memory budget."""
+    if n**dim > _MAX_TENSOR_NODES:
+        raise ValueError(
+            f"a tensor rule with `n_points`={n} in dim={dim} has {n**dim} nodes "
+            f"(limit {_MAX_TENSOR_NODES}); pass a smaller `n_points`"
+        )
+    # meshgrid copies, the stacked nodes and the weights: about (2 dim + 1) n^dim floats
+    check_allocation(
+        8.0 * (2 * dim + 1) * float(n) ** dim,
+        f"a tensor {family} rule with {n}^{dim} nodes",
+        "pass a smaller `n_points` or use fewer variables",
+    )
+
+
 def tensor_gauss_legendre(n, dim):
     """Tensor-product Gauss-Legendre rule on [0, 1]^dim.
 
@@ -73,17 +88,7 @@ def tensor_gauss_legendre(n, dim):
     """
     n = check_int("n_points", n, minimum=1)
     dim = check_int("dim", dim, minimum=1)
-    if n**dim > _MAX_TENSOR_NODES:
-        raise ValueError(
-            f"a tensor rule with `n_points`={n} in dim={dim} has {n**dim} nodes "
-            f"(limit {_MAX_TENSOR_NODES}); pass a smaller `n_points`"
-        )
-    # meshgrid copies, the stacked nodes and the weights: about (2 dim + 1) n^dim floats
-    check_allocation(
-        8.0 * (2 * dim + 1) * float(n) ** dim,
-        f"a tensor Gauss-Legendre rule with {n}^{dim} nodes",
-        "pass a smaller `n_points` or use fewer variables",
-    )
+    _check_tensor_size(n, dim, "Gauss-Legendre")
     x, w = gauss_legendre(n)
     grids = np.meshgrid(*([x] * dim), indexing="ij")
     nodes = np.stack([g.ravel() for g in grids], axis=1)
@@ -112,16 +117,7 @@ def tensor_rule(rules, n):
     """
     n = check_int("n_points", n, minimum=1)
     dim = len(rules)
-    if n**dim > _MAX_TENSOR_NODES:
-        raise ValueError(
-            f"a tensor rule with `n_points`={n} in dim={dim} has {n**dim} nodes "
-            f"(limit {_MAX_TENSOR_NODES}); pass a smaller `n_points`"
-        )
-    check_allocation(
-        8.0 * (2 * dim + 1) * float(n) ** dim,
-        f"a tensor Gauss rule with {n}^{dim} nodes",
-        "pass a smaller `n_points` or use fewer variables",
-    )
+    _check_tensor_size(n, dim, "Gauss")
     parts = [rule(n) for rule in rules]
     grids = np.meshgrid(*[x for x, _ in parts], indexing="ij")
     nodes = np.stack([g.ravel() for g in grids], axis=1)
