@@ -331,11 +331,17 @@ def _preconditioner(system, options):
     kind = options.preconditioner
     if kind == "none":
         return None
+    st = system.structure
+    if kind == "nodal" and st.nonlinear_terms:
+        raise ValueError(
+            f"`preconditioner`='nodal' does not take term {st.nonlinear_terms[0].name!r} "
+            "(a NonlinearTerm); pass preconditioner='mean' or 'auto'"
+        )
     if kind != "auto":
         return kind
-    st = system.structure
     small = system.N <= DECOUPLED_AUTO_SIZE
-    if small and not st.is_linear and st.gauss_nodes is not None:
+    user = bool(st.nonlinear_terms)
+    if small and not st.is_linear and not user and st.gauss_nodes is not None:
         return "nodal"
     if small and st.couplings_decouple:
         return "decoupled"
@@ -348,6 +354,8 @@ def _nodal_march_refusal(system):
     N, P = system.shape
     if P == 1:
         return "P = 1"
+    if st.nonlinear_terms:
+        return "the system has a NonlinearTerm (a user's callbacks, evaluated in Python)"
     if st.gauss_nodes is None:
         return "the chaos basis has more than one germ (no P-node Gauss rule)"
     if st.n_quadratic > 1:
@@ -367,6 +375,8 @@ def _march_refusal(system, solver, precond, constrained, keep_factors):
     if P == 1:
         if solver != "dense":
             return f"the P = 1 kernel factorizes densely, but the solver is {solver!r}"
+        if system.structure.nonlinear_terms:
+            return "the system has a NonlinearTerm (a user's callbacks, evaluated in Python)"
         if system.structure.n_quadratic > 1:
             return "the system has more than one quadratic term"
         if N > COMPILED_MARCH_MAX_N:
