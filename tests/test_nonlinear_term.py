@@ -21,7 +21,7 @@ from ecfm_uq.system import (
     march,
     solve_steady,
 )
-from ecfm_uq.system.nonlinear_term import nonlinear_rule_points
+from ecfm_uq.system.nonlinear_term import nonlinear_rule_points, smolyak_quadrature
 
 N = 15
 H = 1.0 / (N + 1)
@@ -136,7 +136,8 @@ def test_cubic_reaction_two_germs_sparse_jacobian_matches_collocation():
     assert np.max(np.abs(system.variance(sol.Theta) - var)) <= 1e-8 * np.max(var)
 
 
-def test_quadratic_term_as_nonlinear_term_same_solution():
+@pytest.mark.parametrize("rule", ["auto", "smolyak"])
+def test_quadratic_term_as_nonlinear_term_same_solution(rule):
     rng = np.random.default_rng(3)
     n = 6
     A = rng.normal(size=(n, n, n)) * 0.3
@@ -156,7 +157,7 @@ def test_quadratic_term_as_nonlinear_term_same_solution():
         return GalerkinSystem([LinearTerm(Kd, G=G), q, LoadTerm.constant(Fv)], 1, basis=basis)
 
     s_quad = build(QuadraticTerm(A))
-    s_user = build(NonlinearTerm(res, jac, degree=2))
+    s_user = build(NonlinearTerm(res, jac, degree=2, rule=rule))
     Theta = rng.normal(size=(n, basis.size)) * 0.5
     r_quad, r_user = s_quad.residual(Theta, [0.0]), s_user.residual(Theta, [0.0])
     assert np.max(np.abs(r_quad - r_user)) <= 1e-12 * np.max(np.abs(r_quad))
@@ -168,6 +169,26 @@ def test_quadratic_term_as_nonlinear_term_same_solution():
     # one point fewer per germ is not exact: the test can tell
     s_low = build(NonlinearTerm(res, jac, rule=nonlinear_rule_points(3, 2) - 1))
     assert np.max(np.abs(s_low.residual(Theta, [0.0]) - r_quad)) > 1e-8
+
+
+def test_smolyak_rule_is_as_exact_as_the_tensor_rule():
+    """Three germs, a cubic with a random rate (degree 4): the Gauss Smolyak rule of level
+    floor(5p/2) integrates what the (5p/2 + 1)-point tensor rule integrates exactly."""
+    basis = ChaosBasis(2, dim=3)
+    smol = cubic_system(basis, random_reaction=True, degree=4, rule="smolyak")
+    tens = cubic_system(basis, random_reaction=True, degree=4, rule="tensor")
+    Theta, eps = np.random.default_rng(2).normal(size=smol.shape), [3.0]
+    r_s, r_t = smol.residual(Theta, eps), tens.residual(Theta, eps)
+    assert np.max(np.abs(r_s - r_t)) <= 1e-12 * np.max(np.abs(r_t))
+    J_s, J_t = smol.jacobian(Theta, eps), tens.jacobian(Theta, eps)
+    assert np.max(np.abs(J_s - J_t)) <= 1e-12 * np.max(np.abs(J_t))
+    # the integrand has total degree 1 + 3 * 2 + 2 = 9: level 4 is exact as well, level 3 not
+    low = NonlinearTerm(
+        smol.terms[1].residual, smol.terms[1].jacobian, rule=smolyak_quadrature(3, basis)
+    )
+    s_low = GalerkinSystem([LinearTerm(K, G=weighted_gram(basis, a_of)), low], 1, basis=basis)
+    r_low = s_low.residual(Theta, eps) - smol.terms[0].apply(Theta, eps)
+    assert np.max(np.abs(r_low - smol.terms[1].apply(Theta, eps))) > 1e-6
 
 
 def test_jacobian_and_transpose_vs_finite_differences():

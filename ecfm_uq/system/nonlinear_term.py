@@ -49,6 +49,41 @@ def nonlinear_rule_points(order, degree):
     return max(1, math.ceil(((degree + 1) * order + 1) / 2))
 
 
+def _smolyak_size(level, dim):
+    """An upper bound of the Smolyak grid's node count: the sizes of its tensor rules,
+    :math:`\\sum_{\\ell + 1 \\le |l| \\le \\ell + d} \\prod_i l_i`, by a recursion on the
+    level sums (no enumeration of the multi-levels)."""
+    top = level + dim
+    sums = np.zeros(top + 1)  # sums[s]: sum of prod(l) over the l of the germs so far, |l| = s
+    sums[0] = 1.0
+    for _ in range(dim):
+        new = np.zeros(top + 1)
+        for li in range(1, level + 2):
+            new[li:] += li * sums[: top + 1 - li]
+        sums = new
+    return float(sums[level + 1 : top + 1].sum())
+
+
+def smolyak_quadrature(level, basis):
+    """The Gauss Smolyak rule of ``level`` for the basis' germs, as (nodes, weights).
+
+    The combination of the tensor rules of :func:`ecfm_uq.chaos.smolyak_rule`, summed on
+    its distinct nodes (weights may be negative; they sum to one).
+    """
+    from ..chaos import smolyak_rule
+
+    nodes, parts = smolyak_rule(level, basis.dim, "gauss", basis.germs)
+    if len(nodes) > MAX_RULE_NODES:
+        raise ValueError(
+            f"the Smolyak rule of level {level} in {basis.dim} germs has {len(nodes)} nodes "
+            f"(> {MAX_RULE_NODES}); lower the chaos order or `degree`"
+        )
+    weights = np.zeros(len(nodes))
+    for coef, _levels, idx, w, _degrees in parts:
+        np.add.at(weights, idx, coef * w)
+    return nodes, weights
+
+
 def _model_error(message):
     from ..errors import ModelEvaluationError
 
@@ -79,11 +114,13 @@ class NonlinearTerm:
         exact for polynomial terms of that degree. Default 3 (a cubic reaction:
         ``2p + 1`` points). For non-polynomial terms (``exp(u)``) raise it until the
         answer stops changing.
-    rule : "auto", "tensor", int or (nodes, weights)
-        ``"auto"`` and ``"tensor"``: the tensor Gauss rule of the basis' germs
-        (``ChaosBasis.quadrature``) with the points above; an ``int``: that many points
-        per germ; a pair ``(nodes (Q, dim), weights (Q,))``: the user's own rule (e.g. a
-        Smolyak grid), weights summing to one.
+    rule : "auto", "tensor", "smolyak", int or (nodes, weights)
+        ``"tensor"``: the tensor Gauss rule of the basis' germs (``ChaosBasis.quadrature``)
+        with the points above; ``"smolyak"``: the Gauss Smolyak rule of level
+        :math:`\\lfloor(\\text{degree} + 1)\\,p/2\\rfloor`, exact for the same polynomial
+        integrands of total degree (several germs); ``"auto"``: whichever of the two has
+        fewer nodes. An ``int``: that many tensor points per germ; a pair
+        ``(nodes (Q, dim), weights (Q,))``: the user's own rule, weights summing to one.
     size : int, optional
         The state size N, needed only when the system has no other term that fixes it.
     name : str
@@ -122,9 +159,10 @@ class NonlinearTerm:
         self.eps_jacobian_fn = eps_jacobian
         self.degree = check_int("degree", degree, minimum=1)
         if isinstance(rule, str):
-            if rule not in ("auto", "tensor"):
+            if rule not in ("auto", "tensor", "smolyak"):
                 raise ValueError(
-                    f"`rule` must be 'auto', 'tensor', an int or (nodes, weights), got {rule!r}"
+                    "`rule` must be 'auto', 'tensor', 'smolyak', an int or (nodes, weights), "
+                    f"got {rule!r}"
                 )
         elif isinstance(rule, int | np.integer) and not isinstance(rule, bool):
             check_int("rule", rule, minimum=1)
@@ -156,19 +194,34 @@ class NonlinearTerm:
                     f"weights summing to 1, got sum {weights.sum():.6g}"
                 )
         else:
-            n = self.rule if not isinstance(self.rule, str) else None
-            if n is None:
-                n = nonlinear_rule_points(basis.order, self.degree)
-            total = n**basis.dim
-            if total > MAX_RULE_NODES:
-                raise ValueError(
-                    f"term {self.name!r}: the tensor Gauss rule has {n}^{basis.dim} = {total} "
-                    f"nodes (> {MAX_RULE_NODES}); pass rule=(nodes, weights) with a sparse "
-                    "grid (ecfm_uq.chaos.smolyak_rule), a smaller `degree`, or fewer germs"
-                )
-            nodes, weights = basis.quadrature(n)
+            nodes, weights = self._gauss_rule(basis)
         Psi = basis.evaluate(nodes)  # validates the nodes against the germs' supports
         return nodes, weights, Psi
+
+    def _gauss_rule(self, basis):
+        """The tensor or Smolyak Gauss rule the term's ``rule`` and ``degree`` ask for."""
+        n = self.rule if not isinstance(self.rule, str) else None
+        if n is None:
+            n = nonlinear_rule_points(basis.order, self.degree)
+        total = n**basis.dim
+        smolyak = None
+        if self.rule in ("auto", "smolyak") and basis.dim > 1:
+            # a total-degree integrand of degree D = (degree + 1) p_max is integrated
+            # exactly by the Gauss Smolyak rule of level floor(D / 2) (module notes)
+            p_max = int(basis.indices.sum(axis=1).max())
+            level = ((self.degree + 1) * p_max) // 2
+            size = _smolyak_size(level, basis.dim)
+            if self.rule == "smolyak" or size < min(total, 4 * MAX_RULE_NODES):
+                smolyak = smolyak_quadrature(level, basis)
+        if smolyak is not None:
+            return smolyak
+        if total > MAX_RULE_NODES:
+            raise ValueError(
+                f"term {self.name!r}: the tensor Gauss rule has {n}^{basis.dim} = {total} "
+                f"nodes (> {MAX_RULE_NODES}); pass rule='smolyak' or rule=(nodes, weights), "
+                "a smaller `degree`, or fewer germs"
+            )
+        return basis.quadrature(n)
 
     def bind(self, basis, N, n_eps):
         """A copy bound to a system's basis (``None``: deterministic), state size and

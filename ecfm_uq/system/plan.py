@@ -26,7 +26,10 @@ small nonlinear one-germ system (run by the compiled kernel, faster than the den
 otherwise ``"cg"`` (symmetric linear systems) or ``"gmres"``. Sparse LU of the
 chaos-coupled block matrix is never chosen for ``P > 1``: its fill makes it 30-53x slower
 than mean-preconditioned CG already at ``N = 169, P = 35`` (``benchmarks/solvers.py``).
-Nothing larger than the memory budget (:mod:`ecfm_uq.memory`) is chosen.
+Nothing larger than the memory budget (:mod:`ecfm_uq.memory`) is chosen. A system with
+a :class:`~ecfm_uq.system.NonlinearTerm` (the user's callbacks) is nonlinear and of
+unknown symmetry: never ``"decoupled"`` nor ``"cg"``, never a compiled march, never the
+``"nodal"`` preconditioner (``ValueError`` when asked for).
 
 Rules of ``preconditioner="auto"``
 ----------------------------------
