@@ -233,6 +233,34 @@ def test_eps_sensitivity_vs_finite_differences(solver):
     assert np.max(np.abs(dTheta - fd)) <= 1e-6 * np.max(np.abs(fd))
 
 
+def test_adjoint_gradient_equals_forward_sensitivity():
+    basis = ChaosBasis(3, dim=2)
+    system = cubic_system(basis, random_reaction=True, degree=4)
+    sol = solve_steady(system, [100.0])
+    assert sol.success
+    g = np.random.default_rng(4).normal(size=system.shape)  # z = <g, Theta>
+    forward = np.einsum("ik,ikm->m", g, sol.eps_sensitivity()[0])
+    assert np.allclose(sol.adjoint_gradient(g), forward, rtol=1e-10, atol=0)
+    h = 1e-3
+    fd = (
+        np.vdot(g, solve_steady(system, [100.0 + h], tol=1e-12).Theta)
+        - np.vdot(g, solve_steady(system, [100.0 - h], tol=1e-12).Theta)
+    ) / (2 * h)
+    assert abs(sol.adjoint_gradient(g)[0] - fd) <= 1e-6 * abs(fd)
+
+
+def test_dense_jacobians_over_the_memory_budget_are_refused(monkeypatch):
+    from ecfm_uq.errors import MemoryBudgetError
+
+    monkeypatch.setenv("ECFM_UQ_MEMORY_BUDGET", "5000")  # bytes: under 5 nodes x 15^2 doubles
+    system = cubic_system(ChaosBasis(2))
+    with pytest.raises(MemoryBudgetError, match="scipy.sparse"):
+        system.jacobian_operator(np.zeros(system.shape), [1.0])
+    # sparse node Jacobians are not refused
+    sparse = cubic_system(ChaosBasis(2), sparse_jac=True)
+    sparse.jacobian_operator(np.zeros(sparse.shape), [1.0])
+
+
 def test_missing_eps_jacobian_is_reported():
     system = cubic_system(ChaosBasis(2), eps_jac=False)
     sol = solve_steady(system, [10.0])

@@ -343,9 +343,23 @@ class NonlinearTerm:
         return np.abs(self.node_residuals(Theta, eps)) @ np.abs(self._wPsi)
 
     def node_jacobians(self, Theta, eps):
-        """:math:`\\partial r/\\partial u` at every rule node (a list of Q matrices)."""
+        """:math:`\\partial r/\\partial u` at every rule node (a list of Q matrices).
+
+        Dense Jacobians at all Q nodes are held at once: refused
+        (:class:`~ecfm_uq.errors.MemoryBudgetError`) beyond the memory budget.
+        """
         U = self._node_states(Theta)
-        return [self._jacobian_at(U[:, q], q, eps) for q in range(self.n_nodes)]
+        first = self._jacobian_at(U[:, 0], 0, eps)
+        if not is_sparse(first) and self.n_nodes > 1:
+            from ..memory import check_allocation
+
+            check_allocation(
+                8.0 * self._N**2 * self.n_nodes,
+                f"term {self.name!r}: dense Jacobians at {self.n_nodes} rule nodes (N = {self._N})",
+                "return a scipy.sparse matrix from `jacobian`",
+            )
+        rest = [self._jacobian_at(U[:, q], q, eps) for q in range(1, self.n_nodes)]
+        return [first, *rest]
 
     def linearize(self, Theta, eps):
         """The term's Jacobian at ``Theta`` as an operator part (see :mod:`.operator`)."""
