@@ -234,6 +234,7 @@ class NonlinearTerm:
         bound._nodes, bound._weights, bound._Psi = self._make_rule(basis)
         bound._wPsi = bound._weights[:, None] * bound._Psi  # (Q, P)
         bound._N, bound._n_eps = N, n_eps
+        bound._last = None  # (Theta, eps, node residuals) of the latest evaluation
         return bound
 
     @property
@@ -251,7 +252,7 @@ class NonlinearTerm:
         return np.asarray(Theta) @ self._Psi.T  # (N, Q): column q is u(omega_q)
 
     def _call(self, which, f, u, q, eps):
-        omega = self._nodes[q]
+        omega = self._nodes[q] if isinstance(q, int | np.integer) else q
         try:
             with np.errstate(over="raise", invalid="raise", divide="raise"):
                 out = f(u, omega, eps)
@@ -283,6 +284,7 @@ class NonlinearTerm:
         return r
 
     def _jacobian_at(self, u, q, eps):
+        """``jacobian`` at rule node ``q`` (an index) or at a germ point ``q`` (an array)."""
         J = self._call("jacobian", self.jacobian, u, q, eps)
         if is_sparse(J):
             J = sp.csr_matrix(J, dtype=float)
@@ -307,7 +309,7 @@ class NonlinearTerm:
         if not np.all(np.isfinite(data)):
             raise _model_error(
                 f"term {self.name!r}: `jacobian` returned NaN or inf at "
-                f"omega={self._nodes[q].tolist()}"
+                f"omega={np.asarray(self._nodes[q] if np.ndim(q) == 0 else q).tolist()}"
             )
         return J
 
@@ -331,9 +333,20 @@ class NonlinearTerm:
 
     # -- the term's interface --------------------------------------------------------------
     def node_residuals(self, Theta, eps):
-        """:math:`r(u_q, \\omega_q, \\epsilon)` at every rule node, (N, Q)."""
+        """:math:`r(u_q, \\omega_q, \\epsilon)` at every rule node, (N, Q).
+
+        The last evaluation is kept: Newton asks for the residual and its round-off scale
+        (:meth:`magnitude`) at the same state, which costs one pass over the nodes.
+        """
+        Theta = np.asarray(Theta, dtype=float)
+        eps = np.asarray(eps, dtype=float)
+        last = self._last
+        if last is not None and np.array_equal(last[0], Theta) and np.array_equal(last[1], eps):
+            return last[2]
         U = self._node_states(Theta)
-        return np.column_stack([self._residual_at(U[:, q], q, eps) for q in range(self.n_nodes)])
+        R = np.column_stack([self._residual_at(U[:, q], q, eps) for q in range(self.n_nodes)])
+        self._last = (Theta.copy(), eps.copy(), R)
+        return R
 
     def apply(self, Theta, eps, t=None):
         return self.node_residuals(Theta, eps) @ self._wPsi
@@ -363,7 +376,7 @@ class NonlinearTerm:
 
     def linearize(self, Theta, eps):
         """The term's Jacobian at ``Theta`` as an operator part (see :mod:`.operator`)."""
-        return _NonlinearLinearization(self, self.node_jacobians(Theta, eps))
+        return _NonlinearLinearization(self, self.node_jacobians(Theta, eps), Theta, eps)
 
     def eps_jacobian(self, Theta, eps, t=None):
         U = self._node_states(Theta)
@@ -391,8 +404,9 @@ class _NonlinearLinearization:
     is_quadratic = True  # state-dependent: solvers treat it as the nonlinear parts
     is_user = True
 
-    def __init__(self, term, Js):
+    def __init__(self, term, Js, Theta, eps):
         self.term, self.Js = term, Js
+        self.Theta, self.eps = Theta, eps
         self.coef = 1.0
         self.sparse_input = any(is_sparse(J) for J in Js)
 
@@ -428,6 +442,11 @@ class _NonlinearLinearization:
             block = sp.kron(sp.csr_matrix(Jq), sp.csr_matrix(self._coupling(q)), format="csr")
             out = block if out is None else out + block
         return out
+
+    def node_block(self, omega, u):
+        """The deterministic Jacobian at germ point ``omega`` (dim,) and state ``u`` (N,)
+        (a block of the ``"nodal"`` preconditioner)."""
+        return self.term._jacobian_at(u, np.atleast_1d(omega), self.eps)
 
     def mean_block(self, E2_00):
         """The (0, 0) chaos block over :math:`\\mathbb E[\\Psi_0^2]`."""

@@ -28,8 +28,9 @@ chaos-coupled block matrix is never chosen for ``P > 1``: its fill makes it 30-5
 than mean-preconditioned CG already at ``N = 169, P = 35`` (``benchmarks/solvers.py``).
 Nothing larger than the memory budget (:mod:`ecfm_uq.memory`) is chosen. A system with
 a :class:`~ecfm_uq.system.NonlinearTerm` (the user's callbacks) is nonlinear and of
-unknown symmetry: never ``"decoupled"`` nor ``"cg"``, never a compiled march, never the
-``"nodal"`` preconditioner (``ValueError`` when asked for).
+unknown symmetry: never ``"decoupled"`` nor ``"cg"``, never a compiled march (the
+generic Newton-Krylov path takes the ``"nodal"`` preconditioner, with the user's
+Jacobian at the germ's ``P`` Gauss nodes).
 
 Rules of ``preconditioner="auto"``
 ----------------------------------
@@ -335,16 +336,10 @@ def _preconditioner(system, options):
     if kind == "none":
         return None
     st = system.structure
-    if kind == "nodal" and st.nonlinear_terms:
-        raise ValueError(
-            f"`preconditioner`='nodal' does not take term {st.nonlinear_terms[0].name!r} "
-            "(a NonlinearTerm); pass preconditioner='mean' or 'auto'"
-        )
     if kind != "auto":
         return kind
     small = system.N <= DECOUPLED_AUTO_SIZE
-    user = bool(st.nonlinear_terms)
-    if small and not st.is_linear and not user and st.gauss_nodes is not None:
+    if small and not st.is_linear and st.gauss_nodes is not None:
         return "nodal"
     if small and st.couplings_decouple:
         return "decoupled"
