@@ -16,6 +16,16 @@ with a rule :math:`(\\omega_q, w_q)` of the germ,
         = \\sum_q w_q\\, J_{ij}(u_q, \\omega_q, \\epsilon)\\,\\Psi_k(\\omega_q)\\Psi_\\ell(\\omega_q),
 
 exact when the integrands are polynomials of the rule's degree.
+
+Exactness of the rules: for a nonlinearity of degree ``m`` in ``u`` and a state of chaos
+order ``p``, :math:`r\\Psi_k` and :math:`J\\Psi_k\\Psi_\\ell` have degree :math:`D = (m + 1)p`.
+The tensor rule with :math:`n = \\lceil (D + 1)/2 \\rceil` Gauss points per germ is exact
+to degree :math:`2n - 1 \\ge D` in each germ. The Gauss Smolyak rule of level ``L``
+combines tensor rules of :math:`l_i` points with :math:`\\sum_i l_i \\le L + d`; a
+monomial :math:`\\omega^\\alpha` is integrated exactly if some rule has
+:math:`2 l_i - 1 \\ge \\alpha_i`, i.e. :math:`\\sum_i (\\lfloor\\alpha_i/2\\rfloor + 1) \\le L + d`,
+which holds for every total degree :math:`|\\alpha| \\le D` when :math:`L = \\lfloor D/2 \\rfloor`
+(checked against the tensor rule in ``tests/test_nonlinear_term.py``).
 """
 
 from __future__ import annotations
@@ -168,7 +178,8 @@ class NonlinearTerm:
             check_int("rule", rule, minimum=1)
         elif not (isinstance(rule, tuple | list) and len(rule) == 2):
             raise TypeError(
-                f"`rule` must be 'auto', 'tensor', an int or (nodes, weights), got {_describe(rule)}"
+                "`rule` must be 'auto', 'tensor', 'smolyak', an int or (nodes, weights), "
+                f"got {_describe(rule)}"
             )
         self.rule = rule
         self.size = None if size is None else check_int("size", size, minimum=1)
@@ -207,7 +218,7 @@ class NonlinearTerm:
         smolyak = None
         if self.rule in ("auto", "smolyak") and basis.dim > 1:
             # a total-degree integrand of degree D = (degree + 1) p_max is integrated
-            # exactly by the Gauss Smolyak rule of level floor(D / 2) (module notes)
+            # exactly by the Gauss Smolyak rule of level floor(D / 2) (module docstring)
             p_max = int(basis.indices.sum(axis=1).max())
             level = ((self.degree + 1) * p_max) // 2
             size = _smolyak_size(level, basis.dim)
