@@ -79,3 +79,22 @@ def test_calibration_page_example_runs_and_says_the_lower_end_is_open():
     lo, hi = summary.intervals[0]
     assert lo == -np.inf and hi > 0.0 and "not identifiable" in summary.message
     assert summary.intervals[1, 0] < 20.0 < summary.intervals[1, 1]
+
+
+def test_nonlinear_page_example_matches_collocation():
+    import pytest
+
+    pytest.importorskip("skfem")
+    text = (DOCS / "nonlinear.md").read_text()
+    code = re.findall(r"```python\n(.*?)```", text, re.S)[0]
+    ns = {}
+    exec(compile(code, "nonlinear.md", "exec"), ns)
+    assert ns["sol"].success
+    # the table's order-3 row: chaos truncation error against 10 x 10 collocation
+    assert ns["err_mean"] < 1e-7 and ns["err_var"] < 5e-5
+    # the sensitivity against a central difference of two solves
+    system, h = ns["system"], 1e-3
+    plus = ns["solve_steady"](system, [50.0 + h], tol=1e-12).Theta
+    minus = ns["solve_steady"](system, [50.0 - h], tol=1e-12).Theta
+    fd = (plus - minus) / (2 * h)
+    assert np.abs(ns["dTheta"][:, :, 0] - fd).max() <= 1e-5 * np.abs(fd).max()

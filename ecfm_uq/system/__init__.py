@@ -4,6 +4,7 @@ backward_euler, ecfm_solve, discrete_sens, discrete_sens_ecfm, pce, stochastic_s
 from .galerkin import GalerkinSystem
 from .linear import LinearSolver
 from .nonlinear import NewtonInfo, newton
+from .nonlinear_term import NonlinearTerm
 from .operator import AugmentedOperator, GalerkinOperator
 from .options import SOLVERS, SolverOptions, solver_options
 from .steady import SteadySolution, solve_continuation, solve_steady
@@ -22,6 +23,7 @@ __all__ = [
     "LinearTerm",
     "LoadTerm",
     "NewtonInfo",
+    "NonlinearTerm",
     "QuadraticTerm",
     "SolverOptions",
     "SteadySolution",

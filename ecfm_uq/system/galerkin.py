@@ -19,6 +19,7 @@ import scipy.sparse as sp
 
 from .._validation import as_finite_array, as_operator, check_int, describe
 from ..memory import check_covariance
+from .nonlinear_term import NonlinearTerm
 from .operator import GalerkinOperator, _LinearPart, _QuadraticLinearization
 from .structure import SystemStructure, triple_product_pairs
 from .terms import LinearTerm, LoadTerm, QuadraticTerm
@@ -40,12 +41,23 @@ def _check_parameters(terms, n_eps):
             )
 
 
+def _term_size(term):
+    """The state size a term fixes (``None``: it does not)."""
+    if isinstance(term, LinearTerm):
+        return term.K.shape[0]
+    if isinstance(term, QuadraticTerm):
+        return term.form.size
+    if isinstance(term, NonlinearTerm):
+        return term.size
+    return None
+
+
 class GalerkinSystem:
     """A discretized, parameterized (stochastic) model.
 
     Parameters
     ----------
-    terms : sequence of LinearTerm, QuadraticTerm, LoadTerm
+    terms : sequence of LinearTerm, QuadraticTerm, NonlinearTerm, LoadTerm
         Residual contributions; they are summed. The system keeps copies bound to its
         chaos basis (``system.terms``, a tuple); the terms passed in are left unbound, so
         they can build systems of other sizes ``P``.
@@ -74,10 +86,10 @@ class GalerkinSystem:
         if not terms:
             raise ValueError("`terms` must contain at least one term")
         for term in terms:
-            if not isinstance(term, LinearTerm | QuadraticTerm | LoadTerm):
+            if not isinstance(term, LinearTerm | QuadraticTerm | NonlinearTerm | LoadTerm):
                 raise TypeError(
-                    f"`terms` holds an unsupported {describe(term)}; "
-                    "use LinearTerm, QuadraticTerm or LoadTerm (e.g. LoadTerm.constant(F))"
+                    f"`terms` holds an unsupported {describe(term)}; use LinearTerm, "
+                    "QuadraticTerm, NonlinearTerm or LoadTerm (e.g. LoadTerm.constant(F))"
                 )
         self.n_eps = check_int("n_eps", n_eps, minimum=0)
         self.basis = basis
@@ -98,16 +110,15 @@ class GalerkinSystem:
                 E.setflags(write=False)
         sizes = {t.K.shape[0] for t in terms if isinstance(t, LinearTerm)}
         sizes |= {t.form.size for t in terms if isinstance(t, QuadraticTerm)}
+        sizes |= {t.size for t in terms if isinstance(t, NonlinearTerm) and t.size is not None}
         if not sizes:
             raise ValueError(
                 "`terms` has no LinearTerm or QuadraticTerm, so the state size N is unknown; "
-                "add the model's operator (e.g. LinearTerm(K))"
+                "add the model's operator (e.g. LinearTerm(K)) or pass NonlinearTerm(size=N)"
             )
         if len(sizes) != 1:
             named = sorted(
-                f"{t.name!r}: {t.K.shape[0] if isinstance(t, LinearTerm) else t.form.size}"
-                for t in terms
-                if isinstance(t, LinearTerm | QuadraticTerm)
+                f"{t.name!r}: {_term_size(t)}" for t in terms if _term_size(t) is not None
             )
             raise ValueError(
                 f"terms disagree on the state size N ({', '.join(named)}); "
@@ -124,6 +135,8 @@ class GalerkinSystem:
                 bound.append(term.bind(self.E2))
             elif isinstance(term, QuadraticTerm):
                 bound.append(term.bind(self.E3, pairs))
+            elif isinstance(term, NonlinearTerm):
+                bound.append(term.bind(basis, self.N, self.n_eps))
             else:
                 term.check_sizes(self.N, self.n_eps)
                 bound.append(term.bind(self.E1, self.N))
@@ -205,6 +218,8 @@ class GalerkinSystem:
             if isinstance(term, LinearTerm | QuadraticTerm):
                 c = abs(float(term.coef.value(eps)))
                 s += c * float(np.linalg.norm(term.magnitude(Theta)))
+            elif isinstance(term, NonlinearTerm):
+                s += float(np.linalg.norm(term.magnitude(Theta, eps)))
             else:
                 s += float(np.linalg.norm(term.apply(Theta, eps, t)))
         if lam is not None and self.Gamma is not None:
@@ -237,6 +252,8 @@ class GalerkinSystem:
                 parts.append(_LinearPart(term, term.coef.value(eps)))
             elif isinstance(term, QuadraticTerm):
                 parts.append(_QuadraticLinearization(term, Theta, term.coef.value(eps)))
+            elif isinstance(term, NonlinearTerm):
+                parts.append(term.linearize(Theta, eps))
         op = GalerkinOperator(self, parts, dt=dt)
         if self.is_linear:
             self.structure.store_operator(key, op)
@@ -252,7 +269,7 @@ class GalerkinSystem:
 
     @property
     def is_linear(self):
-        """True when no term is quadratic in the state."""
+        """True when no term is quadratic (or a :class:`NonlinearTerm`) in the state."""
         return self.structure.is_linear
 
     @property

@@ -26,7 +26,11 @@ small nonlinear one-germ system (run by the compiled kernel, faster than the den
 otherwise ``"cg"`` (symmetric linear systems) or ``"gmres"``. Sparse LU of the
 chaos-coupled block matrix is never chosen for ``P > 1``: its fill makes it 30-53x slower
 than mean-preconditioned CG already at ``N = 169, P = 35`` (``benchmarks/solvers.py``).
-Nothing larger than the memory budget (:mod:`ecfm_uq.memory`) is chosen.
+Nothing larger than the memory budget (:mod:`ecfm_uq.memory`) is chosen. A system with
+a :class:`~ecfm_uq.system.NonlinearTerm` (the user's callbacks) is nonlinear and of
+unknown symmetry: never ``"decoupled"`` nor ``"cg"``, never a compiled march (the
+generic Newton-Krylov path takes the ``"nodal"`` preconditioner, with the user's
+Jacobian at the germ's ``P`` Gauss nodes).
 
 Rules of ``preconditioner="auto"``
 ----------------------------------
@@ -331,9 +335,9 @@ def _preconditioner(system, options):
     kind = options.preconditioner
     if kind == "none":
         return None
+    st = system.structure
     if kind != "auto":
         return kind
-    st = system.structure
     small = system.N <= DECOUPLED_AUTO_SIZE
     if small and not st.is_linear and st.gauss_nodes is not None:
         return "nodal"
@@ -348,6 +352,8 @@ def _nodal_march_refusal(system):
     N, P = system.shape
     if P == 1:
         return "P = 1"
+    if st.nonlinear_terms:
+        return "the system has a NonlinearTerm (a user's callbacks, evaluated in Python)"
     if st.gauss_nodes is None:
         return "the chaos basis has more than one germ (no P-node Gauss rule)"
     if st.n_quadratic > 1:
@@ -367,6 +373,8 @@ def _march_refusal(system, solver, precond, constrained, keep_factors):
     if P == 1:
         if solver != "dense":
             return f"the P = 1 kernel factorizes densely, but the solver is {solver!r}"
+        if system.structure.nonlinear_terms:
+            return "the system has a NonlinearTerm (a user's callbacks, evaluated in Python)"
         if system.structure.n_quadratic > 1:
             return "the system has more than one quadratic term"
         if N > COMPILED_MARCH_MAX_N:

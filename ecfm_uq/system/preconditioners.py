@@ -151,7 +151,11 @@ class NodalPreconditioner(_ChaosBlockDiagonal):
             blocks[k] = block if blocks[k] is None else blocks[k] + block
 
         for part in op.parts:
-            if part.is_quadratic:
+            if getattr(part, "is_user", False):  # a NonlinearTerm: its Jacobian at the node
+                U = part.Theta @ nodes.Phi.T
+                for k in range(P):
+                    add(k, part.node_block(nodes.nodes[k], U[:, k]))
+            elif part.is_quadratic:
                 U = part.Theta @ nodes.Phi.T
                 for k in range(P):
                     add(k, part.coef * part.term.form.matrix(U[:, k]))

@@ -18,6 +18,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..memory import check_allocation
+from .nonlinear_term import NonlinearTerm
 from .terms import LinearTerm, QuadraticTerm, _symmetric
 
 __all__ = ["SystemStructure", "triple_product_pairs"]
@@ -67,9 +68,14 @@ class SystemStructure:
         return len(self.quadratic_terms)
 
     @cached_property
+    def nonlinear_terms(self):
+        """The user's :class:`NonlinearTerm` s, in order (a tuple)."""
+        return tuple(t for t in self._system.terms if isinstance(t, NonlinearTerm))
+
+    @cached_property
     def is_linear(self):
-        """No term is quadratic in the state."""
-        return not self.quadratic_terms
+        """No term is quadratic (or a user's nonlinear term) in the state."""
+        return not self.quadratic_terms and not self.nonlinear_terms
 
     @cached_property
     def sparse_input(self):
@@ -85,6 +91,8 @@ class SystemStructure:
 
     @cached_property
     def _term_asymmetry(self):
+        if self.nonlinear_terms:
+            return f"term {self.nonlinear_terms[0].name!r} is a NonlinearTerm (symmetry unknown)"
         if not self.is_linear:
             return "the system has a quadratic (nonsymmetric) term"
         for term in self.linear_terms:
