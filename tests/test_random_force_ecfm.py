@@ -75,3 +75,35 @@ def test_exact_forces_stay_available_and_bad_options_are_named():
         fit(problem, [1.0, 10.0], formulation="ecfm", sigma=sigma, options={"forces": "x"})
     with pytest.raises(TypeError, match="unknown name"):
         fit(problem, [1.0, 10.0], formulation="ecfm", sigma=sigma, options={"lr": 1})
+
+
+@pytest.mark.parametrize("scale", [1e9, 1e-9])
+def test_equations_in_other_units_give_the_same_fits_intervals_and_force_map(scale):
+    """The same rod with every equation multiplied by `scale` (physical units, e.g. Pa):
+    standard and random-force estimates, profile intervals, the verdict and the force
+    z-scores do not change (Gamma is in the same units, so the forces do not either)."""
+    from ecfm_uq.inverse import profile_intervals
+
+    def scaled():
+        t = terms()
+        return GalerkinSystem(
+            [LinearTerm(scale * t[0].K), LinearTerm(scale * t[1].K, t[1].coef),
+             LoadTerm.scaled(-scale * load(B, np.ones_like), Coefficient.parameter(1))],
+            2, Gamma=scale * hat_forces(B, SENS, 0.05),
+        )  # fmt: skip
+
+    for amplitude, noise in ((0.0, 0.02), (10.0, 1e-3)):
+        v, sigma = readings(amplitude, noise, 4)
+        ref = fit(SteadyProblem(model(), M_OBS, v), [1.0, 10.0], formulation="ecfm", sigma=sigma)
+        res = fit(SteadyProblem(scaled(), M_OBS, v), [1.0, 10.0], formulation="ecfm", sigma=sigma)
+        assert res.success and res.verdict.consistent == ref.verdict.consistent
+        # estimates and interval ends agree to a small fraction of the interval's width
+        # (the eps search stops at its own tolerance, not at round-off)
+        ci, ci_ref = profile_intervals(res), profile_intervals(ref)
+        width = ci_ref[:, 1] - ci_ref[:, 0]
+        assert np.all(np.abs(res.eps - ref.eps) <= 2e-3 * width)
+        assert np.all(np.abs(ci - ci_ref) <= 2e-3 * width[:, None])
+        # the force map to the same accuracy, relative to its largest entry
+        for key, a, b in (("lam", res.extra["lam"], ref.extra["lam"]),
+                          ("z", res.verdict["force_z"], ref.verdict["force_z"])):  # fmt: skip
+            assert np.max(np.abs(a - b)) <= 1e-3 * max(np.max(np.abs(b)), 1e-12), key

@@ -329,9 +329,12 @@ def fit_random_force(problem, eps0, s):
             x = res.x
         if res.success or moved < 1e-8 or nit >= maxiter:
             break
-    if not res.success and bnds is None:
-        # a long flat valley (the discrepancy trading off against eps) where the
-        # finite-difference gradient is noise: finish derivative-free
+    tau_positive = np.isfinite(res.fun) and _profiled(model, eps_std + scale * x)[1] > 0.0
+    if (tau_positive or not res.success) and bnds is None:
+        # with tau > 0 the optimum lies in a long flat valley (the discrepancy trading off
+        # against eps) where a small gradient in standard-error units does not mean close
+        # (a premature stop there made the estimate depend on the equations' units):
+        # finish derivative-free
         simplex = x + np.vstack([np.zeros(x.size), 10.0 * np.eye(x.size)])
         nm = optimize.minimize(
             p, x, method="Nelder-Mead",
