@@ -159,9 +159,9 @@ class LinearSolver:
         schur = SchurFactor(inner, op.Jl, op.Cth, self.options.rtol)
         return None if schur.singular else schur
 
-    def newton_rtol(self, rnorm, tol, floor=0.0):
+    def newton_rtol(self, rnorm, tol, floor=0.0, *, linear=False):
         """Relative tolerance of a Newton step's linear solve (``None`` for direct solvers):
         the plan's forcing term :func:`.plan.newton_rtol`."""
         if not self.iterative:
             return None
-        return _plan.newton_rtol(rnorm, tol, floor)
+        return _plan.newton_rtol(rnorm, tol, floor, linear=linear)

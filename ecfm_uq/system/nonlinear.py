@@ -13,7 +13,13 @@ from .linear import (
     dense_lu,
 )
 from .operator import AugmentedOperator
-from .plan import SolveStatus, failure_message, newton_converged, residual_floor
+from .plan import (
+    NEWTON_ETA_FACTOR,
+    SolveStatus,
+    failure_message,
+    newton_converged,
+    residual_floor,
+)
 
 
 @dataclass
@@ -34,7 +40,7 @@ class NewtonInfo:
     status: SolveStatus = SolveStatus.CONVERGED
 
 
-def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None, scale=None):
+def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None, scale=None, linear=False):
     """Newton's method on ``fun(z) -> (r, J)``.
 
     Parameters
@@ -56,6 +62,14 @@ def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None, scale=None):
         ``scale(z) -> float``, the magnitude of the terms the residual sums at ``z``
         (:meth:`GalerkinSystem.residual_scale`); evaluated only while
         :math:`\\|r\\| \\ge` ``tol``.
+    linear : bool
+        ``fun`` is affine in ``z`` (its Jacobian does not depend on ``z``). With a Krylov
+        solver the first solve then aims at ``tol`` itself and, once the residual meets
+        it, no further solve is made (one Krylov solve per linear system, more only where
+        one falls short), with ``tol`` relative to ``scale`` where the model's scale is
+        below 1; the returned factors are those of the constant Jacobian. Direct
+        solvers keep their one refinement step (a back-substitution with the same
+        factors: it costs little and leaves the answer at round-off).
 
     Returns
     -------
@@ -75,11 +89,17 @@ def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None, scale=None):
         ok = status == SolveStatus.CONVERGED
         return NewtonInfo(ok, k, rnorm, message, label, its, status)
 
+    one_solve = linear and linear_solver is not None and linear_solver.iterative
     for k in range(maxiter + 1):
         try:
             r, J = fun(z)
             rnorm = float(np.linalg.norm(r))
             floor = 0.0
+            if one_solve and k == 0 and scale is not None and np.isfinite(rnorm):
+                # one solve must be accurate on its own: tol is absolute for models of
+                # unit scale and above, relative to the model's scale below it (a whole
+                # model x 1e-9 keeps its digits; the refinement step used to give them)
+                tol = tol * min(1.0, scale(z))
             if scale is not None and rnorm >= tol and np.isfinite(rnorm):
                 floor = residual_floor(scale(z), tol)
         except ModelEvaluationError as e:
@@ -96,10 +116,15 @@ def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None, scale=None):
             rtol = None
         else:
             factor = linear_solver.factorize(J)
-            rtol = linear_solver.newton_rtol(rnorm, tol, floor)
+            rtol = linear_solver.newton_rtol(rnorm, tol, floor, linear=linear)
         if factor is None:
             message = failure_message(SolveStatus.SINGULAR_JACOBIAN, maxiter)
             return z, None, info(SolveStatus.SINGULAR_JACOBIAN, k, message)
+        # an affine residual: the Jacobian (and its factors) is the same everywhere, so
+        # a correction step would only refine below tol; a start counts as solved only
+        # if it is as good as a solve would make it (a warm start of a march step)
+        if one_solve and newton_converged(rnorm, tol if k else NEWTON_ETA_FACTOR * tol, floor):
+            return z, factor, info(SolveStatus.CONVERGED, k, "converged")
         try:
             dz = factor.solve(r, rtol=rtol)
         except KrylovError as e:

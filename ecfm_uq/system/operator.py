@@ -151,6 +151,7 @@ class GalerkinOperator:
     # -- action ----------------------------------------------------------------------
     def apply(self, X):
         """:math:`J\\,\\mathrm{vec}(X)` reshaped: ``X`` (N, P) -> (N, P), matrix-free."""
+        X = np.ascontiguousarray(X)  # else every sparse product copies it
         Y = np.zeros((self.N, self.P))
         for part in self.parts:
             Y += part.apply(X)

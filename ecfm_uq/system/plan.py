@@ -120,6 +120,9 @@ KRYLOV_ACCEPT = 10.0
 UNIT_ROUNDOFF = float(np.finfo(float).eps)
 ROUNDOFF_FACTOR = 10.0
 CHORD_RATE = 0.25
+# a linear march step's Krylov solve starts from the last state plus the best combination
+# of the differences of this many previous states (stepping._warm_start)
+WARM_START_STATES = 3
 # a chaos block (mean block, decoupled mode) below this fraction of the operator's scale
 # vanishes: the Galerkin operator is singular whatever the spatial operators are
 VANISHING_BLOCK = 1e-12
@@ -185,13 +188,19 @@ def newton_converged(rnorm, tol, floor=0.0):
     return bool(rnorm < tol or (floor > 0.0 and rnorm <= floor))
 
 
-def newton_rtol(rnorm, tol, floor=0.0):
+def newton_rtol(rnorm, tol, floor=0.0, *, linear=False):
     """The relative tolerance of a Newton step's Krylov solve (the forcing term), never
-    below what floating point can reach (``floor / ||R||``)."""
+    below what floating point can reach (``floor / ||R||``).
+
+    It aims at :data:`NEWTON_ETA_FACTOR` ``tol`` (or the floor), so one solve meets the
+    Newton test on a linear system; a nonlinear step asks for at most
+    :data:`NEWTON_ETA_MAX` (Newton's own convergence does the rest). A linear system
+    (``linear=True``) is not capped: its one solve is the answer.
+    """
     eta = max(NEWTON_ETA_FACTOR * tol / max(rnorm, 1e-300), NEWTON_ETA_MIN)
     if floor > 0.0:
         eta = max(eta, floor / max(rnorm, 1e-300))
-    return float(min(NEWTON_ETA_MAX, eta))
+    return float(eta if linear else min(NEWTON_ETA_MAX, eta))
 
 
 def krylov_accepts(res, rtol, floor=0.0):

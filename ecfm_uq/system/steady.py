@@ -209,7 +209,8 @@ def solve_steady(
         ``"sparse-direct"``, ``"cg"`` or ``"gmres"`` (see :mod:`ecfm_uq.system.plan`);
         a :class:`~ecfm_uq.system.SolverOptions` or dict also sets the preconditioner,
         Krylov tolerance and iteration limits. A linear system is solved by Newton too:
-        one step, plus refinement steps until ``tol`` is met.
+        one Krylov solve aimed at ``tol`` (more only if it falls short), or a direct
+        solve plus one refinement back-substitution.
     structure : {"auto", "dense"}, optional
         Deprecated older name for ``solver`` (``"auto"`` or ``"dense"`` only); warns.
 
@@ -235,6 +236,7 @@ def solve_steady(
     n = N * P
     Theta0 = system.zeros() if Theta0 is None else as_finite_array("Theta0", Theta0, shape=(N, P))
     linear = LinearSolver(system, opts, constrained=M_obs is not None, steady=True)
+    affine = system.is_linear  # one linear solve, no refinement once tol is met
     if M_obs is None:
         lam = system.check_lam(lam)
 
@@ -246,7 +248,7 @@ def solve_steady(
             return system.residual_scale(z.reshape(N, P), eps, lam)
 
         z, factor, info = newton(
-            fun, Theta0.ravel(), tol, maxiter, linear_solver=linear, scale=scale
+            fun, Theta0.ravel(), tol, maxiter, linear_solver=linear, scale=scale, linear=affine
         )
         Theta, lam_out = z.reshape(N, P), lam
     else:
@@ -264,7 +266,9 @@ def solve_steady(
             return s + _constraint_scale(Cth, z[:n], v)
 
         z0 = np.concatenate([Theta0.ravel(), np.zeros(system.n_forces)])
-        z, factor, info = newton(fun, z0, tol, maxiter, linear_solver=linear, scale=scale)
+        z, factor, info = newton(
+            fun, z0, tol, maxiter, linear_solver=linear, scale=scale, linear=affine
+        )
         Theta, lam_out = z[:n].reshape(N, P), z[n:]
     message = info.message
     if info.success and linear.name == "decoupled":
