@@ -40,7 +40,9 @@ class NewtonInfo:
     status: SolveStatus = SolveStatus.CONVERGED
 
 
-def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None, scale=None, linear=False):
+def newton(
+    fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None, scale=None, linear=False, first=None
+):
     """Newton's method on ``fun(z) -> (r, J)``.
 
     Parameters
@@ -70,6 +72,8 @@ def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None, scale=None, li
         below 1; the returned factors are those of the constant Jacobian. Direct
         solvers keep their one refinement step (a back-substitution with the same
         factors: it costs little and leaves the answer at round-off).
+    first : (r, J), optional
+        ``fun(z0)`` when the caller already has it (saves one evaluation).
 
     Returns
     -------
@@ -92,7 +96,7 @@ def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None, scale=None, li
     one_solve = linear and linear_solver is not None and linear_solver.iterative
     for k in range(maxiter + 1):
         try:
-            r, J = fun(z)
+            r, J = first if (k == 0 and first is not None) else fun(z)
             rnorm = float(np.linalg.norm(r))
             floor = 0.0
             if one_solve and k == 0 and scale is not None and np.isfinite(rnorm):

@@ -34,7 +34,8 @@ from .trajectory import Trajectory, _generic_adjoint
 
 def _warm_start(fun, states):
     """The start of a linear step's solve: the last state plus the combination of the
-    last state differences that minimizes the step's residual.
+    last state differences that minimizes the step's residual; returns it with its
+    residual and the Jacobian, ``(z0, (r0, J))``.
 
     For an affine residual ``r(z0 + D c) = r(z0) + J D c``, so the least-squares ``c``
     costs one matrix product per difference: it contains keeping the last state
@@ -50,7 +51,8 @@ def _warm_start(fun, states):
     # normal equations of the few columns (their Gram matrix is tiny); pinv drops the
     # directions in which the differences are (nearly) dependent
     c = np.linalg.pinv(JD.T @ JD, rcond=1e-10, hermitian=True) @ (JD.T @ -r)
-    return last + D @ c
+    # the residual there is known without another evaluation (the residual is affine)
+    return last + D @ c, (r + JD @ c, J)
 
 
 @library_threads(size=dense_unknowns)
@@ -191,6 +193,7 @@ def march(
     for s in range(n_steps):
         t1 = times[s + 1]
         prev = Th[s].ravel()
+        first = None
 
         if constrained:
             v1 = V[s + 1]
@@ -213,7 +216,7 @@ def march(
 
             z0 = prev if guess is None else guess.Theta[s + 1].ravel()
             if warm and guess is None and s > 0:
-                z0 = _warm_start(fun, Th[max(0, s - WARM_START_STATES) : s + 1])
+                z0, first = _warm_start(fun, Th[max(0, s + 1 - WARM_START_STATES) : s + 1])
 
         def scale(z, prev=prev, t1=t1, v1=V[s + 1] if constrained else None):
             T1 = z[:n].reshape(N, P)
@@ -223,7 +226,14 @@ def march(
             return sc + (_constraint_scale(Cth, z[:n], v1) if constrained else 0.0)
 
         z, lu, info = newton(
-            fun, z0, tol, maxiter, linear_solver=linear, scale=scale, linear=system.is_linear
+            fun,
+            z0,
+            tol,
+            maxiter,
+            linear_solver=linear,
+            scale=scale,
+            linear=system.is_linear,
+            first=first,
         )
         nits[s] = info.nit
         if not info.success:
