@@ -91,7 +91,8 @@ def test_the_warm_start_is_no_worse_than_the_last_state_or_extrapolation():
         r = r + system.residual(z.reshape(N, P), []).ravel()
         return r, system.jacobian_operator(z.reshape(N, P), [], dt=dt)
 
-    z0 = _warm_start(fun, tr.Theta[1:4])
+    z0, (r0, _) = _warm_start(fun, tr.Theta[1:4])
+    np.testing.assert_allclose(r0, fun(z0)[0], rtol=0, atol=1e-12 * np.linalg.norm(r0))
     last, extrapolated = tr.Theta[3].ravel(), (2 * tr.Theta[3] - tr.Theta[2]).ravel()
     rn = np.linalg.norm(fun(z0)[0])
     assert rn <= np.linalg.norm(fun(last)[0]) and rn <= np.linalg.norm(fun(extrapolated)[0])
