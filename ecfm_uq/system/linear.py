@@ -152,7 +152,7 @@ class LinearSolver:
             except np.linalg.LinAlgError:
                 return None
         else:
-            precond = make_preconditioner(J, self.plan.preconditioner)
+            precond = make_preconditioner(J, self.plan.preconditioner, symmetric=name == "cg")
             inner = KrylovFactor(J, name, precond, self.options, self.record)
         if not augmented:
             return inner

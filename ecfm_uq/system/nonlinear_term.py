@@ -454,6 +454,10 @@ class _NonlinearLinearization:
             out = block if out is None else out + block
         return out
 
+    def kronecker_terms(self):
+        """``[(J_q, w_q Psi_q Psi_q^T)]``: :meth:`apply` ``= sum_q J_q X C_q``."""
+        return [(Jq, self._coupling(q)) for q, Jq in enumerate(self.Js)]
+
     def node_block(self, omega, u):
         """The deterministic Jacobian at germ point ``omega`` (dim,) and state ``u`` (N,)
         (a block of the ``"nodal"`` preconditioner)."""

@@ -56,6 +56,10 @@ class _LinearPart:
     def mean_block(self, E2_00):
         return (self.coef * self.term.G[0, 0] / E2_00) * self.term.K
 
+    def kronecker_terms(self):
+        """``[(K, C)]`` with :meth:`apply` ``= sum K X C`` (the Kronecker preconditioner)."""
+        return [(self.term.K, self.coef * self.term.G)]
+
     def magnitude(self, X):
         return abs(self.coef) * self.term.magnitude(X)
 
@@ -105,6 +109,15 @@ class _QuadraticLinearization:
             block = sp.kron(sp.csr_matrix(Sk), sp.csr_matrix(Ek), format="csr")
             out = block if out is None else out + block
         return self.coef * out
+
+    def kronecker_terms(self):
+        """``[(S_k, E_k^T)]``: :meth:`apply` ``= sum_k S_k X E_k^T``."""
+        E3 = self.term.E3
+        return [
+            (self.coef * Sk, E3[:, :, k].T)
+            for k, Sk in enumerate(self.term.matrices(self.Theta))
+            if np.any(E3[:, :, k])
+        ]
 
     def mean_block(self, E2_00):
         """The (0, 0) chaos block divided by :math:`\\mathbb E[\\Psi_0^2]`."""

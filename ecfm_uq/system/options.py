@@ -11,7 +11,7 @@ from .plan import CHORD_RATE
 __all__ = ["SOLVERS", "PRECONDITIONERS", "SolverOptions", "solver_options"]
 
 SOLVERS = ("auto", "dense", "decoupled", "sparse-direct", "cg", "gmres")
-PRECONDITIONERS = ("auto", "mean", "mean-amg", "decoupled", "nodal", "none")
+PRECONDITIONERS = ("auto", "mean", "mean-amg", "kronecker", "decoupled", "nodal", "none")
 
 
 @dataclass(frozen=True)
@@ -21,17 +21,20 @@ class SolverOptions:
     Parameters
     ----------
     solver : {"auto", "dense", "decoupled", "sparse-direct", "cg", "gmres"}
-    preconditioner : {"auto", "mean", "mean-amg", "decoupled", "nodal", "none"}
+    preconditioner : {"auto", "mean", "mean-amg", "kronecker", "decoupled", "nodal", "none"}
         For ``"cg"``/``"gmres"``: the mean-based preconditioner with the mean block
         factorized by ``splu`` (``"mean"``) or approximated by one AMG V-cycle
-        (``"mean-amg"``, needs ``pyamg``); or ``"decoupled"``, exact for the linear terms
+        (``"mean-amg"``, needs ``pyamg``); ``"kronecker"``, the mean block times the
+        chaos factor nearest the Jacobian (Ullmann; same cost as ``"mean"``, any number
+        of germs, built from the user's node Jacobians for a NonlinearTerm);
+        or ``"decoupled"``, exact for the linear terms
         when their couplings share an eigenbasis (``P`` factorized ``N x N`` blocks) and
         mean-based for the quadratic ones; or ``"nodal"`` (one germ): the Jacobian with
         its chaos integrals taken by the germ's ``P``-node Gauss rule, i.e. the ``P``
         deterministic Jacobians at the nodes, quadratic terms included.
         ``"auto"``: ``"nodal"`` for a nonlinear one-germ system, else ``"decoupled"``
-        when available, each for ``N <= 5000``; else ``"mean"`` (``"mean-amg"`` for very
-        large ``N``).
+        when available, each for ``N <= 5000``; else ``"kronecker"`` (linear systems) or
+        ``"mean"`` (nonlinear ones); ``"mean-amg"`` for very large ``N``.
     rtol : float
         Relative residual of Krylov solves outside Newton (sensitivities, adjoints).
         Newton steps choose their own, tighter as the residual approaches ``tol``.

@@ -9,8 +9,8 @@ march, with or without the ECFM data constraint, with or without kept factors)
   ``P > 1`` node-preconditioned march (``"compiled-sg"``, :func:`._kernels.march_sg`);
 * the **linear solver** (``"dense"``, ``"decoupled"``, ``"sparse-direct"``, ``"cg"``,
   ``"gmres"``);
-* the **preconditioner** of a Krylov solver (``"mean"``, ``"mean-amg"``, ``"decoupled"``,
-  ``"nodal"`` or none),
+* the **preconditioner** of a Krylov solver (``"mean"``, ``"mean-amg"``, ``"kronecker"``,
+  ``"decoupled"``, ``"nodal"`` or none),
 
 and holds every threshold the solvers and the compiled kernels share. Nothing else in
 the package makes these choices; everything else asks the plan.
@@ -36,7 +36,10 @@ Rules of ``preconditioner="auto"``
 ----------------------------------
 ``"nodal"`` for a nonlinear one-germ system, else ``"decoupled"`` when the couplings
 (and :math:`\\mathbb E[\\Psi\\Psi^T]`) share an eigenbasis, each for ``N <= 5000``;
-else ``"mean"`` (``"mean-amg"`` beyond ``N = 400 000``).
+else ``"kronecker"`` for a linear system (Ullmann's :math:`\\bar K\\otimes A`, as cheap
+as the mean-based one and 20-37 % fewer CG iterations on a lognormal conductivity,
+never more on the affine ones measured) and ``"mean"`` for a nonlinear one; beyond
+``N = 400 000`` ``"mean-amg"``.
 
 Rules of ``compiled="auto"``
 ----------------------------
@@ -353,7 +356,11 @@ def _preconditioner(system, options):
         return "nodal"
     if small and st.couplings_decouple:
         return "decoupled"
-    return "mean" if system.N <= SPLU_AUTO_SIZE else "mean-amg"
+    if system.N > SPLU_AUTO_SIZE:
+        return "mean-amg"
+    # the Kronecker factor is built once for a linear system; for a nonlinear one it would
+    # need every chaos block of the linearization at each Newton step
+    return "kronecker" if st.is_linear else "mean"
 
 
 def _nodal_march_refusal(system):

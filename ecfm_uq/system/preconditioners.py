@@ -75,6 +75,90 @@ class MeanPreconditioner:
         return self._solve_t(R) / self.d[None, :]
 
 
+def _frobenius(A, B):
+    """:math:`\\mathrm{tr}(A^T B)` of two (N, N) matrices, sparse or dense."""
+    if sp.issparse(A):
+        return float(A.multiply(B).sum())
+    if sp.issparse(B):
+        return float(B.multiply(A).sum())
+    return float(np.vdot(A, B))
+
+
+class KroneckerPreconditioner:
+    """:math:`(\\bar K \\otimes A)^{-1}`, the Kronecker-product preconditioner of Ullmann (2010).
+
+    The Jacobian is a sum of Kronecker products, :math:`J\\,\\mathrm{vec}X = \\sum_j K_j X
+    C_j` (a linear term: :math:`K_q` and :math:`c_q G_q`; a quadratic term linearized at
+    the state: :math:`S_k` and :math:`\\mathbb E[\\Psi\\Psi\\Psi_k]`; a
+    :class:`~ecfm_uq.system.NonlinearTerm`: the user's Jacobian at each rule node and
+    :math:`w_q\\Psi(\\omega_q)\\Psi(\\omega_q)^T`; the mass: :math:`M/\\Delta t` and
+    :math:`\\mathbb E[\\Psi\\Psi^T]`). With the mean block :math:`\\bar K` as the spatial
+    factor, the chaos factor nearest to :math:`J` in the Frobenius norm is
+
+    .. math:: A = \\sum_j \\frac{\\langle K_j, \\bar K\\rangle_F}
+              {\\langle \\bar K, \\bar K\\rangle_F}\\, C_j .
+
+    :math:`A = \\mathbb E[\\Psi\\Psi^T]` gives the mean-based preconditioner back; the
+    Kronecker one keeps how much of each random mode lies along the mean operator, for
+    the same cost (one factorization of :math:`\\bar K` applied to the ``P`` columns, and
+    a ``P x P`` solve). Any number of germs; for a NonlinearTerm it is built from the
+    user's Jacobians at the rule's nodes.
+
+    Parameters
+    ----------
+    op : GalerkinOperator
+    symmetric : bool
+        The Krylov method needs a symmetric positive definite preconditioner (CG): a
+        chaos factor that is not positive definite is then replaced by
+        :math:`\\mathbb E[\\Psi\\Psi^T]` (the mean-based preconditioner), as
+        ``fallback`` records.
+    """
+
+    def __init__(self, op, symmetric=False):
+        import scipy.linalg as sla
+
+        self.N, self.P = op.N, op.P
+        system = op.system
+        E2 = np.asarray(system.E2, dtype=float)
+        mean = MeanPreconditioner(op, "mean")  # the factor of K_bar, and its checks
+        self._solve, self._solve_t = mean._solve, mean._solve_t
+        K = op.mean_block()
+        kk = _frobenius(K, K)
+        A = np.zeros((self.P, self.P))
+        for part in op.parts:
+            for Kj, Cj in part.kronecker_terms():
+                A += (_frobenius(Kj, K) / kk) * np.asarray(Cj)
+        if op.dt is not None:
+            A += (_frobenius(system.M, K) / (op.dt * kk)) * E2
+        self.fallback = None
+        if symmetric:
+            A = 0.5 * (A + A.T)
+            lam = np.linalg.eigvalsh(A)
+            if not lam[0] > VANISHING_BLOCK * abs(lam).max():
+                self.fallback = "chaos factor not positive definite: mean-based"
+                A = E2
+        try:
+            self._A = sla.lu_factor(A, check_finite=True)
+        except (ValueError, np.linalg.LinAlgError):
+            self._A = None
+        if self._A is None or not np.all(np.abs(np.diag(self._A[0])) > 0):
+            self.fallback = "chaos factor singular: mean-based"
+            self._A = sla.lu_factor(E2)
+        self.A = A
+
+    def apply(self, R):
+        """Apply to ``R`` of shape (N, P): :math:`\\bar K^{-1} R A^{-1}`."""
+        import scipy.linalg as sla
+
+        return sla.lu_solve(self._A, self._solve(R).T, trans=1).T
+
+    def apply_transpose(self, R):
+        """The transposed preconditioner (for adjoint solves)."""
+        import scipy.linalg as sla
+
+        return sla.lu_solve(self._A, self._solve_t(R).T).T
+
+
 class _ChaosBlockDiagonal:
     """A preconditioner block-diagonal in another basis of the chaos space.
 
@@ -264,12 +348,15 @@ class DecoupledPreconditioner(_ChaosBlockDiagonal):
             self.factors.append(factor)
 
 
-def make_preconditioner(op, kind):
-    """The Krylov preconditioner of ``kind`` for ``op`` (``None`` for ``"none"``)."""
+def make_preconditioner(op, kind, symmetric=False):
+    """The Krylov preconditioner of ``kind`` for ``op`` (``None`` for ``"none"``);
+    ``symmetric``: for CG (symmetric positive definite)."""
     if kind is None:
         return None
     if kind == "decoupled":
         return DecoupledPreconditioner(op)
     if kind == "nodal":
         return NodalPreconditioner(op)
+    if kind == "kronecker":
+        return KroneckerPreconditioner(op, symmetric=symmetric)
     return MeanPreconditioner(op, kind)
