@@ -110,22 +110,3 @@ def test_a_lognormal_conductivity_takes_fewer_iterations_than_with_the_mean(meth
     assert sum(kron.linear_iterations) < 0.85 * sum(mean.linear_iterations)
     scale = abs(mean.Theta).max()
     np.testing.assert_allclose(kron.Theta, mean.Theta, rtol=0, atol=1e-8 * scale)
-
-
-def test_auto_takes_kronecker_for_large_linear_systems_only():
-    from ecfm_uq.system.options import solver_options
-    from ecfm_uq.system.plan import plan_solve
-
-    N = 6000  # above the decoupled/nodal size limit
-    basis = ChaosBasis(2, dim=2)
-    G = weighted_gram(basis, lambda w: 1.0 + 0.3 * w[:, 0] * w[:, 1])
-    K = _laplacian(N).tocsr()
-    lin = GalerkinSystem([LinearTerm(K, G=G), LoadTerm.constant(np.ones(N))], 0, basis=basis,
-                         M=sp.identity(N, format="csr"))  # fmt: skip
-    nonlin = GalerkinSystem(
-        [LinearTerm(K, G=G), NonlinearTerm(lambda u, w, e: u**3, lambda u, w, e: sp.diags(3 * u**2)),
-         LoadTerm.constant(np.ones(N))], 0, basis=basis, M=sp.identity(N, format="csr"),
-    )  # fmt: skip
-    kw = dict(constrained=False, steady=False)
-    assert plan_solve(lin, solver_options("auto"), **kw).preconditioner == "kronecker"
-    assert plan_solve(nonlin, solver_options("auto"), **kw).preconditioner == "mean"

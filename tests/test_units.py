@@ -116,3 +116,67 @@ def test_the_compiled_stochastic_march_in_large_units_matches_the_dense_march(un
     assert tr.solver == "gmres+nodal (compiled)"
     scale = np.abs(ref.Theta).max()
     np.testing.assert_allclose(tr.Theta, ref.Theta, rtol=0, atol=1e-8 * scale)
+
+
+def _random_poisson_system(N, units, M=None):
+    """Conductivity 10^eps0 (1 + 0.3 w1) + 0.2 w2 on the plain-units Poisson matrix."""
+    from ecfm_uq.system import Coefficient
+
+    K, F = _poisson(N)
+    K = units * K
+    basis = ChaosBasis(2, dim=2)
+    G1 = weighted_gram(basis, lambda w: 1.0 + 0.3 * w[:, 0])
+    G2 = weighted_gram(basis, lambda w: 0.2 * w[:, 1])
+    terms = [
+        LinearTerm(K, coef=Coefficient.power10(0, sign=1.0), G=G1),
+        LinearTerm(K, G=G2),
+        LoadTerm.constant(units * F),
+    ]
+    return GalerkinSystem(terms, 1, basis=basis, M=M)
+
+
+@pytest.mark.parametrize("units", [1.0, 1e-9, 1e9])
+@pytest.mark.parametrize(
+    "solver", ["dense", "sparse-direct", "cg", "gmres", {"solver": "cg", "preconditioner": "mean"}]
+)
+def test_a_random_model_in_any_units_matches_spsolve_in_every_solver(units, solver):
+    system = _random_poisson_system(300, units)
+    eps = [0.1]
+    sol = solve_steady(system, eps, solver=solver)
+    assert sol.success, sol.message
+    A = system.jacobian_operator(system.zeros(), eps).to_sparse().tocsc()
+    ref = spla.spsolve(A, -system.residual(system.zeros(), eps).ravel()).reshape(system.shape)
+    np.testing.assert_allclose(sol.Theta, ref, rtol=0, atol=1e-8 * np.abs(ref).max())
+
+
+@pytest.mark.parametrize("units", [1.0, 1e-9, 1e9])
+@pytest.mark.parametrize("solver", ["dense", "sparse-direct", "cg", "gmres"])
+def test_a_random_march_in_any_units_matches_backward_euler_in_every_solver(units, solver):
+    N, dt, n_steps = 150, 1e-3, 8
+    system = _random_poisson_system(N, units, M=units * sp.identity(N, format="csr"))
+    eps = [0.0]
+    tr = march(system, eps, np.zeros(system.shape), dt, n_steps, solver=solver)
+    assert tr.success, tr.message
+    A = system.jacobian_operator(system.zeros(), eps, dt=dt).to_sparse().tocsc()
+    Mdt = system.mass_matrix(sparse=True) / dt
+    lu = spla.splu(A)
+    b = -system.residual(system.zeros(), eps).ravel()
+    x = np.zeros(A.shape[0])
+    for s in range(n_steps):
+        x = lu.solve(Mdt @ x + b)
+        np.testing.assert_allclose(tr.Theta[s + 1].ravel(), x, rtol=0, atol=1e-8 * abs(x).max())
+
+
+@pytest.mark.parametrize("units", [1.0, 1e-9, 1e9])
+def test_a_calibration_in_any_units_recovers_the_parameter(units):
+    from ecfm_uq.inverse import SteadyProblem, fit
+
+    N = 200
+    system = _random_poisson_system(N, units)
+    M_obs = np.zeros((5, N))
+    M_obs[np.arange(5), np.linspace(20, 180, 5).astype(int)] = 1.0
+    truth = 0.3
+    v = M_obs @ system.mean(solve_steady(system, [truth]).Theta)  # exact data
+    res = fit(SteadyProblem(system, M_obs, v), [0.0], formulation="standard")
+    assert res.success, res.message
+    assert abs(res.eps[0] - truth) < 1e-8

@@ -33,8 +33,8 @@ class SolverOptions:
         its chaos integrals taken by the germ's ``P``-node Gauss rule, i.e. the ``P``
         deterministic Jacobians at the nodes, quadratic terms included.
         ``"auto"``: ``"nodal"`` for a nonlinear one-germ system, else ``"decoupled"``
-        when available, each for ``N <= 5000``; else ``"kronecker"`` (linear systems) or
-        ``"mean"`` (nonlinear ones); ``"mean-amg"`` for very large ``N``.
+        when available, each for ``N <= 5000``; else ``"mean"`` (``"mean-amg"`` for very
+        large ``N``).
     rtol : float
         Relative residual of Krylov solves outside Newton (sensitivities, adjoints).
         Newton steps choose their own, tighter as the residual approaches ``tol``.

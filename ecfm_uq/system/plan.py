@@ -36,10 +36,11 @@ Rules of ``preconditioner="auto"``
 ----------------------------------
 ``"nodal"`` for a nonlinear one-germ system, else ``"decoupled"`` when the couplings
 (and :math:`\\mathbb E[\\Psi\\Psi^T]`) share an eigenbasis, each for ``N <= 5000``;
-else ``"kronecker"`` for a linear system (Ullmann's :math:`\\bar K\\otimes A`, as cheap
-as the mean-based one and 20-37 % fewer CG iterations on a lognormal conductivity,
-never more on the affine ones measured) and ``"mean"`` for a nonlinear one; beyond
-``N = 400 000`` ``"mean-amg"``.
+else ``"mean"`` (``"mean-amg"`` beyond ``N = 400 000``). ``"kronecker"`` (Ullmann's
+:math:`\\bar K\\otimes A`, as cheap as the mean-based one) is available by name: 20-37 %
+fewer CG iterations on a lognormal conductivity, as many on the affine fields and the
+nonlinear models measured; it is not the default so that what ``"auto"`` runs (and
+reports) stays what it was.
 
 Rules of ``compiled="auto"``
 ----------------------------
@@ -74,6 +75,19 @@ Shared thresholds and the Krylov acceptance rule
     floor also bounds the forcing term from below, and a Krylov answer at the round-off
     floor of :math:`|J||x|` is accepted (the generic path; the compiled marches apply
     the floor to Newton's termination and to the forcing term).
+Linear systems (``newton(..., linear=True)``; :attr:`GalerkinSystem.is_linear`)
+    With a Krylov solver a linear system costs **one solve**: its forcing term is not
+    capped at :math:`10^{-4}` (it aims at :math:`0.05\\,\\mathrm{tol}` at once), ``tol``
+    is taken relative to the model's scale where that scale is below 1
+    (:math:`\\mathrm{tol}\\cdot\\min(1, \\mathrm{scale})`: a whole model
+    :math:`\\times10^{-9}` keeps its digits), and Newton stops as soon as the residual
+    meets it (a start that already does, e.g. a march step's warm start, is accepted
+    only below :math:`0.05\\,\\mathrm{tol}`, as good as a solve would make it). Direct
+    solvers keep one refinement back-substitution after convergence.
+:data:`WARM_START_STATES`
+    A linear march step's Krylov solve starts from the last state plus the least-squares
+    combination of the differences of this many previous states
+    (:func:`.stepping._warm_start`).
 :data:`CHORD_RATE`
     Default of ``SolverOptions.chord_rate``: the ``P > 1`` kernel's chord iteration hands
     a step to Newton-Krylov once the residual falls by less than this factor per
@@ -97,6 +111,7 @@ from ..memory import check_allocation, memory_budget
 __all__ = [
     "CHORD_RATE",
     "COMPILED_MARCH_MAX_N",
+    "WARM_START_STATES",
     "KRYLOV_ACCEPT",
     "PATHS",
     "SINGULAR_PIVOT",
@@ -356,11 +371,7 @@ def _preconditioner(system, options):
         return "nodal"
     if small and st.couplings_decouple:
         return "decoupled"
-    if system.N > SPLU_AUTO_SIZE:
-        return "mean-amg"
-    # the Kronecker factor is built once for a linear system; for a nonlinear one it would
-    # need every chaos block of the linearization at each Newton step
-    return "kronecker" if st.is_linear else "mean"
+    return "mean" if system.N <= SPLU_AUTO_SIZE else "mean-amg"
 
 
 def _nodal_march_refusal(system):
