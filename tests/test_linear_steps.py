@@ -110,3 +110,16 @@ def test_round_off_does_not_make_a_coupling_dense():
     true = (diff[:, :, 1] == 1) & (diff.sum(axis=2) == 1)
     assert Gs.nnz == np.count_nonzero(true)
     np.testing.assert_allclose(Gs.toarray(), G, rtol=0, atol=1e-13 * abs(G).max())
+
+
+def test_a_krylov_solve_that_falls_short_says_what_it_reached_and_what_is_attainable():
+    from ecfm_uq.system import SolverOptions
+
+    system = _random_heat(N=200)
+    sol = solve_steady(system, [], solver=SolverOptions("cg", preconditioner="none", maxiter=3))
+    assert not sol.success
+    msg = sol.message
+    assert (
+        "did not reach rtol=" in msg and "relative residual" in msg and "after 3 iterations" in msg
+    )
+    assert "floating point can reach about" in msg

@@ -120,9 +120,11 @@ class KrylovFactor:
             if bnorm > 0:
                 floor = ROUNDOFF_FACTOR * UNIT_ROUNDOFF * (self.op.magnitude(X) + bnorm) / bnorm
         if not krylov_accepts(res, rtol, floor):
+            attainable = f"; floating point can reach about {floor:.1e} here" if floor else ""
             raise KrylovError(
                 f"{self.method} did not reach rtol={rtol:.1e}: relative residual {res:.3e} "
-                f"after {nit} iterations (raise maxiter, or try another preconditioner)"
+                f"after {nit} iterations{attainable} (raise maxiter, or try another "
+                "preconditioner)"
             )
         return X.ravel()
 
