@@ -104,11 +104,10 @@ def _random_burgers_like(units, N=24):
     return GalerkinSystem(terms, 0, basis=basis, M=units * np.eye(N))
 
 
-@pytest.mark.parametrize("units", [1e3, 1e9])
-def test_the_compiled_stochastic_march_in_large_units_matches_the_dense_march(units):
-    # x1e9: the round-off floor (~1e-5 here) is far above tol = 1e-10. (The whole model
-    # x1e-9 is the other side, an absolute tol that is loose for it: not covered by the
-    # floor, which only ever relaxes tol to what round-off allows.)
+@pytest.mark.parametrize("units", [1e-9, 1e3, 1e9])
+def test_the_compiled_stochastic_march_in_any_units_matches_the_dense_march(units):
+    # x1e9: the round-off floor (~1e-5 here) is far above tol = 1e-10; x1e-9: tol is
+    # taken relative to the step's scale (plan.scaled_tol), in the kernel as in Python
     dt, n_steps = 2e-3, 4
     ref = march(_random_burgers_like(1.0), [], np.zeros(24), dt, n_steps, solver="dense")
     tr = march(_random_burgers_like(units), [], np.zeros(24), dt, n_steps)
@@ -180,3 +179,33 @@ def test_a_calibration_in_any_units_recovers_the_parameter(units):
     res = fit(SteadyProblem(system, M_obs, v), [0.0], formulation="standard")
     assert res.success, res.message
     assert abs(res.eps[0] - truth) < 1e-8
+
+
+@pytest.mark.parametrize("solver", ["dense", "gmres"])
+def test_a_nonlinear_model_times_any_constant_gives_the_same_answer(solver):
+    """Steady and transient, a cubic reaction written as a NonlinearTerm: the equations
+    x1e-9 and x1e9 converge to the plain-units answer (to round-off), with success."""
+    from ecfm_uq.system import NonlinearTerm
+
+    K, F = _poisson(40)
+    K = K.toarray() / 1e3
+    basis = ChaosBasis(3, dim=2)
+    G = weighted_gram(basis, lambda w: 1.0 + 0.5 * w[:, 0])
+    out = {}
+    for c in (1.0, 1e-9, 1e9):
+
+        def res(u, w, eps, c=c):
+            return c * 30.0 * (1.0 + 0.5 * w[1]) * u**3
+
+        def jac(u, w, eps, c=c):
+            return np.diag(c * 90.0 * (1.0 + 0.5 * w[1]) * u**2)
+
+        terms = [LinearTerm(c * K, G=G), NonlinearTerm(res, jac), LoadTerm.constant(c * F)]
+        system = GalerkinSystem(terms, 0, basis=basis, M=c * np.eye(40))
+        sol = solve_steady(system, [], solver=solver)
+        tr = march(system, [], np.zeros(system.shape), 1e-2, 4, solver=solver)
+        assert sol.success and tr.success, (c, sol.message, tr.message)
+        out[c] = (sol.Theta, tr.Theta)
+    for c in (1e-9, 1e9):
+        for got, ref in zip(out[c], out[1.0], strict=True):
+            np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12 * np.abs(ref).max())

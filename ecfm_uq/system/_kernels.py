@@ -155,8 +155,8 @@ def _quadratic(theta, rows, ptr, idx, val, q, S):
 
 
 @numba.njit(cache=True)
-def _p1_floor(th, prev, lam, Mdt, Klin, cq, S, F, Gam, Cobs, V, tol):
-    """:func:`.plan.residual_floor` of the ``P = 1`` step residual (0 below ``tol``)."""
+def _p1_scale(th, prev, lam, Mdt, Klin, cq, S, F, Gam, Cobs, V):
+    """The magnitude of the ``P = 1`` step residual's terms (:meth:`residual_scale`)."""
     a = np.abs(th)
     scale = np.sqrt(np.sum((np.abs(Mdt) @ (a + np.abs(prev))) ** 2))
     scale += np.sqrt(np.sum((np.abs(Klin) @ a) ** 2))
@@ -165,8 +165,7 @@ def _p1_floor(th, prev, lam, Mdt, Klin, cq, S, F, Gam, Cobs, V, tol):
     if Cobs.shape[0] > 0:
         scale += np.sqrt(np.sum((np.abs(Gam) @ np.abs(lam)) ** 2))
         scale += np.sqrt(np.sum((np.abs(Cobs) @ a) ** 2)) + np.sqrt(np.sum(V * V))
-    floor = _ROUNDOFF * scale
-    return floor if floor > tol else 0.0
+    return scale
 
 
 @numba.njit(cache=True)
@@ -248,6 +247,7 @@ def march_p1(
             z[N:] = lam[s]
         converged = False
         rnorm = np.inf
+        tol_s = tol
         rhs = np.empty((N, n_eps))
         for k in range(maxiter + 1):
             th = z[:N]
@@ -264,9 +264,13 @@ def march_p1(
             if not _lu_factor(J, lu, piv):
                 return Th, lam, dTh, dlam, nits, s, _SINGULAR_JACOBIAN, rnorm, LUs, pivs
             floor = 0.0
-            if rnorm >= tol:  # the plan's round-off floor of the step residual's terms
-                floor = _p1_floor(th, Th[s], z[N:], Mdt, Klin, cq, S, F[t1], Gam, Cobs, V[t1], tol)
-            if rnorm < tol or (floor > 0.0 and rnorm <= floor):
+            if k == 0 or rnorm >= tol_s:  # plan.scaled_tol and plan.residual_floor
+                sc = _p1_scale(th, Th[s], z[N:], Mdt, Klin, cq, S, F[t1], Gam, Cobs, V[t1])
+                if k == 0 and sc > 0.0:
+                    tol_s = tol * min(1.0, sc)
+                if rnorm >= tol_s and _ROUNDOFF * sc > tol_s:
+                    floor = _ROUNDOFF * sc
+            if rnorm < tol_s or (floor > 0.0 and rnorm <= floor):
                 # the last Newton correction is taken with the converged Jacobian, whose
                 # factors give the sensitivities (Eqs. discrete_sens / discrete_sens_ecfm)
                 converged = True
@@ -426,8 +430,8 @@ def _sg_precond(R, Tn, Tb, LUs, pivs, out):
 
 
 @numba.njit(cache=True)
-def _sg_floor(Z, prev, Mdt, E2, Kc, Gs, cq, rows, ptr, idx, val, E3m, F, tol):
-    """:func:`.plan.residual_floor` of the ``P > 1`` step residual (0 below ``tol``)."""
+def _sg_scale(Z, prev, Mdt, E2, Kc, Gs, cq, rows, ptr, idx, val, E3m, F):
+    """The magnitude of the ``P > 1`` step residual's terms (:meth:`residual_scale`)."""
     N, P = Z.shape
     A = np.abs(Z)
     scale = np.sqrt(np.sum(((np.abs(Mdt) @ (A + np.abs(prev))) @ np.abs(E2)) ** 2))
@@ -438,8 +442,7 @@ def _sg_floor(Z, prev, Mdt, E2, Kc, Gs, cq, rows, ptr, idx, val, E3m, F, tol):
         _linearize(A, rows, ptr, idx, np.abs(val), Sa)
         scale += 0.5 * abs(cq) * np.sqrt(np.sum(_sg_quadratic(A, Sa, np.abs(E3m)) ** 2))
     scale += np.sqrt(np.sum(F * F))
-    floor = _ROUNDOFF * scale
-    return floor if floor > tol else 0.0
+    return scale
 
 
 @numba.njit(cache=True)
@@ -625,6 +628,7 @@ def march_sg(
         prev = np.inf
         _sg_mass(Th[s], Mdt, E2, e2_eye, X)
         Fs = F[t1] + X  # the step's fixed part: load and previous state
+        tol_s = tol
         for k in range(maxiter + 1):
             if has_quad:
                 _linearize(Z, rows, ptr, idx, val, Sf)
@@ -637,10 +641,14 @@ def march_sg(
             if not np.isfinite(rnorm):
                 break
             floor = 0.0
-            if rnorm >= tol:  # the plan's round-off floor of the step residual's terms
-                floor = _sg_floor(Z, Th[s], Mdt, E2, Kc, Gs, cq_eff, rows, ptr, idx, val, E3m,
-                                  F[t1], tol)  # fmt: skip
-            if rnorm < tol or (floor > 0.0 and rnorm <= floor):
+            if k == 0 or rnorm >= tol_s:  # plan.scaled_tol and plan.residual_floor
+                sc = _sg_scale(Z, Th[s], Mdt, E2, Kc, Gs, cq_eff, rows, ptr, idx, val, E3m,
+                               F[t1])  # fmt: skip
+                if k == 0 and sc > 0.0:
+                    tol_s = tol * min(1.0, sc)
+                if rnorm >= tol_s and _ROUNDOFF * sc > tol_s:
+                    floor = _ROUNDOFF * sc
+            if rnorm < tol_s or (floor > 0.0 and rnorm <= floor):
                 converged = True
                 break
             if k == maxiter:
@@ -652,7 +660,7 @@ def march_sg(
                     return Th, dTh, nits, kits, s, _SINGULAR_JACOBIAN, rnorm
                 factored = True
             if krylov:
-                eta = max(NEWTON_ETA_FACTOR * tol / rnorm, NEWTON_ETA_MIN, floor / rnorm)
+                eta = max(NEWTON_ETA_FACTOR * tol_s / rnorm, NEWTON_ETA_MIN, floor / rnorm)
                 eta = min(NEWTON_ETA_MAX, eta)
                 its, rel = _sg_gmres(
                     R, Mdt, E2, e2_eye, Kc, Gs, cq_eff, Sf, E3m, Tn, Tb, LUs, pivs, eta,

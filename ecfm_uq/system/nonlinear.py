@@ -19,6 +19,7 @@ from .plan import (
     failure_message,
     newton_converged,
     residual_floor,
+    scaled_tol,
 )
 
 
@@ -55,7 +56,10 @@ def newton(
     tol : float
         Convergence when :math:`\\|r\\|_2 < \\mathrm{tol}`, or (with ``scale``) when
         :math:`\\|r\\|_2` is at the round-off floor of the model's scale, if that floor is
-        above ``tol`` (:func:`.plan.newton_converged`).
+        above ``tol`` (:func:`.plan.newton_converged`). With ``scale``, ``tol`` is taken
+        relative to the scale at ``z0`` where that scale is below 1
+        (:func:`.plan.scaled_tol`), so equations multiplied by a small constant keep
+        their digits.
     maxiter : int
     linear_solver : LinearSolver, optional
         How the Jacobians are factorized (dense LU when omitted). With a Krylov solver
@@ -68,8 +72,7 @@ def newton(
         ``fun`` is affine in ``z`` (its Jacobian does not depend on ``z``). With a Krylov
         solver the first solve then aims at ``tol`` itself and, once the residual meets
         it, no further solve is made (one Krylov solve per linear system, more only where
-        one falls short), with ``tol`` relative to ``scale`` where the model's scale is
-        below 1; the returned factors are those of the constant Jacobian. Direct
+        one falls short); the returned factors are those of the constant Jacobian. Direct
         solvers keep their one refinement step (a back-substitution with the same
         factors: it costs little and leaves the answer at round-off).
     first : (r, J), optional
@@ -99,11 +102,8 @@ def newton(
             r, J = first if (k == 0 and first is not None) else fun(z)
             rnorm = float(np.linalg.norm(r))
             floor = 0.0
-            if one_solve and k == 0 and scale is not None and np.isfinite(rnorm):
-                # one solve must be accurate on its own: tol is absolute for models of
-                # unit scale and above, relative to the model's scale below it (a whole
-                # model x 1e-9 keeps its digits; the refinement step used to give them)
-                tol = tol * min(1.0, scale(z))
+            if k == 0 and scale is not None and np.isfinite(rnorm):
+                tol = scaled_tol(tol, scale(z))
             if scale is not None and rnorm >= tol and np.isfinite(rnorm):
                 floor = residual_floor(scale(z), tol)
         except ModelEvaluationError as e:

@@ -68,6 +68,11 @@ Shared thresholds and the Krylov acceptance rule
     the residual it monitors and is **accepted when the true relative residual is at
     most** :data:`KRYLOV_ACCEPT` ``* rtol`` (the factor covers scipy's GMRES, which
     monitors the left-preconditioned residual).
+:func:`scaled_tol`
+    ``tol`` is absolute for models of unit scale and above and relative to the scale of
+    the equations at the start of a solve (or march step) below it:
+    :math:`\\mathrm{tol}\\cdot\\min(1, \\mathrm{scale})`. With the floor below, equations
+    multiplied by any positive constant converge to the same answer.
 :func:`residual_floor`
     Newton stops when :math:`\\|R\\| <` ``tol`` (absolute) **or**, when it is above
     ``tol``, at the round-off floor of the model's own scale
@@ -77,10 +82,8 @@ Shared thresholds and the Krylov acceptance rule
     the floor to Newton's termination and to the forcing term).
 Linear systems (``newton(..., linear=True)``; :attr:`GalerkinSystem.is_linear`)
     With a Krylov solver a linear system costs **one solve**: its forcing term is not
-    capped at :math:`10^{-4}` (it aims at :math:`0.05\\,\\mathrm{tol}` at once), ``tol``
-    is taken relative to the model's scale where that scale is below 1
-    (:math:`\\mathrm{tol}\\cdot\\min(1, \\mathrm{scale})`: a whole model
-    :math:`\\times10^{-9}` keeps its digits), and Newton stops as soon as the residual
+    capped at :math:`10^{-4}` (it aims at :math:`0.05\\,\\mathrm{tol}` at once), and
+    Newton stops as soon as the residual
     meets it (a start that already does, e.g. a march step's warm start, is accepted
     only below :math:`0.05\\,\\mathrm{tol}`, as good as a solve would make it). Direct
     solvers keep one refinement back-substitution after convergence.
@@ -122,6 +125,7 @@ __all__ = [
     "krylov_accepts",
     "newton_converged",
     "residual_floor",
+    "scaled_tol",
     "newton_rtol",
     "plan_solve",
 ]
@@ -199,6 +203,22 @@ def residual_floor(scale, tol):
     """
     floor = ROUNDOFF_FACTOR * UNIT_ROUNDOFF * scale
     return float(floor) if floor > tol else 0.0
+
+
+def scaled_tol(tol, scale):
+    """Newton's tolerance for equations of magnitude ``scale`` at the start of a solve:
+    ``tol`` (absolute) for models of unit scale and above, ``tol * scale`` below 1.
+
+    Multiplying a model's equations by ``c < 1`` then changes neither its answer nor its
+    iteration count (the test is relative); for ``c > 1`` the round-off floor
+    (:func:`residual_floor`) does the same from above. Models of unit scale and above
+    keep the absolute test they always had. A zero scale (nothing to compare with) keeps
+    ``tol``.
+    """
+    scale = float(scale)
+    if not (np.isfinite(scale) and scale > 0.0):
+        return tol
+    return tol * min(1.0, scale)
 
 
 def newton_converged(rnorm, tol, floor=0.0):
