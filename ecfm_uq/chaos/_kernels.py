@@ -5,12 +5,16 @@ Small kernels, each compiled once and cached on disk (``cache=True``):
 ``legendre_table``   orthonormal shifted Legendre values by the three-term recurrence
 ``triple_1d``        the 1-D triple-product table t[i, j, k] = E[L_i L_j L_k] from the
                      Adams-Neumann closed form, only where the selection rules allow
-``triple_dense``     the multi-variable dense tensor from the per-variable factors
-``triple_sparse``    the same tensor as coordinate lists, built from the selection rules
 ``orthonormal_table``   any germ's orthonormal polynomials from its recurrence coefficients
 ``hermite_triple_1d``   the Hermite triple-product table in closed form
 ``recurrence_triple_1d``  any germ's triple-product table from its Jacobi matrix
-``triple_dense_mixed`` / ``triple_sparse_mixed``  the tensor with one table per variable
+``triple_dense_mixed``  the multi-variable dense tensor from one table per variable
+``triple_sparse_mixed`` the same tensor as coordinate lists, built from the per-variable
+                        selection rules (triangle; parity for symmetric germs)
+``triple_cross``     the (Pa, P, P) coupling tensor between two bases
+
+A Legendre basis passes its one table once per variable (the same products in the same
+order as the v0.2 single-table kernels these replaced, so the tensors are bit-identical).
 """
 
 from __future__ import annotations
@@ -78,64 +82,6 @@ def triple_1d(p, normalized):
                 t[k, i, j] = v
                 t[k, j, i] = v
     return t
-
-
-@numba.njit(cache=True)
-def triple_dense(alpha, t):
-    """Dense T[a, b, c] = prod_d t[alpha[a, d], alpha[b, d], alpha[c, d]], shape (P, P, P)."""
-    P, dim = alpha.shape
-    T = np.empty((P, P, P))
-    for a in range(P):
-        for b in range(P):
-            for c in range(P):
-                v = 1.0
-                for d in range(dim):
-                    v *= t[alpha[a, d], alpha[b, d], alpha[c, d]]
-                T[a, b, c] = v
-    return T
-
-
-@numba.njit(cache=True)
-def _allowed(alpha, a, b, c):
-    # Selection rules per variable: parity and the triangle inequality.
-    for d in range(alpha.shape[1]):
-        i = alpha[a, d]
-        j = alpha[b, d]
-        k = alpha[c, d]
-        if (i + j + k) % 2 == 1 or k > i + j or i > j + k or j > i + k:
-            return False
-    return True
-
-
-@numba.njit(cache=True)
-def triple_sparse(alpha, t):
-    """Coordinates (nnz, 3) and values (nnz,) of the structurally nonzero entries.
-
-    Two passes over (a, b, c): count, then fill, so memory is exactly nnz.
-    """
-    P, dim = alpha.shape
-    nnz = 0
-    for a in range(P):
-        for b in range(P):
-            for c in range(P):
-                if _allowed(alpha, a, b, c):
-                    nnz += 1
-    idx = np.empty((nnz, 3), dtype=np.int64)
-    val = np.empty(nnz)
-    m = 0
-    for a in range(P):
-        for b in range(P):
-            for c in range(P):
-                if _allowed(alpha, a, b, c):
-                    v = 1.0
-                    for d in range(dim):
-                        v *= t[alpha[a, d], alpha[b, d], alpha[c, d]]
-                    idx[m, 0] = a
-                    idx[m, 1] = b
-                    idx[m, 2] = c
-                    val[m] = v
-                    m += 1
-    return idx, val
 
 
 @numba.njit(cache=True)

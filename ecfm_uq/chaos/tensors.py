@@ -25,9 +25,7 @@ from ..memory import check_allocation
 from ._kernels import (
     triple_1d,
     triple_cross,
-    triple_dense,
     triple_dense_mixed,
-    triple_sparse,
     triple_sparse_mixed,
 )
 from .basis import ChaosBasis
@@ -263,30 +261,8 @@ def expectation_tensor(basis, rank, *, sparse=False):
         return np.diag(np.asarray(basis.norms2, dtype=float))
 
     alpha = np.ascontiguousarray(basis.indices)
-    if not basis.is_legendre:
-        return _triple_mixed(basis, alpha, sparse)
-    t = triple_product_1d(basis.order, basis.normalized)
+    tables, parity = _germ_tables(basis)
     if sparse:
-        idx, val = triple_sparse(alpha, t)
-        return SparseTensor3(idx, val, (P, P, P))
-    check_allocation(
-        8.0 * P**3,
-        f"the dense (P, P, P) tensor E[Psi_a Psi_b Psi_c] at P={P}",
-        "pass sparse=True for a SparseTensor3, or lower the chaos `order` or `dim`",
-    )
-    return triple_dense(alpha, t)
-
-
-def _triple_mixed(basis, alpha, sparse):
-    """E[Psi_a Psi_b Psi_c] with one exact 1-D table per germ (Hermite, Laguerre, Jacobi)."""
-    P = basis.size
-    cache = {}
-    for g in basis.germs:
-        if g not in cache:
-            cache[g] = g.triple(basis.order)
-    tables = np.stack([cache[g] for g in basis.germs])
-    if sparse:
-        parity = np.array([g.symmetric for g in basis.germs])
         idx, val = triple_sparse_mixed(alpha, tables, parity)
         return SparseTensor3(idx, val, (P, P, P))
     check_allocation(
@@ -295,6 +271,26 @@ def _triple_mixed(basis, alpha, sparse):
         "pass sparse=True for a SparseTensor3, or lower the chaos `order` or `dim`",
     )
     return triple_dense_mixed(alpha, tables)
+
+
+def _germ_tables(basis):
+    """The exact 1-D triple products of each germ of ``basis``, stacked
+    (dim, p+1, p+1, p+1), and which germs are symmetric (their parity rule holds).
+    Legendre keeps v0.2's table (:func:`triple_product_1d`), also unnormalized."""
+    if basis.is_legendre:
+        t = triple_product_1d(basis.order, basis.normalized)
+        tables = np.ascontiguousarray(np.broadcast_to(t, (basis.dim, *t.shape)))
+        return tables, np.ones(basis.dim, dtype=bool)
+    return _stacked_tables(basis.germs, basis.order)
+
+
+def _stacked_tables(germs, order):
+    """Each germ's exact 1-D triple products to ``order``, stacked, and their symmetry."""
+    cache = {}
+    for g in germs:
+        if g not in cache:
+            cache[g] = g.triple(order)
+    return np.stack([cache[g] for g in germs]), np.array([g.symmetric for g in germs])
 
 
 def coupling_tensor(coef_basis, basis):
@@ -332,12 +328,7 @@ def coupling_tensor(coef_basis, basis):
         f"the (Pa, P, P) coupling tensor at Pa={Pa}, P={P}",
         "lower the coefficient's or the solution's order",
     )
-    p = max(coef_basis.order, basis.order)
-    cache = {}
-    for g in basis.germs:
-        if g not in cache:
-            cache[g] = g.triple(p)
-    tables = np.stack([cache[g] for g in basis.germs])
+    tables, _ = _stacked_tables(basis.germs, max(coef_basis.order, basis.order))
     return triple_cross(
         np.ascontiguousarray(coef_basis.indices), np.ascontiguousarray(basis.indices), tables
     )
