@@ -198,7 +198,18 @@ class RandomForceModel:
         """:math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))`: the marginal likelihood with
         :math:`\\tau` re-estimated (REML) at ``eps`` -- the function the estimate minimizes
         (one solve); raises the model's error where it cannot be solved."""
-        return self.best_s(self.linearize(eps))[1]
+        lin = self.linearize(eps)
+        dead = np.flatnonzero(~(np.linalg.norm(lin.J, axis=0) > 0.0))
+        if dead.size:
+            # e.g. a reaction rate 10^eps0 that underflowed to zero: the parameter has no
+            # effect at all, its direction is lost and the error contrasts would jump to
+            # one more dimension (tau-hat and the likelihood with them)
+            raise ModelEvaluationError(
+                f"eps{dead.tolist()} have no effect on the readings at eps="
+                f"{np.asarray(eps).tolist()} (underflow): the error contrasts of tau are "
+                "undefined there"
+            )
+        return self.best_s(lin)[1]
 
     def profiled_likelihood(self, scale, h=1e-5):
         """The :class:`LogLikelihood` :math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))` of the
@@ -440,7 +451,16 @@ def fit_random_force(problem, eps0, s):
     # the intervals and likelihood-ratio tests profile tau out: re-estimated at every eps
     result.likelihood = like
     if opts["tau_in_intervals"] == "profiled":
-        result.interval_likelihood = model.profiled_likelihood(scale)
+        try:
+            model.profiled_nll(eps)
+            result.interval_likelihood = model.profiled_likelihood(scale)
+        except _FAILURES as e:
+            # an estimate run off to where a parameter has no effect (not converged): its
+            # intervals fall back to the held covariance, and say so
+            result.extra["interval_likelihood"] = (
+                f"tau cannot be re-estimated at the estimate ({e}); the intervals hold the "
+                "data covariance at tau-hat"
+            )
     return result
 
 
