@@ -200,3 +200,25 @@ def test_delta_method_falls_back_to_gauss_newton_with_tau_held_and_says_why():
     np.testing.assert_allclose(u.cov, cov, rtol=1e-5)
     # the fit itself: tau > 0 and a positive definite observed information
     assert res.uncertainty.success and res.uncertainty.method == "marginal-likelihood"
+
+
+def test_an_open_profile_does_not_recentre_where_the_reaction_rate_underflows():
+    """4 sensors: the data do not bound the reaction rate below, the eps0 profile walks out
+    to 10^eps0 = 0, where the parameter has no effect and the REML contrasts would gain a
+    dimension (tau-hat and the likelihood jumping with them). Before that was refused, the
+    profile of this data set 're-centred' on eps0 ~ -7e11 at a likelihood 0.2 lower."""
+    rod = ReactionRod(4)
+    clean = rod.data([0.5, 20.0])
+    sigma = 0.02 * float(np.abs(clean).mean())
+    rng = np.random.default_rng(0)
+    for _ in range(12):  # the 12th data set of the coverage study's stream
+        v = clean + sigma * rng.normal(size=clean.size)
+    res = fit(SteadyProblem(rod.system, rod.M_obs, v), [0.5, 20.0], formulation="ecfm",
+              sigma=sigma)  # fmt: skip
+    assert res.success and res.extra["tau"] > 0 and res.interval_likelihood is not None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        summary = profile_likelihood(res)
+    assert "did not end at its optimum" not in summary.message
+    assert summary.intervals[0, 0] == -np.inf and np.isfinite(summary.intervals[0, 1])
+    assert summary.intervals[1, 0] < res.eps[1] < summary.intervals[1, 1]
