@@ -222,3 +222,20 @@ def test_an_open_profile_does_not_recentre_where_the_reaction_rate_underflows():
     assert "did not end at its optimum" not in summary.message
     assert summary.intervals[0, 0] == -np.inf and np.isfinite(summary.intervals[0, 1])
     assert summary.intervals[1, 0] < res.eps[1] < summary.intervals[1, 1]
+
+
+def test_an_estimate_run_off_to_a_vanishing_reaction_rate_is_not_converged():
+    """Data sets 17 and 26 of the same stream: the likelihood keeps falling as the rate
+    10^eps0 -> 0, the standard fit says so (not converged); the random-force fit stopped
+    there on a small gradient and used to report CONVERGED at eps0 = -14.7 (tau > 0) and
+    -2.6e8 (tau = 0, the standard estimate)."""
+    rod = ReactionRod(4)
+    clean = rod.data([0.5, 20.0])
+    sigma = 0.02 * float(np.abs(clean).mean())
+    rng = np.random.default_rng(0)
+    data = [clean + sigma * rng.normal(size=clean.size) for _ in range(27)]
+    for k in (17, 26):
+        res = fit(SteadyProblem(rod.system, rod.M_obs, data[k]), [0.5, 20.0],
+                  formulation="ecfm", sigma=sigma)  # fmt: skip
+        assert res.eps[0] < -10 and not res.extra["standard"].success
+        assert not res.success and "infinity" in res.message, (k, res.message)

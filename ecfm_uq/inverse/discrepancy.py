@@ -434,11 +434,25 @@ def fit_random_force(problem, eps0, s):
         status = FitStatus.STALLED
     lam, lam_sd = model.forces(lin, s_hat)
     unc = _uncertainty(p, x, scale, standard, s_hat, model, lin)
+    message = str(res.message)
+    if status == FitStatus.CONVERGED:
+        # a small gradient is not an optimum where the data no longer determine eps (an
+        # estimate run off towards infinity, e.g. a reaction rate 10^eps0 -> 0): the same
+        # refusal as the standard fit's
+        if s_hat == 0.0 and not standard.success and np.allclose(eps, standard.eps):
+            status, message = standard.status, f"tau = 0, the standard fit: {standard.message}"
+        elif s_hat > 0.0 and _singular(_gauss_newton_information(model, lin, s_hat)):
+            status = FitStatus.STALLED
+            message = (
+                f"{message} [NOT converged: the Gauss-Newton information J^T S^-1 J is "
+                "singular at the estimate (the readings no longer depend on some parameter "
+                "combination): the minimum may lie at infinity]"
+            )
     T, p_value = model.restricted_test(lin)
     verdict = _verdict(model, T, p_value, s_hat, lam, lam_sd, s.alpha, at_bound)
     like = model.conditional_likelihood(lin, s_hat)
     result = InverseResult(
-        eps=eps, loss=val, status=status, message=str(res.message),
+        eps=eps, loss=val, status=status, message=message,
         nit=standard.nit + res.nit, nfev=standard.nfev + nfev[0],
         njev=standard.njev + res.njev, optimality=optimality, method="ecfm",
         optimizer="L-BFGS-B", uncertainty=unc, verdict=verdict,
@@ -520,12 +534,8 @@ def _uncertainty(p, x, scale, standard, s_hat, model, lin):
     except np.linalg.LinAlgError as e:
         why = f"the observed information of the profiled marginal likelihood failed ({e})"
     # the expected information with the covariance held at tau-hat
-    tau2 = model.tau(s_hat) ** 2
-    S = model.sigma**2 * np.eye(lin.A.shape[0]) + tau2 * lin.A @ lin.A.T
-    F = lin.J.T @ np.linalg.solve(S, lin.J)
-    F = 0.5 * (F + F.T)
-    wf = np.linalg.eigvalsh(F)
-    if not wf[0] > 1e-12 * max(wf[-1], 0.0):
+    F = _gauss_newton_information(model, lin, s_hat)
+    if _singular(F):
         return Uncertainty.failed(
             f"no delta-method uncertainty: {why}, and the Gauss-Newton information J^T S^-1 J "
             "is singular (a parameter combination the data do not determine)"
@@ -539,6 +549,19 @@ def _uncertainty(p, x, scale, standard, s_hat, model, lin):
         cov, se, np.column_stack([eps - z * se, eps + z * se]), 0.95,
         "gauss-newton-held-tau", "known",
     )  # fmt: skip
+
+
+def _gauss_newton_information(model, lin, s_hat):
+    """:math:`J^T S^{-1} J` with :math:`S = \\sigma^2 I + \\hat\\tau^2 AA^T`, symmetrized."""
+    tau2 = model.tau(s_hat) ** 2
+    S = model.sigma**2 * np.eye(lin.A.shape[0]) + tau2 * lin.A @ lin.A.T
+    F = lin.J.T @ np.linalg.solve(S, lin.J)
+    return 0.5 * (F + F.T)
+
+
+def _singular(F):
+    w = np.linalg.eigvalsh(F)
+    return not w[0] > 1e-12 * max(w[-1], 0.0)
 
 
 def _verdict(model, T, p, s_hat, lam, lam_sd, alpha, at_bound):
