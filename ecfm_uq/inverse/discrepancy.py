@@ -91,6 +91,7 @@ class Linearization:
     w2: np.ndarray  # squared residual in the eigenbasis
     xi: np.ndarray  # eigenvalues of K^T A A^T K / a0^2, K the complement of J
     q: np.ndarray  # squared error contrasts in that eigenbasis, over sigma^2
+    J: np.ndarray | None = None  # M dE[theta]/deps, (C, n_eps)
 
 
 class RandomForceModel:
@@ -129,13 +130,20 @@ class RandomForceModel:
             self.a0 = float(np.sqrt(max(np.trace(AA) / AA.shape[0], 1e-300)))
         mu, U = np.linalg.eigh(AA / self.a0**2)
         mu = np.maximum(mu, 0.0)
-        # error contrasts: the residual's components orthogonal to what eps can explain
-        Q = np.linalg.qr(J, mode="complete")[0]
-        K = Q[:, np.linalg.matrix_rank(J) :]
+        # error contrasts: the residual's components orthogonal to what eps can explain.
+        # The span of J is found from its unit columns (a parameter whose effect is merely
+        # small, e.g. a reaction rate 10^eps0 far below the diffusion, still explains its
+        # direction: the rank must not depend on the parameters' units or magnitudes) and
+        # by SVD (QR without pivoting misplaces the span when a column vanishes)
+        norms = np.linalg.norm(J, axis=0)
+        Jn = J[:, norms > 0] / norms[norms > 0]
+        U_J, sv, _ = np.linalg.svd(Jn, full_matrices=True)
+        rank = int(np.sum(sv > max(Jn.shape) * np.finfo(float).eps * sv[0])) if sv.size else 0
+        K = U_J[:, rank:]
         xi, V = np.linalg.eigh(K.T @ AA @ K / self.a0**2)
         q = (V.T @ (K.T @ r)) ** 2 / self.sigma**2
         return Linearization(
-            np.asarray(eps, float), r, A, mu, (U.T @ r) ** 2, np.maximum(xi, 0.0), q
+            np.asarray(eps, float), r, A, mu, (U.T @ r) ** 2, np.maximum(xi, 0.0), q, J
         )
 
     def nll(self, lin, s):
@@ -161,12 +169,71 @@ class RandomForceModel:
         s_hat = 0.0
         if k > 0 and drop[k] > 0.0:
             lo, hi = _S_GRID[k - 1], _S_GRID[min(k + 1, _S_GRID.size - 1)]
+            d_lo, d_hi = self._restricted_slope(lin, lo), self._restricted_slope(lin, hi)
+            if d_lo > 0.0 > d_hi:
+                # the stationary point to machine precision (a minimizer of a flat maximum
+                # finds it to sqrt(machine eps) only, too coarse for finite differences
+                # of the profiled likelihood in eps)
+                s_hat = float(
+                    optimize.brentq(
+                        lambda x: self._restricted_slope(lin, x), lo, hi, xtol=1e-300,
+                        rtol=4 * np.finfo(float).eps,
+                    )
+                )  # fmt: skip
+                return s_hat, self.nll(lin, s_hat)
             res = optimize.minimize_scalar(
                 lambda x: -self.restricted_drop(lin.q, lin.xi, np.array([x]))[0],
                 bounds=(lo, hi), method="bounded", options={"xatol": 1e-10 * hi},
             )  # fmt: skip
             s_hat = float(res.x) if -res.fun > drop[k] else float(_S_GRID[k])
         return s_hat, self.nll(lin, s_hat)
+
+    @staticmethod
+    def _restricted_slope(lin, s):
+        """:math:`d/ds` of :meth:`restricted_drop` at scalar ``s``."""
+        a = 1.0 + s * lin.xi
+        return float(np.sum(lin.q * lin.xi / a**2 - lin.xi / a))
+
+    def profiled_nll(self, eps):
+        """:math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))`: the marginal likelihood with
+        :math:`\\tau` re-estimated (REML) at ``eps`` -- the function the estimate minimizes
+        (one solve); raises the model's error where it cannot be solved."""
+        lin = self.linearize(eps)
+        dead = np.flatnonzero(~(np.linalg.norm(lin.J, axis=0) > 0.0))
+        if dead.size:
+            # e.g. a reaction rate 10^eps0 that underflowed to zero: the parameter has no
+            # effect at all, its direction is lost and the error contrasts would jump to
+            # one more dimension (tau-hat and the likelihood with them)
+            raise ModelEvaluationError(
+                f"eps{dead.tolist()} have no effect on the readings at eps="
+                f"{np.asarray(eps).tolist()} (underflow): the error contrasts of tau are "
+                "undefined there"
+            )
+        return self.best_s(lin)[1]
+
+    def profiled_likelihood(self, scale, h=1e-5):
+        """The :class:`LogLikelihood` :math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))` of the
+        profile-likelihood intervals: :math:`\\tau` re-estimated at every :math:`\\epsilon`,
+        so the intervals carry its uncertainty. Gradient by central differences with steps
+        ``h * scale`` (``scale``: the parameters' standard-error scale; the exact gradient
+        would need :math:`\\partial A/\\partial\\epsilon`)."""
+        scale = np.asarray(scale, float)
+
+        def evaluate(eps):
+            val = self.profiled_nll(eps)
+            g = np.empty(eps.size)
+            for j in range(eps.size):
+                e = np.zeros(eps.size)
+                e[j] = h * scale[j]
+                g[j] = (self.profiled_nll(eps + e) - self.profiled_nll(eps - e)) / (2 * e[j])
+            return val, g
+
+        return LogLikelihood(
+            evaluate, self.system.n_eps, self.v.size, "random forces",
+            f"marginal likelihood, Gaussian noise sigma={self.sigma:g} and random forces, "
+            "tau re-estimated (REML) at every eps",
+            exact_gradient=False, value_only=self.profiled_nll,
+        )  # fmt: skip
 
     def restricted_test(self, lin, n_sim=_N_SIM):
         """Restricted likelihood-ratio test of tau = 0: statistic and p-value.
@@ -262,7 +329,13 @@ def fit_random_force(problem, eps0, s):
     from .steady import fit_steady_problem
 
     system = problem.system
-    s.take({})  # no options of its own: refuse unknown names
+    opts = s.take({"tau_in_intervals": "profiled"})  # refuses unknown names
+    if opts["tau_in_intervals"] not in ("profiled", "held"):
+        raise ValueError(
+            "`options['tau_in_intervals']` must be 'profiled' (tau re-estimated at every eps "
+            "along the profiles, the default) or 'held' (the data covariance held at "
+            f"tau-hat), got {opts['tau_in_intervals']!r}"
+        )
     standard = fit_steady_problem(
         problem, eps0,
         FitSettings("standard", "auto", s.sigma, s.bounds, None, s.maxiter, {}, True, s.alpha),
@@ -360,12 +433,26 @@ def fit_random_force(problem, eps0, s):
     else:
         status = FitStatus.STALLED
     lam, lam_sd = model.forces(lin, s_hat)
-    unc = _uncertainty(p, x, scale, standard, s_hat)
+    unc = _uncertainty(p, x, scale, standard, s_hat, model, lin)
+    message = str(res.message)
+    if status == FitStatus.CONVERGED:
+        # a small gradient is not an optimum where the data no longer determine eps (an
+        # estimate run off towards infinity, e.g. a reaction rate 10^eps0 -> 0): the same
+        # refusal as the standard fit's
+        if s_hat == 0.0 and not standard.success and np.allclose(eps, standard.eps):
+            status, message = standard.status, f"tau = 0, the standard fit: {standard.message}"
+        elif s_hat > 0.0 and _singular(_gauss_newton_information(model, lin, s_hat)):
+            status = FitStatus.STALLED
+            message = (
+                f"{message} [NOT converged: the Gauss-Newton information J^T S^-1 J is "
+                "singular at the estimate (the readings no longer depend on some parameter "
+                "combination): the minimum may lie at infinity]"
+            )
     T, p_value = model.restricted_test(lin)
     verdict = _verdict(model, T, p_value, s_hat, lam, lam_sd, s.alpha, at_bound)
     like = model.conditional_likelihood(lin, s_hat)
     result = InverseResult(
-        eps=eps, loss=val, status=status, message=str(res.message),
+        eps=eps, loss=val, status=status, message=message,
         nit=standard.nit + res.nit, nfev=standard.nfev + nfev[0],
         njev=standard.njev + res.njev, optimality=optimality, method="ecfm",
         optimizer="L-BFGS-B", uncertainty=unc, verdict=verdict,
@@ -374,7 +461,20 @@ def fit_random_force(problem, eps0, s):
             "standard": standard, "n_solves": model.n_solves,
         },
     )  # fmt: skip
+    # the density of the data given eps (sample_posterior) holds the covariance at tau-hat;
+    # the intervals and likelihood-ratio tests profile tau out: re-estimated at every eps
     result.likelihood = like
+    if opts["tau_in_intervals"] == "profiled":
+        try:
+            model.profiled_nll(eps)
+            result.interval_likelihood = model.profiled_likelihood(scale)
+        except _FAILURES as e:
+            # an estimate run off to where a parameter has no effect (not converged): its
+            # intervals fall back to the held covariance, and say so
+            result.extra["interval_likelihood"] = (
+                f"tau cannot be re-estimated at the estimate ({e}); the intervals hold the "
+                "data covariance at tau-hat"
+            )
     return result
 
 
@@ -389,9 +489,18 @@ def _at_bound(eps, bounds):
     return out
 
 
-def _uncertainty(p, x, scale, standard, s_hat):
-    """Delta method on the profiled marginal likelihood (observed information by central
-    differences of ``p`` in the scaled parameters); the standard fit's where tau = 0."""
+def _uncertainty(p, x, scale, standard, s_hat, model, lin):
+    """Delta method of the random-force ECFM; the standard fit's where tau = 0.
+
+    With tau > 0: the observed information of the profiled marginal likelihood
+    :math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))` (central differences of ``p`` in the
+    scaled parameters), which carries tau's uncertainty. Where that is not positive
+    definite (a flat valley where the discrepancy trades off against eps, or the kink
+    where :math:`\\hat\\tau(\\epsilon)` leaves zero), the expected (Gauss-Newton)
+    information :math:`J^T S^{-1} J` with :math:`S = \\sigma^2 I + \\hat\\tau^2 AA^T` held at
+    the estimate -- the standard fit's Gauss-Newton convention with the estimated
+    discrepancy added to the noise; it does not carry tau's uncertainty, and the message
+    says so and why."""
     if s_hat == 0.0:
         u = standard.uncertainty
         return Uncertainty(
@@ -400,25 +509,59 @@ def _uncertainty(p, x, scale, standard, s_hat):
         )  # fmt: skip
     n, h = x.size, 1e-3
     H = np.empty((n, n))
-    for j in range(n):
-        e = np.zeros(n)
-        e[j] = h
-        H[:, j] = (_fd_gradient(p, x + e, 1e-5) - _fd_gradient(p, x - e, 1e-5)) / (2 * h)
-    H = 0.5 * (H + H.T)
-    try:
-        w = np.linalg.eigvalsh(H)
-        if not w[0] > 1e-10 * w[-1]:
-            raise np.linalg.LinAlgError("observed information not positive definite")
-        cov = np.linalg.inv(H) * np.outer(scale, scale)
-    except np.linalg.LinAlgError as e:
-        return Uncertainty.failed(f"no delta-method uncertainty: {e}")
-    se = np.sqrt(np.diag(cov))
-    z = stats.norm.ppf(0.975)
     eps = np.asarray(standard.eps, float) + scale * x
+    z = stats.norm.ppf(0.975)
+    why = None
+    try:
+        for j in range(n):
+            e = np.zeros(n)
+            e[j] = h
+            H[:, j] = (_fd_gradient(p, x + e, 1e-5) - _fd_gradient(p, x - e, 1e-5)) / (2 * h)
+        H = 0.5 * (H + H.T)
+        w = np.linalg.eigvalsh(H) if np.all(np.isfinite(H)) else np.array([np.nan])
+        if w[0] > 1e-10 * w[-1]:
+            cov = np.linalg.inv(H) * np.outer(scale, scale)
+            se = np.sqrt(np.diag(cov))
+            return Uncertainty(
+                True, "observed information of the marginal likelihood (tau profiled out)",
+                cov, se, np.column_stack([eps - z * se, eps + z * se]), 0.95,
+                "marginal-likelihood", "known",
+            )  # fmt: skip
+        why = (
+            "the observed information of the profiled marginal likelihood is not positive "
+            f"definite (eigenvalues {np.round(w, 6).tolist()} in standard-error units)"
+        )
+    except np.linalg.LinAlgError as e:
+        why = f"the observed information of the profiled marginal likelihood failed ({e})"
+    # the expected information with the covariance held at tau-hat
+    F = _gauss_newton_information(model, lin, s_hat)
+    if _singular(F):
+        return Uncertainty.failed(
+            f"no delta-method uncertainty: {why}, and the Gauss-Newton information J^T S^-1 J "
+            "is singular (a parameter combination the data do not determine)"
+        )
+    cov = np.linalg.inv(F)
+    se = np.sqrt(np.diag(cov))
     return Uncertainty(
-        True, "observed information of the marginal likelihood (tau profiled out)", cov, se,
-        np.column_stack([eps - z * se, eps + z * se]), 0.95, "marginal-likelihood", "known",
+        True,
+        f"{why}: Gauss-Newton information J^T S^-1 J with S = sigma^2 I + tau^2 A A^T held at "
+        "tau-hat instead (does not carry tau's uncertainty; the profile intervals do)",
+        cov, se, np.column_stack([eps - z * se, eps + z * se]), 0.95,
+        "gauss-newton-held-tau", "known",
     )  # fmt: skip
+
+
+def _gauss_newton_information(model, lin, s_hat):
+    """:math:`J^T S^{-1} J` with :math:`S = \\sigma^2 I + \\hat\\tau^2 AA^T`, symmetrized."""
+    tau2 = model.tau(s_hat) ** 2
+    S = model.sigma**2 * np.eye(lin.A.shape[0]) + tau2 * lin.A @ lin.A.T
+    F = lin.J.T @ np.linalg.solve(S, lin.J)
+    return 0.5 * (F + F.T)
+
+
+def _singular(F):
+    w = np.linalg.eigvalsh(F)
+    return not w[0] > 1e-12 * max(w[-1], 0.0)
 
 
 def _verdict(model, T, p, s_hat, lam, lam_sd, alpha, at_bound):

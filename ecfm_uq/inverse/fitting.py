@@ -141,7 +141,9 @@ def fit(
     options : dict, optional
         Method- and formulation-specific settings by name (e.g. ``{"lr": 1e-2}`` for
         Adam, ``{"penalty": 100}`` for the penalty form, ``{"covariance": "sandwich"}``
-        and ``{"polish": False}`` for the steady least-squares fits); an unknown name is
+        and ``{"polish": False}`` for the steady least-squares fits,
+        ``{"forces": "exact"}`` for the paper's ECFM and ``{"tau_in_intervals": "held"}``
+        for random-force ECFM intervals with tau held at its estimate); an unknown name is
         refused.
     uncertainty : bool
         Attach the estimate's uncertainty (costs extra gradient evaluations).

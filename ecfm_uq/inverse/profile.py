@@ -52,6 +52,8 @@ _MODEL_FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError
 # delta-method half-width
 AGREEMENT_RTOL = 0.1
 _WALL = 1e12
+# central-difference step of a value-only likelihood, in units of the parameters' scale
+_FD_STEP = 1e-5
 _MAX_RECENTRE = 3  # profiles redone from a better point found along them  # the likelihood increase standing in for "the model fails here"
 
 
@@ -166,7 +168,8 @@ class LikelihoodRatioTest:
 
 
 def _likelihood(result):
-    like = getattr(result, "likelihood", None)
+    # the random-force ECFM's intervals profile tau out (result.interval_likelihood)
+    like = getattr(result, "interval_likelihood", None) or getattr(result, "likelihood", None)
     if like is None or isinstance(like, str):
         why = like or "it was not made by ecfm_uq.inverse.fit"
         raise ValueError(f"`result` has no likelihood to profile: {why}")
@@ -243,6 +246,7 @@ class _Profiler:
         self.nfev = 0
         self.visited = []  # optima of the inner problems, reused as starting points
         exact = like.exact_gradient
+        self.by_differences = not exact and like.value_only is not None
         self.inner_options = {
             "ftol": 1e-15 if exact else 1e-12,
             "gtol": 1e-9 if exact else 1e-6,
@@ -265,12 +269,27 @@ class _Profiler:
         s = self.scale[free]
         x0 = (eps[free] - self.eps_hat[free]) / s
 
-        def fun(x):
+        def point(x):
             e = eps.copy()
             e[free] = self.eps_hat[free] + s * x
+            return e
+
+        def fun(x):
             self.nfev += 1
             try:
-                val, g = self.like(e)
+                if self.by_differences:
+                    # a value-only likelihood: central differences in the free parameters
+                    # alone (in units of their scale), not the full gradient
+                    val = self.like.value(point(x))
+                    g = np.empty(free.size)
+                    for k in range(free.size):
+                        dx = np.zeros(free.size)
+                        dx[k] = _FD_STEP
+                        g[k] = (self.like.value(point(x + dx)) - self.like.value(point(x - dx))) / (
+                            2 * _FD_STEP
+                        )
+                    return val, g
+                val, g = self.like(point(x))
             except _MODEL_FAILURES:
                 # where the model cannot be solved: a wall the line search backs off from
                 return self.ell_hat + _WALL, np.zeros(free.size)

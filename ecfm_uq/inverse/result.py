@@ -196,6 +196,13 @@ class InverseResult:
     likelihood : LogLikelihood, str or None
         The fit's negative log-likelihood in :math:`\\epsilon` (for
         :func:`~ecfm_uq.inverse.profile_intervals`), or why it has none.
+    interval_likelihood : LogLikelihood or None
+        Where it differs from ``likelihood``, the one the profile-likelihood intervals and
+        likelihood-ratio tests use: for the random-force ECFM,
+        :math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))` with the discrepancy's
+        :math:`\\tau` re-estimated at every :math:`\\epsilon` (``likelihood`` holds the
+        data covariance at :math:`\\hat\\tau`: a density of the data given
+        :math:`\\epsilon`, what :func:`~ecfm_uq.inverse.sample_posterior` samples).
     bounds : list of (lo, hi) or None
         The bounds the fit ran with.
 
@@ -266,6 +273,7 @@ class InverseResult:
             verdict = self.extra["verdict"]
         self.verdict = verdict
         self.likelihood = None  # set by fit: a LogLikelihood, or why there is none
+        self.interval_likelihood = None  # set by fit where the intervals use another one
         self.bounds = None  # the bounds the fit ran with
 
     # -- status ---------------------------------------------------------------------------
