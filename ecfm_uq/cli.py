@@ -47,7 +47,8 @@ def build_parser():
     studies = rep.add_subparsers(dest="study", required=True, metavar="STUDY", parser_class=_Parser)
     for name in available_studies():
         mod = load_study(name)
-        p = studies.add_parser(name, help=mod.DESCRIPTION, description=mod.DESCRIPTION)
+        text = mod.DESCRIPTION.replace("%", "%%")  # argparse %-formats help strings
+        p = studies.add_parser(name, help=text, description=text)
         add_common_arguments(p)
         mod.add_arguments(p)
     p = studies.add_parser("all", help="every study, plus summary.md")

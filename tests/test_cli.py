@@ -24,6 +24,18 @@ def test_help_lists_the_reproduce_command():
     assert "reproduce" in r.stdout
 
 
+def test_help_of_reproduce_and_of_every_study_prints():
+    from ecfm_uq.studies import available_studies
+
+    r = run_cli("reproduce", "--help")
+    assert r.returncode == 0, r.stderr
+    assert "coverage" in r.stdout and "95%" in r.stdout  # a literal % in a description
+    for name in available_studies():
+        with pytest.raises(SystemExit) as exc:
+            main(["reproduce", name, "--help"])
+        assert exc.value.code == 0, name
+
+
 def test_unknown_study_is_one_line_and_nonzero():
     r = run_cli("reproduce", "nosuchstudy", "--out", "x")
     assert r.returncode != 0
