@@ -208,7 +208,7 @@ def smolyak_rule(level, dim, rule="gauss", germs=None):
 # --------------------------------------------------------------------------------------
 # model evaluations through the executor path
 # --------------------------------------------------------------------------------------
-def _evaluate(model, x, executor, workers, progress, label):
+def _evaluate(model, x, executor, workers, progress, label, check=None):
     """``model`` at each row of ``x`` through :func:`ecfm_uq.executor.evaluate_samples`."""
     if not callable(model):
         raise TypeError(f"`model` must be callable model(x) -> array, got {type(model).__name__}")
@@ -227,6 +227,7 @@ def _evaluate(model, x, executor, workers, progress, label):
             workers=workers,
             callback=None if bar is None else bar.update,
             name="model",
+            check=check,
         )
     except NonFiniteOutputError as e:
         point = np.array2string(x[e.index], precision=6)
@@ -429,14 +430,18 @@ def fit_pce(
         (1 = total degree; smaller keeps fewer interactions).
     early_stop : int
         Sparse methods: stop raising the degree after this many degrees without improvement.
-    compress : bool, optional
+    compress : bool, "exact" or "randomized", optional
         Sparse methods on a field output: select on the leading principal components of
         the evaluations instead of on every component (PCA-PCE, Blatman & Sudret 2013),
         so a 10 000-value field costs about what a scalar does. Default: for outputs of
-        more than 64 components. ``diagnostics`` then holds ``n_components``,
-        ``compression_error`` (per output component, its discarded variance over its
-        variance) beside ``corrected_loo_error`` (per component, the scores' errors
-        mapped onto it plus the compression's).
+        more than 64 components. ``True`` computes them by the exact SVD when it fits the
+        memory budget and by a randomized SVD in blocks (Halko, Martinsson & Tropp 2011;
+        the evaluations held once) otherwise; ``"exact"`` or ``"randomized"`` forces one.
+        ``diagnostics`` then holds ``n_components``, ``compression`` (which SVD ran),
+        ``compression_info``, ``compression_error`` (per output component, its discarded
+        variance over its variance; measured on the data for the randomized SVD) beside
+        ``corrected_loo_error`` (per component, the scores' errors mapped onto it plus
+        the compression's).
     compress_tol : float
         Largest share of any component's variance the compression may discard.
     executor : object with ``map``, optional
@@ -491,8 +496,8 @@ def fit_pce(
     if evaluations is not None and samples is None:
         raise ValueError("`evaluations` need the `samples` they were computed at")
 
-    def ev(x, label):
-        return _evaluate(model, x, executor, workers, progress, label)
+    def ev(x, label, check=None):
+        return _evaluate(model, x, executor, workers, progress, label, check)
 
     def data(P):
         n_default = 100 if P is None else 2 * P
@@ -519,8 +524,15 @@ def fit_pce(
         if isinstance(q_norm, bool) or not 0 < float(q_norm) <= 1:
             raise ValueError(f"`q_norm` must lie in (0, 1], got {q_norm!r}")
         early_stop = check_int("early_stop", early_stop, minimum=1)
-        if compress is not None and not isinstance(compress, bool | np.bool_):
-            raise TypeError(f"`compress` must be None, True or False, got {compress!r}")
+        if isinstance(compress, np.bool_):
+            compress = bool(compress)
+        if compress is not None and not (
+            isinstance(compress, bool)
+            or (isinstance(compress, str) and compress in ("exact", "randomized"))
+        ):
+            raise TypeError(
+                f"`compress` must be None, True, False, 'exact' or 'randomized', got {compress!r}"
+            )
         if isinstance(compress_tol, bool) or not 0 <= float(compress_tol) < 1:
             raise ValueError(f"`compress_tol` must lie in [0, 1), got {compress_tol!r}")
         pce, n_eval = _fit_sparse(

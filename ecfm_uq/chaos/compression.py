@@ -1,0 +1,255 @@
+"""Principal components of field evaluations: the exact SVD, or a randomized SVD in blocks.
+
+The compression of a field output before the sparse selection (PCA-PCE, Blatman &
+Sudret 2013; :mod:`ecfm_uq.chaos.sparse`): the centred evaluations
+:math:`Y - \\bar y = USV^T` keep the leading principal components until every
+component's discarded variance is below ``tol`` of its own variance. The exact thin SVD
+holds about seven (n, m) arrays' worth of memory at its peak (the evaluations, their
+centred copy, LAPACK's copy, the factors and the per-component energies); when that is
+over the memory budget (:mod:`ecfm_uq.memory`), or on request, a randomized SVD
+(Halko, Martinsson & Tropp 2011, randomized subspace iteration) works on the
+evaluations in blocks of rows, centring each block on the fly, so the (n, m) matrix is
+held once, and measures each component's discarded share on the data afterwards.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+
+from .._validation import check_choice, check_int
+from ..memory import check_allocation, memory_budget
+
+__all__ = ["compress_outputs"]
+
+# Rows per block (Gram path of the sparse selection, randomized compression): a block of
+# this many bytes per array (or 1/64 of the budget if that is smaller).
+_BLOCK_BYTES = 16 * 2**20
+
+
+def _row_blocks(n, width):
+    """Row ranges [a, b) holding about _BLOCK_BYTES of ``width`` floats each."""
+    block = min(_BLOCK_BYTES, memory_budget() / 64)
+    step = max(1, int(block // (8 * max(width, 1))))
+    return [(a, min(a + step, n)) for a in range(0, n, step)]
+
+
+def _column_var(Y):
+    """Column variances of Y in blocks of rows (no (n, m) temporary)."""
+    n = len(Y)
+    mean = Y.mean(axis=0)
+    ss = np.zeros(Y.shape[1])
+    for a, b in _row_blocks(n, Y.shape[1]):
+        ss += ((Y[a:b] - mean) ** 2).sum(axis=0)
+    return ss / n
+
+
+def _exact_pca_bytes(n, m):
+    """Peak of the exact compression: Y, its centred copy, LAPACK's copy, U, V^T, energies."""
+    r = min(n, m)
+    return 8.0 * (3 * n * m + n * r + 4 * r * m)
+
+
+def _randomized_pca_bytes(n, m, ell):
+    """Peak of the randomized compression with a sketch of ``ell`` columns (Y held once).
+
+    Y, the (n, l) sketches and QR factors, about eight (l, m) or (m, l) arrays (test
+    matrix, products, the small SVD's factors and energies) and three row blocks.
+    """
+    rows = _row_blocks(n, m)[0]
+    block = rows[1] - rows[0]
+    return 8.0 * (n * m + 3 * n * ell + 8 * m * ell + ell * ell + 3 * block * m)
+
+
+def _rank_by_energy(energy, total, const, tol):
+    """Smallest K whose discarded share is <= tol in every component, and the shares.
+
+    ``energy[j, m]`` is component m's variance along direction j (decreasing j order),
+    ``total[m]`` its variance; the discarded share when keeping K directions is
+    ``(total - sum_{j<K} energy[j]) / total`` (0 for a constant component).
+    """
+    kept = np.vstack([np.zeros((1, energy.shape[1])), np.cumsum(energy, axis=0)])
+    rel = np.where(const, 0.0, np.maximum(total - kept, 0.0) / np.where(const, 1.0, total))
+    ok = np.flatnonzero(rel.max(axis=1) <= tol)
+    return (int(ok[0]) if ok.size else None), rel
+
+
+def _randomized_pca(Y, ybar, total, const, tol, oversample, power_iterations, seed):
+    """Randomized range finder on the centred evaluations, in blocks of rows.
+
+    Halko, Martinsson & Tropp (2011), Algorithm 4.4 (randomized subspace iteration):
+    :math:`X = (Y - \\bar y)\\Omega` with a Gaussian :math:`\\Omega` of
+    :math:`\\ell = K + p` columns, ``power_iterations`` passes
+    :math:`X \\leftarrow (Y - \\bar y)\\,\\mathrm{orth}((Y - \\bar y)^T \\mathrm{orth}(X))`,
+    then :math:`B = Q^T (Y - \\bar y) = \\tilde U S V^T`. The centring is applied block by
+    block, so the centred (n, m) matrix never exists. The sketch starts at
+    :math:`\\ell = 32` columns and doubles until some :math:`K \\le \\ell - p` meets the
+    energy criterion, measured on the data: :math:`\\|(I - U_KU_K^T)(y_m - \\bar y_m)\\|^2
+    = \\|y_m - \\bar y_m\\|^2 - \\sum_{j<K} S_j^2 V_{jm}^2` is exact for the computed
+    orthonormal :math:`U_K = Q\\tilde U_K`, whatever the sketch's quality.
+
+    Returns
+    -------
+    Z, V, K, ell, passes
+    """
+    n, m = Y.shape
+    r = min(n, m)
+    rng = np.random.default_rng(seed)
+    blocks = _row_blocks(n, m)
+
+    def times(M):  # (Y - ybar) @ M, (n, k)
+        out = np.empty((n, M.shape[1]))
+        shift = ybar @ M
+        for a, b in blocks:
+            out[a:b] = Y[a:b] @ M - shift
+        return out
+
+    def t_times(M):  # (Y - ybar)^T @ M, (m, k)
+        out = Y[blocks[0][0] : blocks[0][1]].T @ M[blocks[0][0] : blocks[0][1]]
+        for a, b in blocks[1:]:
+            out += Y[a:b].T @ M[a:b]
+        out -= np.outer(ybar, M.sum(axis=0))
+        return out
+
+    ell = min(32, r)
+    passes = 0
+    while True:
+        check_allocation(
+            _randomized_pca_bytes(n, m, ell),
+            f"the randomized principal components (sketch of {ell} columns) of {n} runs of "
+            f"a {m}-component output",
+            "pass a larger `compress_tol` (fewer components), fewer `n_samples`, or let "
+            "the model return fewer output values",
+        )
+        Q = sla.qr(times(rng.standard_normal((m, ell))), mode="economic")[0]
+        passes += 1
+        for _ in range(power_iterations):
+            W = sla.qr(t_times(Q), mode="economic")[0]
+            Q = sla.qr(times(W), mode="economic")[0]
+            passes += 2
+        B = t_times(Q).T  # (ell, m) = Q^T (Y - ybar)
+        passes += 1
+        Ub, S, Vt = sla.svd(B, full_matrices=False)
+        del B
+        energy = S[:, None] ** 2 * Vt**2
+        K, _ = _rank_by_energy(energy, total, const, tol)
+        if K is not None and (K <= ell - oversample or ell >= r):
+            K = max(K, 1)
+            Z = Q @ (Ub[:, :K] * S[:K])
+            return Z, Vt[:K], K, ell, passes
+        ell = min(2 * ell, r)
+
+
+def compress_outputs(
+    Y,
+    tol,
+    method="auto",
+    *,
+    oversample=10,
+    power_iterations=2,
+    seed=0,
+    return_info=False,
+):
+    """Principal components of the evaluations, enough for every component to ``tol``.
+
+    Parameters
+    ----------
+    Y : (n, m) ndarray
+        Evaluations, one row per run.
+    tol : float
+        Largest discarded share of any component's own variance.
+    method : {"auto", "exact", "randomized"}
+        ``"exact"``: the thin SVD of the centred evaluations (LAPACK); ``"randomized"``:
+        a randomized range finder in blocks of rows (Halko, Martinsson & Tropp 2011),
+        which holds ``Y`` once plus a few (n, l) and (m, l) sketches; ``"auto"``: exact
+        when its memory (``Y``, its centred copy, LAPACK's copy and the factors) fits the
+        budget, randomized otherwise.
+    oversample : int
+        Randomized: sketch columns beyond the kept rank (p of Halko et al.).
+    power_iterations : int
+        Randomized: subspace iterations (each one more pass over ``Y`` each way).
+    seed : int
+        Randomized: seed of the Gaussian test matrix (the result is reproducible).
+    return_info : bool
+        Also return a dict: ``method``, ``rank``, and for the randomized path
+        ``sketch_columns``, ``passes`` (over ``Y``), ``power_iterations``.
+
+    Returns
+    -------
+    Z : (n, K) ndarray
+        Scores :math:`U_K S_K` (centred columns).
+    V : (K, m) ndarray
+        Principal directions (orthonormal rows), :math:`Y \\approx \\bar y + Z V`.
+    ybar : (m,) ndarray
+    error : (m,) ndarray
+        Discarded variance of each component over its variance (0 for a constant one).
+        Exact path: read off the SVD. Randomized path: measured a posteriori, the
+        residual :math:`\\|y_m - \\bar y_m - Z V_m\\|^2` over the component's variance,
+        in one more pass over ``Y``.
+
+    Raises
+    ------
+    MemoryBudgetError
+        ``method="exact"`` over the budget (names ``compress='randomized'``), or even
+        the randomized sketch over it (names ``compress_tol``, ``n_samples``).
+
+    Notes
+    -----
+    With :math:`Y - \\bar y = USV^T`, component m's variance is
+    :math:`\\sum_j S_j^2 V_{jm}^2`; keeping K directions discards
+    :math:`\\sum_{j \\ge K} S_j^2 V_{jm}^2` of it, exactly. Both paths keep the smallest
+    K for which every component's discarded share is at most ``tol``; the randomized
+    subspace is near-optimal (not optimal), so its K may exceed the exact one by a few.
+    """
+    method = check_choice("compress", method, ("auto", "exact", "randomized"))
+    n, m = Y.shape
+    exact_bytes = _exact_pca_bytes(n, m)
+    if method == "auto":
+        method = "exact" if exact_bytes <= memory_budget() else "randomized"
+    if method == "exact":
+        check_allocation(
+            exact_bytes,
+            f"the principal components (exact SVD) of {n} runs of a {m}-component output",
+            "pass compress='randomized' (a randomized SVD holding the evaluations once), "
+            "compress=False (one selection per component) or fit fewer components",
+        )
+        ybar = Y.mean(axis=0)
+        Yc = Y - ybar
+        U, S, Vt = np.linalg.svd(Yc, full_matrices=False)
+        energy = S[:, None] ** 2 * Vt**2  # (r, m): component m's variance along direction j
+        total = energy.sum(axis=0)
+        scale = np.maximum(np.abs(ybar), np.sqrt(total / len(Y)))
+        const = total <= (1e-13 * scale) ** 2 * len(Y)
+        tail = np.cumsum(energy[::-1], axis=0)[::-1]  # tail[k] = discarded when keeping k
+        rel = np.where(const, 0.0, tail / np.where(const, 1.0, total))
+        rel = np.vstack([rel, np.zeros((1, rel.shape[1]))])
+        ok = np.flatnonzero(rel.max(axis=1) <= tol)
+        K = max(int(ok[0]) if ok.size else len(S), 1)
+        out = (U[:, :K] * S[:K], Vt[:K], ybar, rel[K])
+        info = dict(method="exact", rank=K)
+        return (*out, info) if return_info else out
+    oversample = check_int("oversample", oversample, minimum=0)
+    power_iterations = check_int("power_iterations", power_iterations, minimum=0)
+    blocks = _row_blocks(n, m)
+    ybar = Y.mean(axis=0)
+    total = np.zeros(m)
+    for a, b in blocks:
+        total += ((Y[a:b] - ybar) ** 2).sum(axis=0)
+    scale = np.maximum(np.abs(ybar), np.sqrt(total / n))
+    const = total <= (1e-13 * scale) ** 2 * n
+    Z, V, K, ell, passes = _randomized_pca(
+        Y, ybar, total, const, tol, oversample, power_iterations, seed
+    )
+    resid = np.zeros(m)
+    for a, b in blocks:
+        resid += ((Y[a:b] - ybar - Z[a:b] @ V) ** 2).sum(axis=0)
+    error = np.where(const, 0.0, resid / np.where(const, 1.0, total))
+    info = dict(
+        method="randomized",
+        rank=K,
+        sketch_columns=ell,
+        passes=passes + 2,
+        power_iterations=power_iterations,
+    )
+    out = (Z, V, ybar, error)
+    return (*out, info) if return_info else out
