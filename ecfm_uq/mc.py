@@ -25,6 +25,7 @@ import numpy as np
 
 from ._validation import as_finite_array, check_int
 from .executor import evaluate_samples
+from .memory import check_allocation
 
 __all__ = [
     "Moments",
@@ -133,6 +134,12 @@ def mc_moments(outputs):
     if y.ndim == 0 or y.shape[0] < 2:
         raise ValueError("`outputs` must hold at least 2 samples along axis 0")
     n = y.shape[0]
+    check_allocation(
+        8.0 * 3 * y.size,
+        f"the moments of {n} samples of {y.size // n} outputs (deviations, their squares "
+        "and fourth powers)",
+        "pass the outputs in slices of components (mc_moments(outputs[:, idx]))",
+    )
     mean = y.mean(axis=0)
     d = y - mean
     var = (d**2).sum(axis=0) / (n - 1)

@@ -248,6 +248,14 @@ def _fit_quadrature(model, inputs, order, n_points, index_set, ev):
     order = check_int("order", 3 if order is None else order, minimum=0)
     n_points = order + 1 if n_points is None else check_int("n_points", n_points, minimum=1)
     basis = ChaosBasis(order, dim, index_set=index_set or "tensor", germ=inputs.germs)
+    n_nodes, P = n_points**dim, basis.size
+    check_allocation(
+        8.0 * 2 * n_nodes * P,
+        f"the projection of {n_nodes} tensor Gauss nodes onto P = {P} terms (order {order}, "
+        f"{dim} inputs)",
+        "use method='smolyak' (a sparse grid, far fewer nodes), index_set='total', or a "
+        "smaller `order` or `n_points`",
+    )
     nodes, w = basis.quadrature(n_points)
     y = ev(inputs.from_germ(nodes), "Gauss")
     pce = PolynomialChaosExpansion(basis, project(basis, nodes, w, y), inputs)
@@ -331,8 +339,21 @@ def _fit_lstsq(model, inputs, order, index_set, data, ev):
         f"least squares on n = {n} runs by P = {P} terms (order {order}, {dim} inputs)",
         "pass a smaller `order`, or use method='lars' (candidates sized by the memory budget)",
     )
+
+    def check_outputs(n_runs, out_shape):
+        """Before the other runs: the residuals and leave-one-out terms of every output."""
+        m = math.prod(out_shape)
+        check_allocation(
+            8.0 * (3 * n * P + 2 * P * P + 4 * n * m + 3 * P * m),
+            f"least squares on n = {n} runs by P = {P} terms for a {m}-value output",
+            "let the model return fewer output values, or use method='lars' (a field is "
+            "compressed to a few principal components first)",
+        )
+
     if y is None:
-        y = ev(x, "regression")
+        y = ev(x, "regression", check_outputs)
+    else:
+        check_outputs(n, y.shape[1:])
     Psi = basis.evaluate(omega)
     Q, R = sla.qr(Psi, mode="economic")
     if np.min(np.abs(np.diag(R))) < 1e-12 * np.max(np.abs(np.diag(R))):

@@ -20,7 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._validation import as_finite_array, check_choice, check_int
-from ..memory import check_covariance
+from ..memory import check_allocation, check_covariance
 from .basis import ChaosBasis
 from .inputs import UniformInputs, as_inputs, draw_germs
 from .projection import project
@@ -469,6 +469,13 @@ class PolynomialChaosExpansion:
         pts = self.basis._as_points(omega)
         c = self._flat()
         n = pts.shape[0]
+        check_allocation(
+            8.0 * n * c.shape[1],
+            f"the values of a {c.shape[1]}-value expansion at {n} points",
+            "evaluate the points in slices, or only the components you need "
+            "(pce.linear_map(A), or PolynomialChaosExpansion(pce.basis, "
+            "pce.coefficients[:, idx], pce.inputs))",
+        )
         out = np.empty((n, c.shape[1]))
         block = max(1, _EVAL_BLOCK_ENTRIES // self.basis.size)
         for i in range(0, n, block):
@@ -531,6 +538,15 @@ class PolynomialChaosExpansion:
         q = as_finite_array("q", q)
         if np.any((q < 0) | (q > 1)):
             raise ValueError(f"`q` must lie in [0, 1], got {q}")
+        n_samples = check_int("n_samples", n_samples, minimum=1)
+        m = int(np.prod(self.output_shape, dtype=int))
+        check_allocation(
+            8.0 * (2 * n_samples + q.size) * m,
+            f"quantiles of a {m}-value expansion from {n_samples} samples (the samples and "
+            "the sorted copy)",
+            "pass fewer `n_samples`, or take the quantiles of the components you need "
+            "(PolynomialChaosExpansion(pce.basis, pce.coefficients[:, idx], pce.inputs))",
+        )
         return np.quantile(self.sample(n_samples, seed), q, axis=0)
 
     def density(self, component=(), n_samples=20_000, seed=0, bw_method=None):

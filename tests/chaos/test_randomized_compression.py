@@ -172,3 +172,31 @@ def test_fit_pce_refusals_name_the_cheaper_call_before_the_other_runs(env_budget
     with pytest.raises(MemoryBudgetError, match="fewer `n_samples`") as e:
         fit_pce(fn, bounds, "lars", order=2, n_samples=300, seed=0)
     assert fn.calls == 1 and "fewer output values" in str(e.value)
+
+
+def test_other_field_sized_allocations_are_refused_naming_the_cheaper_call(env_budget):
+    from ecfm_uq.chaos import ChaosBasis, PolynomialChaosExpansion
+    from ecfm_uq.mc import mc_moments
+
+    env_budget("4M")
+
+    def never(x):
+        raise AssertionError("the model must not run")
+
+    # tensor quadrature in 8 inputs: 4^8 nodes by 4^8 terms, 64 GiB of basis values
+    with pytest.raises(MemoryBudgetError, match="method='smolyak'"):
+        fit_pce(never, [(0.0, 1.0)] * 8, "quadrature", order=3)
+    # least squares of a 20 000-value field: Y fits (1.8 MiB), its residual terms do not
+    fn = _Counting(20_000)
+    with pytest.raises(MemoryBudgetError, match="method='lars'"):
+        fit_pce(fn, [(0.0, 1.0)] * 2, "lstsq", order=2, n_samples=12, seed=0)
+    assert fn.calls == 1
+    # a 5 000-value expansion at 200 points (7.6 MiB), its quantiles, Monte Carlo moments
+    pce = PolynomialChaosExpansion(ChaosBasis(2, 2), np.ones((6, 5000)))
+    with pytest.raises(MemoryBudgetError, match="evaluate the points in slices"):
+        pce.evaluate(np.full((200, 2), 0.5))
+    assert pce.evaluate(np.full((20, 2), 0.5)).shape == (20, 5000)  # a slice still answers
+    with pytest.raises(MemoryBudgetError, match="fewer `n_samples`"):
+        pce.quantile(0.5, n_samples=100)
+    with pytest.raises(MemoryBudgetError, match=r"outputs\[:, idx\]"):
+        mc_moments(np.ones((100, 5000)))
