@@ -272,6 +272,11 @@ def batch_errors(outputs, ref_mean, ref_var, sizes):
     y = as_finite_array("outputs", outputs, ndim=2)
     ref_mean = as_finite_array("ref_mean", ref_mean, shape=(y.shape[1],))
     ref_var = as_finite_array("ref_var", ref_var, shape=(y.shape[1],))
+    check_allocation(
+        8.0 * 2 * y.size,
+        f"the batch variances of {y.shape[0]} samples of {y.shape[1]} outputs",
+        "pass the outputs of a few components (outputs[:, idx] with ref_mean[idx], ref_var[idx])",
+    )
     em, ev, nb = [], [], []
     for n in sizes:
         if isinstance(n, bool) or not isinstance(n, numbers.Integral) or not 2 <= n <= y.shape[0]:

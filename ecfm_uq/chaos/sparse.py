@@ -567,6 +567,11 @@ def _fit_sparse(
         cz, deg, err, nt = _select_columns(selector(Z), P, Z, qn, order, early_stop)
         # only the terms up to the highest selected degree are nonzero (graded order)
         P_top = ChaosBasis(max(int(deg.max()), 1), dim).size
+        check_allocation(
+            8.0 * 2 * P_top * m,
+            f"the expansion's coefficients ({P_top} terms by {m} output values)",
+            "pass a smaller `order` (fewer terms), or let the model return fewer output values",
+        )
         coeffs = cz[:P_top] @ V
         coeffs[0] += ybar
         chosen_deg = deg
