@@ -173,8 +173,11 @@ def evaluate_samples(
     start = 0
     try:
         # the first sample alone: its shape sizes (and checks) the output array
-        for results in (run(chunks[:1]), run(chunks[1:]) if n > 1 else ()):
-            for r in results:
+        # the second map is submitted only after the first result has passed the check
+        for part in (chunks[:1], chunks[1:]):
+            if not part:
+                continue
+            for r in run(part):
                 r = r.result() if _is_future(r) else r
                 if out is None:
                     (check or functools.partial(_check_outputs, name=name))(n, r.shape[1:])
@@ -200,4 +203,9 @@ def evaluate_samples(
     finally:
         if own_pool:
             executor.shutdown(wait=True, cancel_futures=True)
+    if start != n:
+        raise RuntimeError(
+            f"`executor` returned results for {start} of {n} samples; its map(f, chunks) "
+            "must return one result per chunk, in order"
+        )
     return out

@@ -200,3 +200,22 @@ def test_other_field_sized_allocations_are_refused_naming_the_cheaper_call(env_b
         pce.quantile(0.5, n_samples=100)
     with pytest.raises(MemoryBudgetError, match=r"outputs\[:, idx\]"):
         mc_moments(np.ones((100, 5000)))
+
+
+def test_the_output_check_runs_before_the_other_runs_through_an_executor(env_budget):
+    from concurrent.futures import ThreadPoolExecutor
+
+    env_budget("1M")
+    fn = _Counting(10_000)
+    with ThreadPoolExecutor(2) as pool, pytest.raises(MemoryBudgetError, match="200 runs"):
+        evaluate_samples(fn, np.random.default_rng(0).random((200, 2)), pool)
+    assert fn.calls == 1
+
+
+def test_an_executor_that_drops_results_is_an_error():
+    class Lossy:
+        def map(self, f, chunks):
+            return [f(c) for c in list(chunks)[:-1]]
+
+    with pytest.raises(RuntimeError, match="returned results for"):
+        evaluate_samples(_Counting(3), np.arange(10.0)[:, None], Lossy(), chunksize=3)
