@@ -149,8 +149,27 @@ def mc_moments(outputs):
 
 
 def _node_outputs(fn, nodes):
-    """``fn`` at each Gauss node, stacked; a non-finite output raises (never a NaN moment)."""
-    y = np.stack([np.asarray(fn(x), dtype=float) for x in nodes])
+    """``fn`` at each Gauss node, stacked; a non-finite output raises (never a NaN moment).
+
+    The first node's output sizes the (n, m) array, checked against the memory budget
+    (with the two temporaries of the moments) before the other nodes run.
+    """
+    first = np.asarray(fn(nodes[0]), dtype=float)
+    check_allocation(
+        8.0 * 3 * len(nodes) * first.size,
+        f"the outputs of `fn` at {len(nodes)} Gauss nodes ({first.size} values each)",
+        "let `fn` return only the values you need (e.g. the sensors), or fewer `n_points`",
+    )
+    y = np.empty((len(nodes), *first.shape))
+    y[0] = first
+    for i in range(1, len(nodes)):
+        yi = np.asarray(fn(nodes[i]), dtype=float)
+        if yi.shape != first.shape:
+            raise ValueError(
+                f"`fn` returned outputs of different shapes: {first.shape} at Gauss node 0 "
+                f"and {yi.shape} at node {i}"
+            )
+        y[i] = yi
     bad = ~np.isfinite(y.reshape(len(nodes), -1)).all(axis=1)
     if bad.any():
         i = int(np.argmax(bad))

@@ -219,3 +219,16 @@ def test_an_executor_that_drops_results_is_an_error():
 
     with pytest.raises(RuntimeError, match="returned results for"):
         evaluate_samples(_Counting(3), np.arange(10.0)[:, None], Lossy(), chunksize=3)
+
+
+def test_gauss_node_outputs_are_checked_after_one_node(env_budget):
+    from ecfm_uq.mc import quadrature_moments
+
+    env_budget("1M")
+    fn = _Counting(10_000)  # 3 x 64 nodes x 10 000 values = 15 MiB
+    with pytest.raises(MemoryBudgetError, match="fewer `n_points`"):
+        quadrature_moments(fn, 8, dim=2)
+    assert fn.calls == 1
+    mean, var = quadrature_moments(_Counting(3), 3, dim=2)  # sum of two U(0, 1)
+    np.testing.assert_allclose(mean, 1.0, rtol=1e-14)
+    np.testing.assert_allclose(var, 1 / 6, rtol=1e-13)
