@@ -133,6 +133,8 @@ def _randomized_pca(Y, ybar, total, const, tol, oversample, power_iterations, se
         del B
         energy = S[:, None] ** 2 * Vt**2
         K, _ = _rank_by_energy(energy, total, const, tol)
+        if ell >= r and K is None:
+            K = r  # a full sketch: the tolerance is below round-off (e.g. tol = 0)
         if K is not None and (K <= ell - oversample or ell >= r):
             K = max(K, 1)
             Z = Q @ (Ub[:, :K] * S[:K])

@@ -232,3 +232,11 @@ def test_gauss_node_outputs_are_checked_after_one_node(env_budget):
     mean, var = quadrature_moments(_Counting(3), 3, dim=2)  # sum of two U(0, 1)
     np.testing.assert_allclose(mean, 1.0, rtol=1e-14)
     np.testing.assert_allclose(var, 1 / 6, rtol=1e-13)
+
+
+def test_a_zero_tolerance_keeps_every_direction_and_terminates():
+    Y = np.random.default_rng(5).standard_normal((20, 50))
+    Z, V, ybar, err, info = compress_outputs(Y, 0.0, "randomized", return_info=True)
+    _, V_ex, _, _ = compress_outputs(Y, 0.0, "exact")
+    assert info["sketch_columns"] == 20 and V.shape[0] == V_ex.shape[0]
+    np.testing.assert_allclose(ybar + Z @ V, Y, atol=1e-12)
