@@ -97,18 +97,18 @@ def _randomized_pca(Y, ybar, total, const, tol, oversample, power_iterations, se
     rng = np.random.default_rng(seed)
     blocks = _row_blocks(n, m)
 
+    # each block is centred before the product: subtracting ybar @ M afterwards would
+    # cancel catastrophically when the mean dominates the fluctuations
     def times(M):  # (Y - ybar) @ M, (n, k)
         out = np.empty((n, M.shape[1]))
-        shift = ybar @ M
         for a, b in blocks:
-            out[a:b] = Y[a:b] @ M - shift
+            out[a:b] = (Y[a:b] - ybar) @ M
         return out
 
     def t_times(M):  # (Y - ybar)^T @ M, (m, k)
-        out = Y[blocks[0][0] : blocks[0][1]].T @ M[blocks[0][0] : blocks[0][1]]
-        for a, b in blocks[1:]:
-            out += Y[a:b].T @ M[a:b]
-        out -= np.outer(ybar, M.sum(axis=0))
+        out = np.zeros((m, M.shape[1]))
+        for a, b in blocks:
+            out += (Y[a:b] - ybar).T @ M[a:b]
         return out
 
     ell = min(32, r)
