@@ -104,15 +104,17 @@ def evaluate_samples(
     check : callable, optional
         ``check(n, shape)``, called once the first sample's output shape is known and
         before the other samples run; it raises (e.g. :class:`~ecfm_uq.errors.MemoryBudgetError`)
-        to stop. Default: refuse an (n, *shape) output array over the memory budget
+        to stop, or returns a callable ``consume(start, block)`` to receive the outputs
+        of rows ``start, start + 1, ...`` in order as they finish instead of having them
+        stored (then ``None`` is returned: a field compressed as it arrives). Default: refuse an (n, *shape) output array over the memory budget
         (:mod:`ecfm_uq.memory`), naming the cheaper calls. A caller that needs more
         memory per output (a fit's work arrays) passes its own check, which should include
         :func:`output_array_bytes`.
 
     Returns
     -------
-    (n, ...) ndarray
-        Outputs in the order of ``samples``.
+    (n, ...) ndarray or None
+        Outputs in the order of ``samples`` (``None`` when ``check`` returned a consumer).
 
     Raises
     ------
@@ -169,7 +171,7 @@ def evaluate_samples(
             return executor.gather(executor.map(task, parts))
         return executor.map(task, parts)
 
-    out = None
+    out = consume = shape = None
     start = 0
     try:
         # the first sample alone: its shape sizes (and checks) the output array
@@ -179,12 +181,15 @@ def evaluate_samples(
                 continue
             for r in run(part):
                 r = r.result() if _is_future(r) else r
-                if out is None:
-                    (check or functools.partial(_check_outputs, name=name))(n, r.shape[1:])
-                    out = np.empty((n, *r.shape[1:]))
-                if r.shape[1:] != out.shape[1:]:
+                if shape is None:
+                    shape = r.shape[1:]
+                    consume = (check or functools.partial(_check_outputs, name=name))(n, shape)
+                    if not callable(consume):
+                        consume = None
+                        out = np.empty((n, *shape))
+                if r.shape[1:] != shape:
                     raise ValueError(
-                        f"`{name}` returned outputs of different shapes: {out.shape[1:]} for "
+                        f"`{name}` returned outputs of different shapes: {shape} for "
                         f"sample 0 and {r.shape[1:]} for a sample in rows {start}.."
                         f"{start + len(r) - 1}"
                     )
@@ -196,7 +201,10 @@ def evaluate_samples(
                         "check the model at that germ value",
                         i,
                     )
-                out[start : start + len(r)] = r
+                if consume is None:
+                    out[start : start + len(r)] = r
+                else:
+                    consume(start, r)
                 start += len(r)
                 if callback is not None:
                     callback(len(r))

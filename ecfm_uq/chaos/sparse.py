@@ -40,10 +40,12 @@ from .._validation import check_int
 from ..memory import check_allocation, memory_budget
 from .basis import ChaosBasis
 from .compression import (
+    StreamingSketch,
     _column_var,
     _exact_pca_bytes,
     _randomized_pca_bytes,
     _row_blocks,
+    _streaming_bytes,
     compress_outputs,
 )
 from .pce import PolynomialChaosExpansion
@@ -66,6 +68,9 @@ _EXACT_DESIGN_BYTES = 128 * 2**20
 # Gram path: a selected column whose Cholesky pivot falls below this share of its norm is
 # numerically dependent on the earlier ones (the Gram squares the conditioning).
 _CHOLESKY_RTOL = 1e-6
+# Field outputs whose evaluations do not fit in memory: range-sketch columns of the
+# one-pass compression, the largest that fits (the largest rank it can keep).
+_STREAM_COLUMNS = (64, 48, 32)
 # Field outputs: above this many components the evaluations are compressed by default.
 _COMPRESS_ABOVE = 64
 
@@ -539,17 +544,30 @@ def _fit_sparse(
                 "pass fewer `n_samples`, or let the model return fewer output values (e.g. "
                 "the sensors you need or a coarser field)"
             )
+            if need > memory_budget():
+                # the evaluations do not fit even once: compress them as they arrive, with
+                # the largest sketch that fits
+                for k in _STREAM_COLUMNS:
+                    k = min(k, n_runs, m_out)
+                    if _streaming_bytes(n_runs, m_out, k) <= memory_budget():
+                        stream[:] = [StreamingSketch(n_runs, m_out, k), out_shape]
+                        return stream[0]
         check_allocation(
             need,
             f"the evaluations of {n_runs} runs of a {m_out}-value output {what}",
             cheaper,
         )
 
+    stream = []
     if y is None:
         y = ev(x, "regression", check_outputs)
-    yf = y.reshape(n, -1)
-    m = yf.shape[1]
-    shape = y.shape[1:]
+    if stream:
+        yf, shape = None, tuple(stream[1])
+        m = math.prod(shape)
+    else:
+        yf = y.reshape(n, -1)
+        m = yf.shape[1]
+        shape = y.shape[1:]
     extra = {}
     compress = _compress_flag(compress, m)
 
@@ -561,9 +579,12 @@ def _fit_sparse(
         return lambda j, candidates: _sparse_select(Psi, Y[:, j], candidates, n, solver)
 
     if compress:
-        Z, V, ybar, comp_err, info = compress_outputs(
-            yf, tol, "auto" if compress is True else compress, return_info=True
-        )
+        if stream:
+            Z, V, ybar, comp_err, info = stream[0].compress(tol)
+        else:
+            Z, V, ybar, comp_err, info = compress_outputs(
+                yf, tol, "auto" if compress is True else compress, return_info=True
+            )
         cz, deg, err, nt = _select_columns(selector(Z), P, Z, qn, order, early_stop)
         # only the terms up to the highest selected degree are nonzero (graded order)
         P_top = ChaosBasis(max(int(deg.max()), 1), dim).size
@@ -579,7 +600,10 @@ def _fit_sparse(
         # V onto each component's variance, plus what the compression discarded
         var_z = Z.var(axis=0)
         # the exact path had room for an (n, m) temporary; the randomized one has not
-        var_yf = yf.var(axis=0) if info["method"] == "exact" else _column_var(yf)
+        if stream:
+            var_yf = stream[0].variance()
+        else:
+            var_yf = yf.var(axis=0) if info["method"] == "exact" else _column_var(yf)
         var_y = np.maximum(var_yf, np.finfo(float).tiny)
         errors = (err * var_z) @ V**2 / var_y + comp_err
         errors = np.where(var_yf > 0, errors, 0.0)
@@ -599,7 +623,7 @@ def _fit_sparse(
         )
     top = max(max(chosen_deg), 1)
     basis_out = ChaosBasis(top, dim, germ=inputs.germs)
-    c = coeffs[: basis_out.size].reshape((basis_out.size, *y.shape[1:]))
+    c = coeffs[: basis_out.size].reshape((basis_out.size, *shape))
     pce = PolynomialChaosExpansion(basis_out, c, inputs)
     if compress:
         # each component uses the union of the scores' terms
