@@ -10,6 +10,10 @@ over the memory budget (:mod:`ecfm_uq.memory`), or on request, a randomized SVD
 (Halko, Martinsson & Tropp 2011, randomized subspace iteration) works on the
 evaluations in blocks of rows, centring each block on the fly, so the (n, m) matrix is
 held once, and measures each component's discarded share on the data afterwards.
+When even one copy of the evaluations is over the budget, :class:`StreamingSketch`
+compresses them as they arrive from the model runner (one pass, nothing stored; Tropp,
+Yurtsever, Udell & Cevher 2017), the discarded shares then estimated from an
+independent Gaussian sketch.
 """
 
 from __future__ import annotations

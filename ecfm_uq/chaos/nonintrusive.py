@@ -457,7 +457,10 @@ def fit_pce(
         so a 10 000-value field costs about what a scalar does. Default: for outputs of
         more than 64 components. ``True`` computes them by the exact SVD when it fits the
         memory budget and by a randomized SVD in blocks (Halko, Martinsson & Tropp 2011;
-        the evaluations held once) otherwise; ``"exact"`` or ``"randomized"`` forces one.
+        the evaluations held once) otherwise, and when even the evaluations do not fit,
+        compresses them as they arrive by a one-pass sketch (Tropp et al. 2017; the
+        discarded share then estimated, ``compression="streaming"``); ``"exact"`` or
+        ``"randomized"`` forces one.
         ``diagnostics`` then holds ``n_components``, ``compression`` (which SVD ran),
         ``compression_info``, ``compression_error`` (per output component, its discarded
         variance over its variance; measured on the data for the randomized SVD) beside
