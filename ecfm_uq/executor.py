@@ -25,6 +25,9 @@ from .memory import check_allocation
 
 __all__ = ["NonFiniteOutputError", "evaluate_samples", "output_array_bytes"]
 
+# Outputs handed to a consumer (not stored) travel in chunks of at most this many bytes.
+STREAM_CHUNK_BYTES = 2**20
+
 
 class NonFiniteOutputError(ValueError):
     """The model returned NaN or inf; ``index`` is the first offending sample's row."""
@@ -176,7 +179,12 @@ def evaluate_samples(
     try:
         # the first sample alone: its shape sizes (and checks) the output array
         # the second map is submitted only after the first result has passed the check
-        for part in (chunks[:1], chunks[1:]):
+        for k in range(2):
+            part = chunks[:1] if k == 0 else chunks[1:]
+            if consume is not None and k == 1:
+                # streamed: small chunks, so that little is in flight at once
+                step = max(1, min(chunksize, int(STREAM_CHUNK_BYTES // (8 * math.prod(shape)))))
+                part = [samples[i : i + step] for i in range(1, n, step)]
             if not part:
                 continue
             for r in run(part):

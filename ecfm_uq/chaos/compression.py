@@ -262,14 +262,24 @@ def compress_outputs(
 
 
 def _streaming_bytes(n, m, k):
-    """Memory of :class:`StreamingSketch` with a range sketch of ``k`` columns."""
-    ell, s = 2 * k + 1, _ERROR_SKETCH
-    return 8.0 * (3 * n * k + (ell + s + 6) * m + 2 * k * m + (n + m) * k)
+    """Peak memory of :class:`StreamingSketch` with a range sketch of ``k`` columns.
+
+    Per output value: the test matrix (k), the co-range and error sketches (2k + 1 and
+    32), the small SVD's input, copy and factor (3k) and a few (m,) sums; per run the
+    range sketch and its QR factor (3k); plus the chunks in flight
+    (:data:`ecfm_uq.executor.STREAM_CHUNK_BYTES`, twice) and the column slices.
+    """
+    from ..executor import STREAM_CHUNK_BYTES
+
+    per_value = k + (2 * k + 1) + _ERROR_SKETCH + 3 * k + 6
+    return 8.0 * (per_value * m + 3 * n * k) + 2 * STREAM_CHUNK_BYTES + 4 * _SLICE_BYTES
 
 
 # Rows of the Gaussian sketch that estimates the streamed compression's error (its
 # relative standard deviation is sqrt(2 / _ERROR_SKETCH), 25 %).
 _ERROR_SKETCH = 32
+# Column slices of a streamed block: temporaries of at most this many bytes.
+_SLICE_BYTES = 2**18
 
 
 class StreamingSketch:
@@ -311,11 +321,17 @@ class StreamingSketch:
             self.shift = block[0].copy()
         b = slice(start, start + len(block))
         self.X[b] = block @ self.Omega
-        self.W += self.Psi[:, b] @ block
-        self.E += self.Theta[:, b] @ block
-        d = block - self.shift
-        self.s1 += d.sum(axis=0)
-        self.s2 += (d**2).sum(axis=0)
+        Psi, Theta = self.Psi[:, b], self.Theta[:, b]
+        # column slices keep every temporary small (the sketches are updated in place)
+        width = max(1, _SLICE_BYTES // (8 * max(len(Psi), len(block))))
+        for j in range(0, self.m, width):
+            cols = slice(j, j + width)
+            Yb = block[:, cols]
+            self.W[:, cols] += Psi @ Yb
+            self.E[:, cols] += Theta @ Yb
+            d = Yb - self.shift[cols]
+            self.s1[cols] += d.sum(axis=0)
+            self.s2[cols] += (d * d).sum(axis=0)
         self.rows += len(block)
 
     def variance(self):
@@ -331,14 +347,25 @@ class StreamingSketch:
         total = np.maximum(self.s2 - self.s1**2 / n, 0.0)
         scale = np.maximum(np.abs(ybar), np.sqrt(total / n))
         const = total <= (1e-13 * scale) ** 2 * n
+        # centred in place (the sketches are linear in Y); each big array is dropped as
+        # soon as it is used, so the peak is the sketches plus the small SVD
         X = self.X - ybar @ self.Omega
-        W = self.W - np.outer(self.Psi.sum(axis=1), ybar)
-        E = self.E - np.outer(self.Theta.sum(axis=1), ybar)
+        self.Omega = None
         Q = sla.qr(X, mode="economic")[0]
-        B = sla.lstsq(self.Psi @ Q, W)[0]
-        Ub, S, Vt = sla.svd(B, full_matrices=False)
+        del X
+        self.W -= np.outer(self.Psi.sum(axis=1), ybar)
+        E = self.E
+        E -= np.outer(self.Theta.sum(axis=1), ybar)
+        # B = (Psi Q)^+ W through the QR factors of the small (2k + 1, k) matrix
+        Q2, R2 = sla.qr(self.Psi @ Q, mode="economic")
+        B = Q2.T @ self.W
+        self.W = None
+        B = sla.solve_triangular(R2, B, overwrite_b=True)
+        Ub, S, Vt = sla.svd(B, full_matrices=False, overwrite_a=True)
+        del B
         TZ = (self.Theta @ Q) @ (Ub * S)  # Theta Z, (s, k)
-        resid = E.copy()
+        resid = E
+        self.E = None
         K = None
         for j in range(len(S) + 1):
             if j:

@@ -561,7 +561,8 @@ def _fit_sparse(
     stream = []
     if y is None:
         y = ev(x, "regression", check_outputs)
-    if stream:
+    streamed = bool(stream)
+    if streamed:
         yf, shape = None, tuple(stream[1])
         m = math.prod(shape)
     else:
@@ -579,8 +580,11 @@ def _fit_sparse(
         return lambda j, candidates: _sparse_select(Psi, Y[:, j], candidates, n, solver)
 
     if compress:
-        if stream:
-            Z, V, ybar, comp_err, info = stream[0].compress(tol)
+        if streamed:
+            sketch = stream.pop(0)  # dropped once compressed: only its results stay
+            Z, V, ybar, comp_err, info = sketch.compress(tol)
+            var_stream = sketch.variance()
+            del sketch
         else:
             Z, V, ybar, comp_err, info = compress_outputs(
                 yf, tol, "auto" if compress is True else compress, return_info=True
@@ -600,8 +604,8 @@ def _fit_sparse(
         # V onto each component's variance, plus what the compression discarded
         var_z = Z.var(axis=0)
         # the exact path had room for an (n, m) temporary; the randomized one has not
-        if stream:
-            var_yf = stream[0].variance()
+        if streamed:
+            var_yf = var_stream
         else:
             var_yf = yf.var(axis=0) if info["method"] == "exact" else _column_var(yf)
         var_y = np.maximum(var_yf, np.finfo(float).tiny)
