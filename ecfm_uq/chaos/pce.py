@@ -314,9 +314,20 @@ class PolynomialChaosExpansion:
                 "quantiles and densities are exact; for sensitivities fit with independent "
                 "inputs or use sobol_germ()"
             )
+        self._check_index_memory()
         support = np.asarray(self.basis.indices) > 0
         self._check_finite_variance(support)
         return support
+
+    def _check_index_memory(self):
+        """Sobol indices hold about four (P, m) arrays (partial variances, shares, sums)."""
+        P, m = self._flat().shape
+        check_allocation(
+            8.0 * 4 * P * m,
+            f"the Sobol indices of a {m}-value expansion of {P} terms",
+            "take the indices of the components you need: "
+            "PolynomialChaosExpansion(pce.basis, pce.coefficients[:, idx], pce.inputs)",
+        )
 
     def _check_finite_variance(self, support):
         """Refuse indices when the output depends on an input without finite variance."""
@@ -352,6 +363,7 @@ class PolynomialChaosExpansion:
         zero_variance : "raise" or float
         """
         kind = check_choice("kind", kind, ("first", "total"))
+        self._check_index_memory()
         s = np.asarray(self.basis.indices) > 0
         if kind == "first":
             s = s & (s.sum(axis=1) == 1)[:, None]

@@ -200,6 +200,14 @@ def test_other_field_sized_allocations_are_refused_naming_the_cheaper_call(env_b
         pce.quantile(0.5, n_samples=100)
     with pytest.raises(MemoryBudgetError, match=r"outputs\[:, idx\]"):
         mc_moments(np.ones((100, 5000)))
+    # Sobol indices of 40 000 components of 6 terms: four (6, 40 000) arrays, 7.3 MiB
+    big = PolynomialChaosExpansion(ChaosBasis(2, 2), np.ones((6, 40_000)), [(0.0, 1.0)] * 2)
+    with pytest.raises(MemoryBudgetError, match=r"coefficients\[:, idx\]"):
+        big.first_order()
+    with pytest.raises(MemoryBudgetError, match="indices of the components you need"):
+        big.sobol_germ()
+    sub = PolynomialChaosExpansion(big.basis, big.coefficients[:, :100], big.inputs)
+    np.testing.assert_allclose(sub.first_order().sum(axis=0), 1.0 - 1.0 / 5.0)
 
 
 def test_the_output_check_runs_before_the_other_runs_through_an_executor(env_budget):
