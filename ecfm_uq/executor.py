@@ -21,8 +21,12 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 from ._validation import as_finite_array, check_int
+from .memory import check_allocation
 
-__all__ = ["NonFiniteOutputError", "evaluate_samples"]
+__all__ = ["NonFiniteOutputError", "evaluate_samples", "output_array_bytes"]
+
+# Outputs handed to a consumer (not stored) travel in chunks of at most this many bytes.
+STREAM_CHUNK_BYTES = 2**20
 
 
 class NonFiniteOutputError(ValueError):
@@ -33,9 +37,30 @@ class NonFiniteOutputError(ValueError):
         self.index = index
 
 
-def _evaluate_chunk(fn, chunk):
+def _evaluate_chunk(fn, chunk, name="fn"):
     """Evaluate ``fn`` on every sample of ``chunk``; module-level so it pickles."""
-    return np.stack([np.asarray(fn(s), dtype=float) for s in chunk])
+    outs = [np.asarray(fn(s), dtype=float) for s in chunk]
+    shapes = {o.shape for o in outs}
+    if len(shapes) > 1:
+        raise ValueError(f"`{name}` returned outputs of different shapes: {sorted(shapes)}")
+    return np.stack(outs)
+
+
+def output_array_bytes(n, shape):
+    """Bytes of the (n, *shape) float array :func:`evaluate_samples` returns."""
+    return 8.0 * n * math.prod(shape)
+
+
+def _check_outputs(n, shape, name):
+    """The default check: the (n, *shape) output array, with what a caller can do instead."""
+    m = math.prod(shape)
+    check_allocation(
+        output_array_bytes(n, shape),
+        f"the outputs of {n} runs of `{name}` ({m} values each, shape {tuple(shape)})",
+        f"let `{name}` return only the values you need (e.g. the sensors M_obs @ u or a "
+        "coarser field), or evaluate `samples` in slices and reduce each slice as it "
+        "arrives (e.g. its running mean and variance)",
+    )
 
 
 def _is_future(obj):
@@ -43,7 +68,15 @@ def _is_future(obj):
 
 
 def evaluate_samples(
-    fn, samples, executor=None, *, workers=2, chunksize=None, callback=None, name="fn"
+    fn,
+    samples,
+    executor=None,
+    *,
+    workers=2,
+    chunksize=None,
+    callback=None,
+    name="fn",
+    check=None,
 ):
     """Evaluate ``fn`` at each sample, in parallel, and stack the outputs.
 
@@ -71,11 +104,20 @@ def evaluate_samples(
     name : str
         What the caller calls ``fn`` in its own signature (``"fn"``, ``"model"``), used in
         error messages.
+    check : callable, optional
+        ``check(n, shape)``, called once the first sample's output shape is known and
+        before the other samples run; it raises (e.g. :class:`~ecfm_uq.errors.MemoryBudgetError`)
+        to stop, or returns a callable ``consume(start, block)`` to receive the outputs
+        of rows ``start, start + 1, ...`` in order as they finish instead of having them
+        stored (then ``None`` is returned: a field compressed as it arrives). Default: refuse an (n, *shape) output array over the memory budget
+        (:mod:`ecfm_uq.memory`), naming the cheaper calls. A caller that needs more
+        memory per output (a fit's work arrays) passes its own check, which should include
+        :func:`output_array_bytes`.
 
     Returns
     -------
-    (n, ...) ndarray
-        Outputs in the order of ``samples``.
+    (n, ...) ndarray or None
+        Outputs in the order of ``samples`` (``None`` when ``check`` returned a consumer).
 
     Raises
     ------
@@ -85,6 +127,15 @@ def evaluate_samples(
         Empty or non-finite samples, outputs of different shapes.
     NonFiniteOutputError
         A non-finite output (a ValueError whose ``index`` is the first offending sample).
+    MemoryBudgetError
+        The output array (or what ``check`` counts) would exceed the memory budget; only
+        the first sample has run.
+
+    Notes
+    -----
+    The first sample runs alone (through the executor) so that the output array can be
+    sized and checked before the other ``n - 1`` runs; the outputs are then written into
+    that one array as the chunks finish, so the (n, *shape) result is held once.
     """
     if not callable(fn):
         raise TypeError(f"`{name}` must be callable {name}(sample), got {type(fn).__name__}")
@@ -101,8 +152,8 @@ def evaluate_samples(
             "`executor` must have a map(f, iterable) method (concurrent.futures executor or "
             f"dask.distributed.Client), got {type(executor).__name__}"
         )
-    chunks = [samples[i : i + chunksize] for i in range(0, n, chunksize)]
-    task = functools.partial(_evaluate_chunk, fn)
+    chunks = [samples[:1]] + [samples[i : i + chunksize] for i in range(1, n, chunksize)]
+    task = functools.partial(_evaluate_chunk, fn, name=name)
 
     own_pool = executor is None and workers > 1
     if own_pool:
@@ -115,32 +166,62 @@ def evaluate_samples(
                 "workers=1"
             ) from e
         executor = ProcessPoolExecutor(max_workers=workers)
-    try:
+
+    def run(parts):
         if executor is None:
-            results = map(task, chunks)
-        elif callable(getattr(executor, "gather", None)):
-            results = executor.gather(executor.map(task, chunks))
-        else:
-            results = executor.map(task, chunks)
-        parts = []
-        for r in results:
-            r = r.result() if _is_future(r) else r
-            parts.append(r)
-            if callback is not None:
-                callback(len(r))
+            return map(task, parts)
+        if callable(getattr(executor, "gather", None)):
+            return executor.gather(executor.map(task, parts))
+        return executor.map(task, parts)
+
+    out = consume = shape = None
+    start = 0
+    try:
+        # the first sample alone: its shape sizes (and checks) the output array
+        # the second map is submitted only after the first result has passed the check
+        for k in range(2):
+            part = chunks[:1] if k == 0 else chunks[1:]
+            if consume is not None and k == 1:
+                # streamed: small chunks, so that little is in flight at once
+                step = max(1, min(chunksize, int(STREAM_CHUNK_BYTES // (8 * math.prod(shape)))))
+                part = [samples[i : i + step] for i in range(1, n, step)]
+            if not part:
+                continue
+            for r in run(part):
+                r = r.result() if _is_future(r) else r
+                if shape is None:
+                    shape = r.shape[1:]
+                    consume = (check or functools.partial(_check_outputs, name=name))(n, shape)
+                    if not callable(consume):
+                        consume = None
+                        out = np.empty((n, *shape))
+                if r.shape[1:] != shape:
+                    raise ValueError(
+                        f"`{name}` returned outputs of different shapes: {shape} for "
+                        f"sample 0 and {r.shape[1:]} for a sample in rows {start}.."
+                        f"{start + len(r) - 1}"
+                    )
+                bad = ~np.isfinite(r.reshape(len(r), -1)).all(axis=1)
+                if bad.any():
+                    i = start + int(np.argmax(bad))
+                    raise NonFiniteOutputError(
+                        f"`{name}` returned NaN or inf for sample {i} ({samples[i]!r}); "
+                        "check the model at that germ value",
+                        i,
+                    )
+                if consume is None:
+                    out[start : start + len(r)] = r
+                else:
+                    consume(start, r)
+                start += len(r)
+                if callback is not None:
+                    callback(len(r))
     finally:
         if own_pool:
             executor.shutdown(wait=True, cancel_futures=True)
-    try:
-        out = np.concatenate(parts, axis=0)
-    except ValueError as e:
-        raise ValueError(f"`{name}` returned outputs of different shapes: {e}") from e
-    bad = ~np.isfinite(out.reshape(n, -1)).all(axis=1)
-    if bad.any():
-        i = int(np.argmax(bad))
-        raise NonFiniteOutputError(
-            f"`{name}` returned NaN or inf for sample {i} ({samples[i]!r}); "
-            "check the model at that germ value",
-            i,
+    if start != n:
+        raise RuntimeError(
+            f"`executor` returned results for {start} of {n} samples; its map(f, chunks) "
+            "must return one result per chunk, in order"
         )
     return out

@@ -25,6 +25,7 @@ import numpy as np
 
 from ._validation import as_finite_array, check_int
 from .executor import evaluate_samples
+from .memory import check_allocation
 
 __all__ = [
     "Moments",
@@ -133,6 +134,12 @@ def mc_moments(outputs):
     if y.ndim == 0 or y.shape[0] < 2:
         raise ValueError("`outputs` must hold at least 2 samples along axis 0")
     n = y.shape[0]
+    check_allocation(
+        8.0 * 3 * y.size,
+        f"the moments of {n} samples of {y.size // n} outputs (deviations, their squares "
+        "and fourth powers)",
+        "pass the outputs in slices of components (mc_moments(outputs[:, idx]))",
+    )
     mean = y.mean(axis=0)
     d = y - mean
     var = (d**2).sum(axis=0) / (n - 1)
@@ -142,8 +149,27 @@ def mc_moments(outputs):
 
 
 def _node_outputs(fn, nodes):
-    """``fn`` at each Gauss node, stacked; a non-finite output raises (never a NaN moment)."""
-    y = np.stack([np.asarray(fn(x), dtype=float) for x in nodes])
+    """``fn`` at each Gauss node, stacked; a non-finite output raises (never a NaN moment).
+
+    The first node's output sizes the (n, m) array, checked against the memory budget
+    (with the two temporaries of the moments) before the other nodes run.
+    """
+    first = np.asarray(fn(nodes[0]), dtype=float)
+    check_allocation(
+        8.0 * 3 * len(nodes) * first.size,
+        f"the outputs of `fn` at {len(nodes)} Gauss nodes ({first.size} values each)",
+        "let `fn` return only the values you need (e.g. the sensors), or fewer `n_points`",
+    )
+    y = np.empty((len(nodes), *first.shape))
+    y[0] = first
+    for i in range(1, len(nodes)):
+        yi = np.asarray(fn(nodes[i]), dtype=float)
+        if yi.shape != first.shape:
+            raise ValueError(
+                f"`fn` returned outputs of different shapes: {first.shape} at Gauss node 0 "
+                f"and {yi.shape} at node {i}"
+            )
+        y[i] = yi
     bad = ~np.isfinite(y.reshape(len(nodes), -1)).all(axis=1)
     if bad.any():
         i = int(np.argmax(bad))
@@ -265,6 +291,11 @@ def batch_errors(outputs, ref_mean, ref_var, sizes):
     y = as_finite_array("outputs", outputs, ndim=2)
     ref_mean = as_finite_array("ref_mean", ref_mean, shape=(y.shape[1],))
     ref_var = as_finite_array("ref_var", ref_var, shape=(y.shape[1],))
+    check_allocation(
+        8.0 * 2 * y.size,
+        f"the batch variances of {y.shape[0]} samples of {y.shape[1]} outputs",
+        "pass the outputs of a few components (outputs[:, idx] with ref_mean[idx], ref_var[idx])",
+    )
     em, ev, nb = [], [], []
     for n in sizes:
         if isinstance(n, bool) or not isinstance(n, numbers.Integral) or not 2 <= n <= y.shape[0]:

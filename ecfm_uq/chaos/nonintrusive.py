@@ -208,7 +208,7 @@ def smolyak_rule(level, dim, rule="gauss", germs=None):
 # --------------------------------------------------------------------------------------
 # model evaluations through the executor path
 # --------------------------------------------------------------------------------------
-def _evaluate(model, x, executor, workers, progress, label):
+def _evaluate(model, x, executor, workers, progress, label, check=None):
     """``model`` at each row of ``x`` through :func:`ecfm_uq.executor.evaluate_samples`."""
     if not callable(model):
         raise TypeError(f"`model` must be callable model(x) -> array, got {type(model).__name__}")
@@ -227,6 +227,7 @@ def _evaluate(model, x, executor, workers, progress, label):
             workers=workers,
             callback=None if bar is None else bar.update,
             name="model",
+            check=check,
         )
     except NonFiniteOutputError as e:
         point = np.array2string(x[e.index], precision=6)
@@ -247,6 +248,14 @@ def _fit_quadrature(model, inputs, order, n_points, index_set, ev):
     order = check_int("order", 3 if order is None else order, minimum=0)
     n_points = order + 1 if n_points is None else check_int("n_points", n_points, minimum=1)
     basis = ChaosBasis(order, dim, index_set=index_set or "tensor", germ=inputs.germs)
+    n_nodes, P = n_points**dim, basis.size
+    check_allocation(
+        8.0 * 2 * n_nodes * P,
+        f"the projection of {n_nodes} tensor Gauss nodes onto P = {P} terms (order {order}, "
+        f"{dim} inputs)",
+        "use method='smolyak' (a sparse grid, far fewer nodes), index_set='total', or a "
+        "smaller `order` or `n_points`",
+    )
     nodes, w = basis.quadrature(n_points)
     y = ev(inputs.from_germ(nodes), "Gauss")
     pce = PolynomialChaosExpansion(basis, project(basis, nodes, w, y), inputs)
@@ -330,8 +339,21 @@ def _fit_lstsq(model, inputs, order, index_set, data, ev):
         f"least squares on n = {n} runs by P = {P} terms (order {order}, {dim} inputs)",
         "pass a smaller `order`, or use method='lars' (candidates sized by the memory budget)",
     )
+
+    def check_outputs(n_runs, out_shape):
+        """Before the other runs: the residuals and leave-one-out terms of every output."""
+        m = math.prod(out_shape)
+        check_allocation(
+            8.0 * (3 * n * P + 2 * P * P + 4 * n * m + 3 * P * m),
+            f"least squares on n = {n} runs by P = {P} terms for a {m}-value output",
+            "let the model return fewer output values, or use method='lars' (a field is "
+            "compressed to a few principal components first)",
+        )
+
     if y is None:
-        y = ev(x, "regression")
+        y = ev(x, "regression", check_outputs)
+    else:
+        check_outputs(n, y.shape[1:])
     Psi = basis.evaluate(omega)
     Q, R = sla.qr(Psi, mode="economic")
     if np.min(np.abs(np.diag(R))) < 1e-12 * np.max(np.abs(np.diag(R))):
@@ -429,14 +451,21 @@ def fit_pce(
         (1 = total degree; smaller keeps fewer interactions).
     early_stop : int
         Sparse methods: stop raising the degree after this many degrees without improvement.
-    compress : bool, optional
+    compress : bool, "exact" or "randomized", optional
         Sparse methods on a field output: select on the leading principal components of
         the evaluations instead of on every component (PCA-PCE, Blatman & Sudret 2013),
         so a 10 000-value field costs about what a scalar does. Default: for outputs of
-        more than 64 components. ``diagnostics`` then holds ``n_components``,
-        ``compression_error`` (per output component, its discarded variance over its
-        variance) beside ``corrected_loo_error`` (per component, the scores' errors
-        mapped onto it plus the compression's).
+        more than 64 components. ``True`` computes them by the exact SVD when it fits the
+        memory budget and by a randomized SVD in blocks (Halko, Martinsson & Tropp 2011;
+        the evaluations held once) otherwise, and when even the evaluations do not fit,
+        compresses them as they arrive by a one-pass sketch (Tropp et al. 2017; the
+        discarded share then estimated, ``compression="streaming"``); ``"exact"`` or
+        ``"randomized"`` forces one.
+        ``diagnostics`` then holds ``n_components``, ``compression`` (which SVD ran),
+        ``compression_info``, ``compression_error`` (per output component, its discarded
+        variance over its variance; measured on the data for the randomized SVD) beside
+        ``corrected_loo_error`` (per component, the scores' errors mapped onto it plus
+        the compression's).
     compress_tol : float
         Largest share of any component's variance the compression may discard.
     executor : object with ``map``, optional
@@ -491,8 +520,8 @@ def fit_pce(
     if evaluations is not None and samples is None:
         raise ValueError("`evaluations` need the `samples` they were computed at")
 
-    def ev(x, label):
-        return _evaluate(model, x, executor, workers, progress, label)
+    def ev(x, label, check=None):
+        return _evaluate(model, x, executor, workers, progress, label, check)
 
     def data(P):
         n_default = 100 if P is None else 2 * P
@@ -519,8 +548,15 @@ def fit_pce(
         if isinstance(q_norm, bool) or not 0 < float(q_norm) <= 1:
             raise ValueError(f"`q_norm` must lie in (0, 1], got {q_norm!r}")
         early_stop = check_int("early_stop", early_stop, minimum=1)
-        if compress is not None and not isinstance(compress, bool | np.bool_):
-            raise TypeError(f"`compress` must be None, True or False, got {compress!r}")
+        if isinstance(compress, np.bool_):
+            compress = bool(compress)
+        if compress is not None and not (
+            isinstance(compress, bool)
+            or (isinstance(compress, str) and compress in ("exact", "randomized"))
+        ):
+            raise TypeError(
+                f"`compress` must be None, True, False, 'exact' or 'randomized', got {compress!r}"
+            )
         if isinstance(compress_tol, bool) or not 0 <= float(compress_tol) < 1:
             raise ValueError(f"`compress_tol` must lie in [0, 1), got {compress_tol!r}")
         pce, n_eval = _fit_sparse(

@@ -20,7 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._validation import as_finite_array, check_choice, check_int
-from ..memory import check_covariance
+from ..memory import check_allocation, check_covariance
 from .basis import ChaosBasis
 from .inputs import UniformInputs, as_inputs, draw_germs
 from .projection import project
@@ -314,9 +314,20 @@ class PolynomialChaosExpansion:
                 "quantiles and densities are exact; for sensitivities fit with independent "
                 "inputs or use sobol_germ()"
             )
+        self._check_index_memory()
         support = np.asarray(self.basis.indices) > 0
         self._check_finite_variance(support)
         return support
+
+    def _check_index_memory(self):
+        """Sobol indices hold about four (P, m) arrays (partial variances, shares, sums)."""
+        P, m = self._flat().shape
+        check_allocation(
+            8.0 * 4 * P * m,
+            f"the Sobol indices of a {m}-value expansion of {P} terms",
+            "take the indices of the components you need: "
+            "PolynomialChaosExpansion(pce.basis, pce.coefficients[:, idx], pce.inputs)",
+        )
 
     def _check_finite_variance(self, support):
         """Refuse indices when the output depends on an input without finite variance."""
@@ -352,6 +363,7 @@ class PolynomialChaosExpansion:
         zero_variance : "raise" or float
         """
         kind = check_choice("kind", kind, ("first", "total"))
+        self._check_index_memory()
         s = np.asarray(self.basis.indices) > 0
         if kind == "first":
             s = s & (s.sum(axis=1) == 1)[:, None]
@@ -469,6 +481,13 @@ class PolynomialChaosExpansion:
         pts = self.basis._as_points(omega)
         c = self._flat()
         n = pts.shape[0]
+        check_allocation(
+            8.0 * n * c.shape[1],
+            f"the values of a {c.shape[1]}-value expansion at {n} points",
+            "evaluate the points in slices, or only the components you need "
+            "(pce.linear_map(A), or PolynomialChaosExpansion(pce.basis, "
+            "pce.coefficients[:, idx], pce.inputs))",
+        )
         out = np.empty((n, c.shape[1]))
         block = max(1, _EVAL_BLOCK_ENTRIES // self.basis.size)
         for i in range(0, n, block):
@@ -531,6 +550,15 @@ class PolynomialChaosExpansion:
         q = as_finite_array("q", q)
         if np.any((q < 0) | (q > 1)):
             raise ValueError(f"`q` must lie in [0, 1], got {q}")
+        n_samples = check_int("n_samples", n_samples, minimum=1)
+        m = int(np.prod(self.output_shape, dtype=int))
+        check_allocation(
+            8.0 * (2 * n_samples + q.size) * m,
+            f"quantiles of a {m}-value expansion from {n_samples} samples (the samples and "
+            "the sorted copy)",
+            "pass fewer `n_samples`, or take the quantiles of the components you need "
+            "(PolynomialChaosExpansion(pce.basis, pce.coefficients[:, idx], pce.inputs))",
+        )
         return np.quantile(self.sample(n_samples, seed), q, axis=0)
 
     def density(self, component=(), n_samples=20_000, seed=0, bw_method=None):

@@ -10,7 +10,10 @@ PCA-PCE): the centred evaluations :math:`Y - \\bar y = U S V^T` keep the leading
 principal components until every component's discarded variance is below ``pca_tol``
 of its own variance; the selection runs on those few score columns and the expansion of
 every component is :math:`c = c_Z V_K^T`. The compression's own error is reported beside
-the leave-one-out error, per output component.
+the leave-one-out error, per output component. The compression itself (exact SVD, or a
+randomized SVD in blocks when the exact one is over the memory budget) is
+:mod:`ecfm_uq.chaos.compression`; the evaluations' array, and what the fit adds per
+output component, are checked after the first model run, before the others.
 
 Sizes and memory. The default candidate degree is the largest whose total-degree basis
 (P terms) satisfies all of: :math:`P \\le 10 n`; the selection's working set
@@ -36,6 +39,15 @@ import scipy.linalg as sla
 from .._validation import check_int
 from ..memory import check_allocation, memory_budget
 from .basis import ChaosBasis
+from .compression import (
+    StreamingSketch,
+    _column_var,
+    _exact_pca_bytes,
+    _randomized_pca_bytes,
+    _row_blocks,
+    _streaming_bytes,
+    compress_outputs,
+)
 from .pce import PolynomialChaosExpansion
 
 __all__ = ["candidate_degree", "compress_outputs"]
@@ -53,12 +65,12 @@ _WORK_LIMIT = 4e12
 # Below this design size (or when P >= n) the selection runs on the design matrix, exactly
 # as in earlier releases; above it, on the Gram matrix built in blocks of rows.
 _EXACT_DESIGN_BYTES = 128 * 2**20
-# Rows per block in the Gram path: a block of this many bytes per array (or 1/64 of the
-# budget if that is smaller).
-_BLOCK_BYTES = 16 * 2**20
 # Gram path: a selected column whose Cholesky pivot falls below this share of its norm is
 # numerically dependent on the earlier ones (the Gram squares the conditioning).
 _CHOLESKY_RTOL = 1e-6
+# Field outputs whose evaluations do not fit in memory: range-sketch columns of the
+# one-pass compression, the largest that fits (the largest rank it can keep).
+_STREAM_COLUMNS = (64, 48, 32)
 # Field outputs: above this many components the evaluations are compressed by default.
 _COMPRESS_ABOVE = 64
 
@@ -218,13 +230,6 @@ def _sparse_select(Psi, y, candidates, n, solver):
 # --------------------------------------------------------------------------------------
 # Gram form: the candidates' Gram matrix built in blocks of rows, never the design
 # --------------------------------------------------------------------------------------
-def _row_blocks(n, width):
-    """Row ranges [a, b) holding about _BLOCK_BYTES of ``width`` floats each."""
-    block = min(_BLOCK_BYTES, memory_budget() / 64)
-    step = max(1, int(block // (8 * max(width, 1))))
-    return [(a, min(a + step, n)) for a in range(0, n, step)]
-
-
 class _GramDesign:
     """:math:`G = \\Psi_B^T \\Psi_B` and :math:`\\Psi_B^T Y` of the built columns B.
 
@@ -476,51 +481,11 @@ def _select_columns(select, P, Y, qn, order, early_stop):
     return coeffs, np.array(chosen_deg), np.array(errors), np.array(n_terms)
 
 
-def compress_outputs(Y, tol):
-    """Principal components of the evaluations, enough for every component to ``tol``.
-
-    Parameters
-    ----------
-    Y : (n, m) ndarray
-        Evaluations, one row per run.
-    tol : float
-        Largest discarded share of any component's own variance.
-
-    Returns
-    -------
-    Z : (n, K) ndarray
-        Scores :math:`U_K S_K` (centred columns).
-    V : (K, m) ndarray
-        Principal directions, :math:`Y \\approx \\bar y + Z V`.
-    ybar : (m,) ndarray
-    error : (m,) ndarray
-        Discarded variance of each component over its variance (0 for a constant one).
-
-    Notes
-    -----
-    With :math:`Y - \\bar y = USV^T`, component m's variance is
-    :math:`\\sum_j S_j^2 V_{jm}^2`; keeping K directions discards
-    :math:`\\sum_{j \\ge K} S_j^2 V_{jm}^2` of it, exactly.
-    """
-    n, m = Y.shape
-    check_allocation(
-        8.0 * (2 * n * m + (n + m) * min(n, m)),
-        f"the principal components of {n} runs of a {m}-component output",
-        "pass compress=False (one selection per component) or fit fewer components",
-    )
-    ybar = Y.mean(axis=0)
-    Yc = Y - ybar
-    U, S, Vt = np.linalg.svd(Yc, full_matrices=False)
-    energy = S[:, None] ** 2 * Vt**2  # (r, m): component m's variance along direction j
-    total = energy.sum(axis=0)
-    scale = np.maximum(np.abs(ybar), np.sqrt(total / len(Y)))
-    const = total <= (1e-13 * scale) ** 2 * len(Y)
-    tail = np.cumsum(energy[::-1], axis=0)[::-1]  # tail[k] = discarded when keeping k
-    rel = np.where(const, 0.0, tail / np.where(const, 1.0, total))
-    rel = np.vstack([rel, np.zeros((1, rel.shape[1]))])
-    ok = np.flatnonzero(rel.max(axis=1) <= tol)
-    K = max(int(ok[0]) if ok.size else len(S), 1)
-    return U[:, :K] * S[:K], Vt[:K], ybar, rel[K]
+def _compress_flag(compress, m):
+    """``compress`` as given (True, False, 'exact', 'randomized'), None by the output size."""
+    if compress is None:
+        return m > _COMPRESS_ABOVE
+    return compress
 
 
 def _fit_sparse(
@@ -557,14 +522,55 @@ def _fit_sparse(
         "leave `order` to its default (sized by n and the memory budget), or pass a "
         f"smaller `order`{' or `q_norm` < 1' if gram else ''}",
     )
+
+    def check_outputs(n_runs, out_shape):
+        """Before the other runs: the evaluations and what the fit adds per component."""
+        m_out = math.prod(out_shape)
+        Y_bytes = 8.0 * n_runs * m_out
+        if _compress_flag(compress, m_out) is False:
+            # one selection per component: its coefficients and correlations, (P, m) each
+            need, what = Y_bytes + 2 * 8.0 * P * m_out, "and one selection per component"
+            cheaper = (
+                "let `compress` compress the field (principal components), or let the model "
+                "return fewer output values"
+            )
+        elif compress == "exact":
+            need, what = _exact_pca_bytes(n_runs, m_out), "and their exact principal components"
+            cheaper = "pass compress='randomized' (holds the evaluations once)"
+        else:
+            need = _randomized_pca_bytes(n_runs, m_out, min(32, n_runs, m_out))
+            what = "and their randomized principal components"
+            cheaper = (
+                "pass fewer `n_samples`, or let the model return fewer output values (e.g. "
+                "the sensors you need or a coarser field)"
+            )
+            if need > memory_budget():
+                # the evaluations do not fit even once: compress them as they arrive, with
+                # the largest sketch that fits
+                for k in _STREAM_COLUMNS:
+                    k = min(k, n_runs, m_out)
+                    if _streaming_bytes(n_runs, m_out, k) <= memory_budget():
+                        stream[:] = [StreamingSketch(n_runs, m_out, k), out_shape]
+                        return stream[0]
+        check_allocation(
+            need,
+            f"the evaluations of {n_runs} runs of a {m_out}-value output {what}",
+            cheaper,
+        )
+
+    stream = []
     if y is None:
-        y = ev(x, "regression")
-    yf = y.reshape(n, -1)
-    m = yf.shape[1]
-    shape = y.shape[1:]
+        y = ev(x, "regression", check_outputs)
+    streamed = bool(stream)
+    if streamed:
+        yf, shape = None, tuple(stream[1])
+        m = math.prod(shape)
+    else:
+        yf = y.reshape(n, -1)
+        m = yf.shape[1]
+        shape = y.shape[1:]
     extra = {}
-    if compress is None:
-        compress = m > _COMPRESS_ABOVE
+    compress = _compress_flag(compress, m)
 
     def selector(Y):
         if gram:
@@ -574,25 +580,45 @@ def _fit_sparse(
         return lambda j, candidates: _sparse_select(Psi, Y[:, j], candidates, n, solver)
 
     if compress:
-        Z, V, ybar, comp_err = compress_outputs(yf, tol)
+        if streamed:
+            sketch = stream.pop(0)  # dropped once compressed: only its results stay
+            Z, V, ybar, comp_err, info = sketch.compress(tol)
+            var_stream = sketch.variance()
+            del sketch
+        else:
+            Z, V, ybar, comp_err, info = compress_outputs(
+                yf, tol, "auto" if compress is True else compress, return_info=True
+            )
         cz, deg, err, nt = _select_columns(selector(Z), P, Z, qn, order, early_stop)
         # only the terms up to the highest selected degree are nonzero (graded order)
         P_top = ChaosBasis(max(int(deg.max()), 1), dim).size
+        check_allocation(
+            8.0 * 2 * P_top * m,
+            f"the expansion's coefficients ({P_top} terms by {m} output values)",
+            "pass a smaller `order` (fewer terms), or let the model return fewer output values",
+        )
         coeffs = cz[:P_top] @ V
         coeffs[0] += ybar
         chosen_deg = deg
         # component LOO error: the scores' (relative to their variances), mapped through
         # V onto each component's variance, plus what the compression discarded
         var_z = Z.var(axis=0)
-        var_y = np.maximum(yf.var(axis=0), np.finfo(float).tiny)
+        # the exact path had room for an (n, m) temporary; the randomized one has not
+        if streamed:
+            var_yf = var_stream
+        else:
+            var_yf = yf.var(axis=0) if info["method"] == "exact" else _column_var(yf)
+        var_y = np.maximum(var_yf, np.finfo(float).tiny)
         errors = (err * var_z) @ V**2 / var_y + comp_err
-        errors = np.where(yf.var(axis=0) > 0, errors, 0.0)
+        errors = np.where(var_yf > 0, errors, 0.0)
         extra = dict(
             n_components=V.shape[0],
             compression_error=comp_err.reshape(shape),
             component_loo_error=err,
             component_degree=deg,
             component_n_terms=nt,
+            compression=info["method"],
+            compression_info=info,
         )
         n_terms = np.count_nonzero(coeffs, axis=0)
     else:
@@ -601,7 +627,7 @@ def _fit_sparse(
         )
     top = max(max(chosen_deg), 1)
     basis_out = ChaosBasis(top, dim, germ=inputs.germs)
-    c = coeffs[: basis_out.size].reshape((basis_out.size, *y.shape[1:]))
+    c = coeffs[: basis_out.size].reshape((basis_out.size, *shape))
     pce = PolynomialChaosExpansion(basis_out, c, inputs)
     if compress:
         # each component uses the union of the scores' terms

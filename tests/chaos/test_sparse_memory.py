@@ -105,8 +105,9 @@ def test_explicit_order_over_the_budget_is_refused_before_the_model_runs(budget)
 
 def test_compression_refuses_a_field_over_the_budget_naming_compress_false(budget):
     budget(2**20)
+    # the exact SVD is what is refused (issue 21: "auto" now falls back to a randomized SVD)
     with pytest.raises(MemoryBudgetError, match="compress=False"):
-        sparse.compress_outputs(np.zeros((400, 400)), 1e-6)
+        sparse.compress_outputs(np.zeros((400, 400)), 1e-6, "exact")
 
 
 def test_covariance_check_names_variance(budget):
