@@ -39,19 +39,11 @@ from .plan import (
 
 ensure_lapack()  # scipy's LAPACK behind numba's binding (raises if scipy is missing)
 # numba's LU binding: info = getrf(kind, m, n, a, lda, ipiv), column-major a, 'd' = 100
-_getrf = types.ExternalFunction(
-    "numba_xxgetrf",
-    types.intc(
-        types.char,
-        types.intp,
-        types.intp,
-        types.CPointer(types.float64),
-        types.intp,
-        types.CPointer(types.int32),
-    ),
-)
-# the plan's thresholds and status codes, frozen into the kernels as integer constants
-_SINGULAR = SINGULAR_PIVOT  # a pivot below this fraction of the largest: singular
+_getrf = types.ExternalFunction("numba_xxgetrf", types.intc(
+    types.char, types.intp, types.intp, types.CPointer(types.float64), types.intp,
+    types.CPointer(types.int32),
+))  # fmt: skip
+_SINGULAR = SINGULAR_PIVOT  # the plan's thresholds and status codes, frozen in the kernels
 _OK = int(SolveStatus.CONVERGED)
 _MAX_ITERATIONS = int(SolveStatus.MAX_ITERATIONS)
 _SINGULAR_JACOBIAN = int(SolveStatus.SINGULAR_JACOBIAN)
@@ -152,6 +144,15 @@ def _quadratic(theta, rows, ptr, idx, val, q, S):
     """S = dq/dth from the folded tensor's compressed rows, and q = S th / 2."""
     _linearize(theta.reshape(theta.shape[0], 1), rows, ptr, idx, val, S)
     q[:] = 0.5 * (S @ theta)
+
+
+@numba.njit(cache=True)
+def _termination(k, rnorm, scale, tol, tol_s):
+    """:func:`.plan.scaled_tol` at a step's first iterate, then :func:`.plan.residual_floor`
+    of the step residual's ``scale``: ``(tol_s, floor)``."""
+    if k == 0 and scale > 0.0:
+        tol_s = tol * min(1.0, scale)
+    return tol_s, (_ROUNDOFF * scale if rnorm >= tol_s and _ROUNDOFF * scale > tol_s else 0.0)
 
 
 @numba.njit(cache=True)
@@ -266,10 +267,7 @@ def march_p1(
             floor = 0.0
             if k == 0 or rnorm >= tol_s:  # plan.scaled_tol and plan.residual_floor
                 sc = _p1_scale(th, Th[s], z[N:], Mdt, Klin, cq, S, F[t1], Gam, Cobs, V[t1])
-                if k == 0 and sc > 0.0:
-                    tol_s = tol * min(1.0, sc)
-                if rnorm >= tol_s and _ROUNDOFF * sc > tol_s:
-                    floor = _ROUNDOFF * sc
+                tol_s, floor = _termination(k, rnorm, sc, tol, tol_s)
             if rnorm < tol_s or (floor > 0.0 and rnorm <= floor):
                 # the last Newton correction is taken with the converged Jacobian, whose
                 # factors give the sensitivities (Eqs. discrete_sens / discrete_sens_ecfm)
@@ -644,10 +642,7 @@ def march_sg(
             if k == 0 or rnorm >= tol_s:  # plan.scaled_tol and plan.residual_floor
                 sc = _sg_scale(Z, Th[s], Mdt, E2, Kc, Gs, cq_eff, rows, ptr, idx, val, E3m,
                                F[t1])  # fmt: skip
-                if k == 0 and sc > 0.0:
-                    tol_s = tol * min(1.0, sc)
-                if rnorm >= tol_s and _ROUNDOFF * sc > tol_s:
-                    floor = _ROUNDOFF * sc
+                tol_s, floor = _termination(k, rnorm, sc, tol, tol_s)
             if rnorm < tol_s or (floor > 0.0 and rnorm <= floor):
                 converged = True
                 break
