@@ -54,6 +54,24 @@ def field_subset(x):
     return field(x)[SUBSET]
 
 
+def _fit_under_budget(field, budget):
+    """``fit_pce`` with the memory budget set to ``budget``: (fit, seconds, peak traced
+    bytes), after one warm-up fit (numba, imports)."""
+    previous = set_memory_budget(budget)
+    try:
+        fit_pce(field, INPUTS, "lars", n_samples=N_RUNS, seed=1)
+        tracemalloc.start()
+        t0 = time.perf_counter()
+        res = fit_pce(field, INPUTS, "lars", n_samples=N_RUNS, seed=0)
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        res.first_order(zero_variance=0.0), res.total(zero_variance=0.0)  # timed, untraced
+        elapsed = time.perf_counter() - t0
+    finally:
+        set_memory_budget(previous)
+    return res, elapsed, peak
+
+
 def main():
     fit_pce(field_subset, INPUTS, "lars", n_samples=40, seed=9)  # warm-up (numba, imports)
     t0 = time.perf_counter()
@@ -77,19 +95,9 @@ def main():
     )
     print(f"max |index difference| vs per-component fits on {len(SUBSET)} components: {diff:.1e}")
     budget = 64 * 2**20
-    previous = set_memory_budget(budget)
-    try:
-        fit_pce(field, INPUTS, "lars", n_samples=N_RUNS, seed=1)  # warm-up (numba, imports)
-        tracemalloc.start()
-        t0 = time.perf_counter()
-        small = fit_pce(field, INPUTS, "lars", n_samples=N_RUNS, seed=0)
-        peak = tracemalloc.get_traced_memory()[1]
-        tracemalloc.stop()
-        S_s, T_s = small.first_order(zero_variance=0.0), small.total(zero_variance=0.0)
-        t_small = time.perf_counter() - t0
-    finally:
-        set_memory_budget(previous)
+    small, t_small, peak = _fit_under_budget(field, budget)
     ds = small.diagnostics
+    S_s, T_s = small.first_order(zero_variance=0.0), small.total(zero_variance=0.0)
     diff_s = max(np.abs(S_s - S).max(), np.abs(T_s - T).max())
     print(
         f"budget {format_bytes(budget)} (exact SVD needs "
@@ -101,18 +109,8 @@ def main():
     )
     # evaluations that cannot be stored even once (22.9 MiB plus any SVD over 32 MiB)
     budget = 32 * 2**20
-    previous = set_memory_budget(budget)
-    try:
-        fit_pce(field, INPUTS, "lars", n_samples=N_RUNS, seed=1)  # warm-up
-        tracemalloc.start()
-        t0 = time.perf_counter()
-        streamed = fit_pce(field, INPUTS, "lars", n_samples=N_RUNS, seed=0)
-        peak = tracemalloc.get_traced_memory()[1]
-        tracemalloc.stop()
-        S_t, T_t = streamed.first_order(zero_variance=0.0), streamed.total(zero_variance=0.0)
-        t_stream = time.perf_counter() - t0
-    finally:
-        set_memory_budget(previous)
+    streamed, t_stream, peak = _fit_under_budget(field, budget)
+    S_t, T_t = streamed.first_order(zero_variance=0.0), streamed.total(zero_variance=0.0)
     dt = streamed.diagnostics
     diff_t = max(np.abs(S_t - S).max(), np.abs(T_t - T).max())
     print(
