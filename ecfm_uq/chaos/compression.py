@@ -18,6 +18,8 @@ independent Gaussian sketch.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import scipy.linalg as sla
 
@@ -381,4 +383,14 @@ class StreamingSketch:
         Z = Q @ (Ub[:, :K] * S[:K])
         info = dict(method="streaming", rank=K, sketch_columns=self.k, passes=1)
         info["tolerance_met"] = bool(est.max() <= tol)
+        if not info["tolerance_met"]:
+            warnings.warn(
+                f"streamed compression: the {self.k}-column sketch keeps {K} components with "
+                f"an estimated discarded share up to {est.max():.1e} > compress_tol={tol:.1e}; "
+                "raise the memory budget (ECFM_UQ_MEMORY_BUDGET) so the evaluations can be "
+                "stored and compressed exactly or by the randomized SVD, or return fewer "
+                "output values",
+                RuntimeWarning,
+                stacklevel=2,
+            )
         return Z, Vt[:K], ybar, est, info

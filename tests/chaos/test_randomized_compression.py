@@ -338,3 +338,11 @@ def test_the_streaming_sketch_stays_within_its_memory_model():
     finally:
         tracemalloc.stop()
     assert peak <= _streaming_bytes(*Y.shape, 64) < Y.nbytes
+
+
+def test_a_streamed_sketch_too_small_for_the_tolerance_warns():
+    # full-rank noise: no rank up to the 8-column sketch meets 1e-6, and the result says so
+    Y = np.random.default_rng(3).standard_normal((200, 500))
+    with pytest.warns(RuntimeWarning, match="compress_tol"):
+        Z, Vr, ybar, est, info = _stream(Y, 8).compress(1e-6)
+    assert not info["tolerance_met"] and est.max() > 1e-6
