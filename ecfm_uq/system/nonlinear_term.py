@@ -274,6 +274,26 @@ class NonlinearTerm:
             ) from e
         return out
 
+    def _checked(self, which, A, shape, meaning, q):
+        """A callback's answer ``A``: of ``shape`` (else a ValueError naming the callback
+        and what the shape means) and finite (else a model error naming the node)."""
+        if A.shape != shape:
+            square = len(A.shape) == 2 and A.shape[0] == A.shape[1]
+            what = (
+                "a non-square " if len(shape) == 2 and shape[0] == shape[1] and not square else ""
+            )
+            raise ValueError(
+                f"term {self.name!r}: `{which}`(u, omega, eps) returned {what}shape {A.shape}, "
+                f"expected {shape} ({meaning})"
+            )
+        if not np.all(np.isfinite(A.data if is_sparse(A) else A)):
+            omega = self._nodes[q] if np.ndim(q) == 0 else q
+            raise _model_error(
+                f"term {self.name!r}: `{which}` returned NaN or inf at "
+                f"omega={np.asarray(omega).tolist()}"
+            )
+        return A
+
     def _residual_at(self, u, q, eps):
         r = self._call("residual", self.residual, u, q, eps)
         try:
@@ -282,24 +302,14 @@ class NonlinearTerm:
             raise TypeError(
                 f"term {self.name!r}: `residual` must return numbers, got {_describe(r)}"
             ) from e
-        if r.shape != (self._N,):
-            raise ValueError(
-                f"term {self.name!r}: `residual`(u, omega, eps) returned shape {r.shape}, "
-                f"expected ({self._N},) (N, the state size); return one entry per unknown"
-            )
-        if not np.all(np.isfinite(r)):
-            raise _model_error(
-                f"term {self.name!r}: `residual` returned NaN or inf at "
-                f"omega={self._nodes[q].tolist()}"
-            )
-        return r
+        meaning = "N, the state size; return one entry per unknown"
+        return self._checked("residual", r, (self._N,), meaning, q)
 
     def _jacobian_at(self, u, q, eps):
         """``jacobian`` at rule node ``q`` (an index) or at a germ point ``q`` (an array)."""
         J = self._call("jacobian", self.jacobian, u, q, eps)
         if is_sparse(J):
             J = sp.csr_matrix(J, dtype=float)
-            data = J.data
         else:
             try:
                 J = np.asarray(J, dtype=float)
@@ -308,21 +318,8 @@ class NonlinearTerm:
                     f"term {self.name!r}: `jacobian` must return an array or a scipy.sparse "
                     f"matrix, got {_describe(J)}"
                 ) from e
-            data = J
         N = self._N
-        if J.shape != (N, N):
-            square = len(J.shape) == 2 and J.shape[0] == J.shape[1]
-            what = "" if square else "a non-square "
-            raise ValueError(
-                f"term {self.name!r}: `jacobian`(u, omega, eps) returned {what}shape "
-                f"{J.shape}, expected ({N}, {N}) (dr/du, square in the state size N)"
-            )
-        if not np.all(np.isfinite(data)):
-            raise _model_error(
-                f"term {self.name!r}: `jacobian` returned NaN or inf at "
-                f"omega={np.asarray(self._nodes[q] if np.ndim(q) == 0 else q).tolist()}"
-            )
-        return J
+        return self._checked("jacobian", J, (N, N), "dr/du, square in the state size N", q)
 
     def _eps_jacobian_at(self, u, q, eps):
         if self.eps_jacobian_fn is None:
@@ -332,15 +329,7 @@ class NonlinearTerm:
             )
         D = self._call("eps_jacobian", self.eps_jacobian_fn, u, q, eps)
         D = D.toarray() if is_sparse(D) else np.asarray(D, dtype=float)
-        want = (self._N, len(eps))
-        if D.shape != want:
-            raise ValueError(
-                f"term {self.name!r}: `eps_jacobian`(u, omega, eps) returned shape "
-                f"{D.shape}, expected {want} (N, n_eps)"
-            )
-        if not np.all(np.isfinite(D)):
-            raise _model_error(f"term {self.name!r}: `eps_jacobian` returned NaN or inf")
-        return D
+        return self._checked("eps_jacobian", D, (self._N, len(eps)), "N, n_eps", q)
 
     # -- the term's interface --------------------------------------------------------------
     def node_residuals(self, Theta, eps):
