@@ -102,10 +102,12 @@ def newton(
             r, J = first if (k == 0 and first is not None) else fun(z)
             rnorm = float(np.linalg.norm(r))
             floor = 0.0
-            if k == 0 and scale is not None and np.isfinite(rnorm):
-                tol = scaled_tol(tol, scale(z))
-            if scale is not None and rnorm >= tol and np.isfinite(rnorm):
-                floor = residual_floor(scale(z), tol)
+            if scale is not None and np.isfinite(rnorm) and (k == 0 or rnorm >= tol):
+                sc = scale(z)  # once per iterate: the tolerance's scale and the floor's
+                if k == 0:
+                    tol = scaled_tol(tol, sc)
+                if rnorm >= tol:
+                    floor = residual_floor(sc, tol)
         except ModelEvaluationError as e:
             return z, None, info(SolveStatus.MODEL_FAILURE, k, f"model evaluation failed: {e}")
         if not np.isfinite(rnorm):

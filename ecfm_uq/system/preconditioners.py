@@ -29,7 +29,7 @@ class MeanPreconditioner:
     def __init__(self, op, kind):
         self.N, self.P = op.N, op.P
         self.d = np.diag(op.system.E2).copy()
-        K = op.mean_block()
+        K = self.K = op.mean_block()
         self.kind = kind
         scale = sum(abs(p.coef) * abs(p.term.K).max() for p in op.parts if not p.is_quadratic)
         if scale > 0 and abs(K).max() <= VANISHING_BLOCK * scale:
@@ -122,7 +122,7 @@ class KroneckerPreconditioner:
         E2 = np.asarray(system.E2, dtype=float)
         mean = MeanPreconditioner(op, "mean")  # the factor of K_bar, and its checks
         self._solve, self._solve_t = mean._solve, mean._solve_t
-        K = op.mean_block()
+        K = mean.K
         kk = _frobenius(K, K)
         A = np.zeros((self.P, self.P))
         for part in op.parts:
