@@ -136,7 +136,15 @@ def _random_poisson_system(N, units, M=None):
 
 @pytest.mark.parametrize("units", [1.0, 1e-9, 1e9])
 @pytest.mark.parametrize(
-    "solver", ["dense", "sparse-direct", "cg", "gmres", {"solver": "cg", "preconditioner": "mean"}]
+    "solver",
+    [
+        "dense",
+        "sparse-direct",
+        "cg",
+        "gmres",
+        {"solver": "cg", "preconditioner": "mean"},
+        {"solver": "cg", "preconditioner": "kronecker"},
+    ],
 )
 def test_a_random_model_in_any_units_matches_spsolve_in_every_solver(units, solver):
     system = _random_poisson_system(300, units)
