@@ -10,6 +10,7 @@ linear terms whose couplings share an eigenbasis). Each has ``apply(R)`` and
 from __future__ import annotations
 
 import numpy as np
+import scipy.linalg as sla
 import scipy.sparse as sp
 
 from ..errors import SingularSystemError
@@ -115,8 +116,6 @@ class KroneckerPreconditioner:
     """
 
     def __init__(self, op, symmetric=False):
-        import scipy.linalg as sla
-
         self.N, self.P = op.N, op.P
         system = op.system
         E2 = np.asarray(system.E2, dtype=float)
@@ -148,14 +147,10 @@ class KroneckerPreconditioner:
 
     def apply(self, R):
         """Apply to ``R`` of shape (N, P): :math:`\\bar K^{-1} R A^{-1}`."""
-        import scipy.linalg as sla
-
         return sla.lu_solve(self._A, self._solve(R).T, trans=1).T
 
     def apply_transpose(self, R):
         """The transposed preconditioner (for adjoint solves)."""
-        import scipy.linalg as sla
-
         return sla.lu_solve(self._A, self._solve_t(R).T).T
 
 
