@@ -39,3 +39,13 @@ def test_without_the_source_the_model_is_consistent(tmp_path):
     res = json.loads((tmp_path / "missing-physics" / "result.json").read_text())
     rf = res["random_force_ecfm"]
     assert rf["consistent"] and rf["tau"] == 0.0 and abs(rf["eps"] - 0.2) < 0.01
+
+
+def test_a_variance_per_force_puts_the_source_in_the_forces_and_recovers_eps(result):
+    sp, std, rf = result["sparse_force_ecfm"], result["standard"], result["random_force_ecfm"]
+    assert sp["success"] and not sp["consistent"]
+    assert sp["peak_sensor"] == result["nearest_sensor"]
+    assert sp["peak_over_median_force"] >= 10.0  # issue 20's must-show for the force map
+    assert 0 < sp["n_forces_used"] < 25  # forces the data do not need are switched off
+    # the conductivity is not traded for the source: far closer than the other fits
+    assert sp["error"] < 0.25 * min(std["error"], rf["error"])

@@ -77,8 +77,9 @@ def test_exact_forces_stay_available_and_bad_options_are_named():
         fit(problem, [1.0, 10.0], formulation="ecfm", sigma=sigma, options={"lr": 1})
 
 
+@pytest.mark.parametrize("prior", ["shared", "sparse"])
 @pytest.mark.parametrize("scale", [1e9, 1e-9])
-def test_equations_in_other_units_give_the_same_fits_intervals_and_force_map(scale):
+def test_equations_in_other_units_give_the_same_fits_intervals_and_force_map(scale, prior):
     """The same rod with every equation multiplied by `scale` (physical units, e.g. Pa):
     standard and random-force estimates, profile intervals, the verdict and the force
     z-scores do not change (Gamma is in the same units, so the forces do not either)."""
@@ -94,8 +95,11 @@ def test_equations_in_other_units_give_the_same_fits_intervals_and_force_map(sca
 
     for amplitude, noise in ((0.0, 0.02), (10.0, 1e-3)):
         v, sigma = readings(amplitude, noise, 4)
-        ref = fit(SteadyProblem(model(), M_OBS, v), [1.0, 10.0], formulation="ecfm", sigma=sigma)
-        res = fit(SteadyProblem(scaled(), M_OBS, v), [1.0, 10.0], formulation="ecfm", sigma=sigma)
+        ref, res = (
+            fit(SteadyProblem(m, M_OBS, v), [1.0, 10.0], formulation="ecfm", sigma=sigma,
+                options={"force_prior": prior})
+            for m in (model(), scaled())
+        )  # fmt: skip
         assert res.success and res.verdict.consistent == ref.verdict.consistent
         # estimates and interval ends agree to a small fraction of the interval's width
         # (the eps search stops at its own tolerance, not at round-off)

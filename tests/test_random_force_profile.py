@@ -176,7 +176,7 @@ def test_delta_method_falls_back_to_gauss_newton_with_tau_held_and_says_why():
     rod, v, sigma, res = _missing_source_fit()
     model = RandomForceModel(SteadyProblem(rod.system, rod.M_obs, v), sigma)
     lin = model.linearize(res.eps)
-    s_hat = model.best_s(lin)[0]
+    g_hat = model.variances(lin)[0]
     standard = res.extra["standard"]
     scale = np.ones(2)
     x = np.asarray(res.eps) - np.asarray(standard.eps)
@@ -184,7 +184,7 @@ def test_delta_method_falls_back_to_gauss_newton_with_tau_held_and_says_why():
     def saddle(y):  # a profiled likelihood with negative curvature in one direction
         return float((y[0] - x[0]) ** 2 - (y[1] - x[1]) ** 2)
 
-    u = _uncertainty(saddle, x, scale, standard, s_hat, model, lin)
+    u = _uncertainty(saddle, x, scale, standard, g_hat, model, lin)
     assert u.success and u.method == "gauss-newton-held-tau"
     assert "not positive definite" in u.message and "tau" in u.message
     bf = _BruteForce(rod, v, sigma)

@@ -224,13 +224,14 @@ def _hits(true_eps, intervals):
 
 
 def interval_coverage(
-    problem, clean, true_eps, sigma, n_datasets=200, seed=0, formulation="standard", eps0=None
-):
+    problem, clean, true_eps, sigma, n_datasets=200, seed=0, formulation="standard", eps0=None,
+    options=None,
+):  # fmt: skip
     """Delta-method and profile-likelihood coverage of fits with ``sigma`` known.
 
     Data set r is ``clean + sigma * xi_r`` (``numpy.random.default_rng(seed)``); each is
     fitted by :func:`~ecfm_uq.inverse.fit` (``formulation`` ``"standard"`` or ``"ecfm"``,
-    the random-force ECFM) and both intervals are computed
+    the random-force ECFM, with ``options``) and both intervals are computed
     (:func:`~ecfm_uq.inverse.profile_likelihood`).
 
     Returns
@@ -253,7 +254,8 @@ def interval_coverage(
     est, delta, prof, failed, rejected = [], [], [], 0, 0
     for _ in range(n):
         v = clean + sigma * rng.normal(size=clean.size)
-        res = fit(problem.with_data(v), eps0, formulation=formulation, sigma=sigma)
+        res = fit(problem.with_data(v), eps0, formulation=formulation, sigma=sigma,
+                  options=options)  # fmt: skip
         # the profile starts from wherever the fit stopped (it re-centres on a better
         # point, and an estimate at infinity gives an open end): every data set has one
         prof.append(profile_likelihood(res).intervals)

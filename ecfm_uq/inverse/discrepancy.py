@@ -52,6 +52,20 @@ boundary, and with few sensors the asymptotic :math:`\\tfrac12\\chi^2_0 + \\tfra
 :math:`q_k` are independent :math:`\\chi^2_1`, so the exact finite-sample null distribution of
 :math:`T` (for the model linearized at the estimate, :math:`\\sigma` known) is simulated
 from them (after Crainiceanu & Ruppert 2004), with a fixed seed.
+
+With ``options={"force_prior": "sparse"}`` each force has a variance of its own,
+:math:`\\lambda_i \\sim N(0, g_i)`, and :math:`S = \\sigma^2 I + A\\,\\mathrm{diag}(g)\\,A^T`:
+the variances maximize the marginal likelihood at every :math:`\\epsilon`
+(:mod:`~ecfm_uq.inverse.sparse_forces`, started from the shared REML estimate), many of them
+end at zero, and the forces that remain sit where the model lacks physics. This is the prior
+of a localized discrepancy (a missing source): with the shared prior, a discrepancy spread
+over the sensors costs as little as a localized one, so a parameter inside the operator
+can take part of a localized source; with a variance per force the forces explaining a
+localized source are cheap and the parameter is not traded for it (Brynjarsdottir &
+O'Hagan 2014: what the discrepancy's prior says decides what the parameters absorb). The
+profiled likelihood then has local minima (forces switching on and off): :math:`\\epsilon`
+is searched from the standard estimate and from the shared prior's, the lower kept. The
+verdict is the same test of :math:`\\tau = 0` at the estimate: one rule for both priors.
 """
 
 from __future__ import annotations
@@ -65,6 +79,7 @@ from ..errors import ConvergenceError, ModelEvaluationError
 from ..system import solve_steady
 from .loglik import LogLikelihood
 from .result import InverseResult, Uncertainty
+from .sparse_forces import sparse_force_variances
 from .status import FitStatus
 from .verdict import decide
 
@@ -103,9 +118,13 @@ class RandomForceModel:
         With constraint forces (``system.Gamma``).
     sigma : float
         Known noise standard deviation of the data.
+    prior : {"shared", "sparse"}
+        ``"shared"``: one variance :math:`\\tau^2` for every force (REML);
+        ``"sparse"``: a variance per force, by maximum marginal likelihood
+        (:mod:`~ecfm_uq.inverse.sparse_forces`), for a discrepancy that is localized.
     """
 
-    def __init__(self, problem, sigma):
+    def __init__(self, problem, sigma, prior="shared"):
         system = problem.system
         if system.Gamma is None:
             raise ValueError("the random-force ECFM needs a system with constraint forces (Gamma)")
@@ -113,6 +132,7 @@ class RandomForceModel:
         self.M = problem.M_obs
         self.v = problem.v
         self.a0 = None  # force-to-data scale, fixed at the first linearization
+        self.prior = prior
         self.n_solves = 0
 
     def linearize(self, eps):
@@ -209,7 +229,21 @@ class RandomForceModel:
                 f"{np.asarray(eps).tolist()} (underflow): the error contrasts of tau are "
                 "undefined there"
             )
-        return self.best_s(lin)[1]
+        return self.variances(lin)[1]
+
+    def variances(self, lin):
+        """The force variances at ``lin`` and the marginal nll there: ``(g, nll)``, ``g``
+        of shape (n_forces,): :math:`\\hat\\tau^2` for every force (shared prior), or each
+        force's own (sparse prior, started from the shared estimate)."""
+        s, val = self.best_s(lin)
+        g = np.full(lin.A.shape[1], self.tau(s) ** 2)
+        if self.prior == "shared":
+            return g, val
+        return sparse_force_variances(lin.A, lin.r, self.sigma**2, g)
+
+    def covariance(self, lin, g):
+        """The data covariance :math:`\\sigma^2 I + A\\,\\mathrm{diag}(g)\\,A^T`."""
+        return self.sigma**2 * np.eye(lin.A.shape[0]) + (lin.A * g) @ lin.A.T
 
     def profiled_likelihood(self, scale, h=1e-5):
         """The :class:`LogLikelihood` :math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))` of the
@@ -256,7 +290,7 @@ class RandomForceModel:
             exceed += int(np.sum(sims >= T - 1e-12 * max(T, 1.0)))
         return T, (1 + exceed) / (1 + n_sim) if T > 0 else 1.0
 
-    def conditional_likelihood(self, lin, s):
+    def conditional_likelihood(self, lin, g):
         """:math:`\\tfrac12 r(\\epsilon)^T S_0^{-1} r(\\epsilon)` with the data covariance
         :math:`S_0 = \\sigma^2 I + \\hat\\tau^2 A A^T` held at the estimate: the likelihood
         of :math:`\\epsilon` conditional on the estimated discrepancy (generalized least
@@ -264,9 +298,7 @@ class RandomForceModel:
         the standard likelihood with ``sigma`` known."""
         from scipy.linalg import cho_factor, cho_solve
 
-        tau2 = self.tau(s) ** 2
-        S0 = self.sigma**2 * np.eye(lin.A.shape[0]) + tau2 * lin.A @ lin.A.T
-        chol = cho_factor(S0)
+        chol = cho_factor(self.covariance(lin, g))
         sysm = self.system
 
         def evaluate(eps):
@@ -281,33 +313,38 @@ class RandomForceModel:
             r = self.v - self.M @ sysm.mean(sol.Theta)
             return 0.5 * float(r @ cho_solve(chol, r))
 
-        what = "Gaussian, sigma" if tau2 == 0.0 else "GLS with the estimated discrepancy"
+        none = not np.any(g)
+        what = "Gaussian, sigma" if none else "GLS with the estimated discrepancy"
         return LogLikelihood(
-            evaluate, sysm.n_eps, self.v.size, "known sigma" if tau2 == 0.0 else "random forces",
-            f"{what} covariance held at the estimate (sigma={self.sigma:g}, tau={self.tau(s):.3g})",
+            evaluate, sysm.n_eps, self.v.size, "known sigma" if none else "random forces",
+            f"{what} covariance held at the estimate (sigma={self.sigma:g}, tau={rms(g):.3g})",
             value_only=value,
         )  # fmt: skip
 
     def tau(self, s):
         return float(np.sqrt(s) * self.sigma / self.a0)
 
-    def forces(self, lin, s):
-        """Posterior mean of the forces and their standard deviations."""
-        tau2 = self.tau(s) ** 2
+    def forces(self, lin, g):
+        """Posterior mean of the forces (variances ``g``) and their standard deviations."""
         n_f = lin.A.shape[1]
-        if tau2 == 0.0:
+        if not np.any(g):
             return np.zeros(n_f), np.zeros(n_f)
-        S = self.sigma**2 * np.eye(lin.A.shape[0]) + tau2 * lin.A @ lin.A.T
-        SiA = np.linalg.solve(S, lin.A)
-        lam = tau2 * SiA.T @ lin.r
-        cov = tau2 * np.eye(n_f) - tau2**2 * lin.A.T @ SiA
-        return lam, np.sqrt(np.maximum(np.diag(cov), 0.0))
+        GAt = g[:, None] * lin.A.T
+        SiAG = np.linalg.solve(self.covariance(lin, g), GAt.T)
+        lam = SiAG.T @ lin.r
+        var = g - np.einsum("ij,ji->i", GAt, SiAG)
+        return lam, np.sqrt(np.maximum(var, 0.0))
+
+
+def rms(g):
+    """The root-mean-square force standard deviation: tau of the shared prior."""
+    return float(np.sqrt(np.mean(g))) if np.size(g) else 0.0
 
 
 def _profiled(model, eps):
     lin = model.linearize(eps)
-    s, val = model.best_s(lin)
-    return val, s, lin
+    g, val = model.variances(lin)
+    return val, g, lin
 
 
 def _fd_gradient(f, x, h):
@@ -317,6 +354,96 @@ def _fd_gradient(f, x, h):
         e[j] = h
         g[j] = (f(x + e) - f(x - e)) / (2 * h)
     return g
+
+
+class _Search:
+    """Minimizes the profiled marginal likelihood over eps in scaled coordinates
+    ``x = (eps - eps_std) / scale``: L-BFGS-B with central-difference gradients and
+    restarts, finished derivative-free where tau > 0."""
+
+    def __init__(self, eps_std, scale, bnds, maxiter, tol):
+        self.eps_std, self.scale, self.bnds = eps_std, scale, bnds
+        self.maxiter, self.tol, self.nfev = maxiter, tol, 0
+
+    def objective(self, model, count=True):
+        def p(x):
+            self.nfev += count
+            try:
+                return _profiled(model, self.eps_std + self.scale * x)[0]
+            except _FAILURES:
+                return np.inf
+
+        return p
+
+    def run(self, model, x0):
+        """``(x, res)`` from ``x0``; ``res.fun`` the profiled nll at ``x``."""
+        p = self.objective(model)
+        nll0 = self.objective(model, count=False)(np.zeros(x0.size))
+        base, x = nll0, np.array(x0, float)
+        last = {"g": None}
+
+        def fun(x):
+            val = p(x)
+            if not np.isfinite(val):
+                return base + 1e12, np.zeros(x.size)
+            last["g"] = _fd_gradient(p, x, 1e-5)
+            return val, last["g"]
+
+        def stop_when_optimal(intermediate_result):
+            # our own criterion, not the optimizer's (its ftol on a finite-difference
+            # gradient behaves differently across scipy versions): the gradient in
+            # standard-error units below _OPTIMALITY leaves eps within that fraction of a
+            # standard error
+            g = last["g"]
+            if g is not None and g.size and np.max(np.abs(g)) < _OPTIMALITY:
+                raise StopIteration
+
+        nit, njev, maxiter = 0, 0, self.maxiter
+        for _ in range(_RESTARTS):
+            # the standard errors of a consistent fit can be a poor scale once tau > 0
+            # (the optimum may lie many of them away): a stalled line search restarts
+            # from where it stopped, with a fresh quasi-Newton memory
+            res = optimize.minimize(
+                fun, x, jac=True, method="L-BFGS-B", bounds=self.bnds,
+                callback=stop_when_optimal,
+                options={"maxiter": maxiter - nit, "ftol": self.tol, "gtol": 1e-6},
+            )  # fmt: skip
+            if last["g"] is not None and np.max(np.abs(last["g"]), initial=0.0) < _OPTIMALITY:
+                res.success = True
+            moved = np.max(np.abs(res.x - x)) if x.size else 0.0
+            nit, njev = nit + res.nit, njev + res.njev
+            if res.fun <= nll0:
+                x = res.x
+            if res.success or moved < 1e-8 or nit >= maxiter:
+                break
+        tau_positive = np.isfinite(res.fun) and np.any(
+            _profiled(model, self.eps_std + self.scale * x)[1]
+        )
+        if (tau_positive or not res.success) and self.bnds is None:
+            # with tau > 0 the optimum lies in a long flat valley (the discrepancy trading
+            # off against eps) where a small gradient in standard-error units does not
+            # mean close (a premature stop there made the estimate depend on the
+            # equations' units): finish derivative-free
+            simplex = x + np.vstack([np.zeros(x.size), 10.0 * np.eye(x.size)])
+            nm = optimize.minimize(
+                p, x, method="Nelder-Mead",
+                options={"initial_simplex": simplex, "xatol": 1e-6, "fatol": 1e-12,
+                         "maxfev": 400 * max(x.size, 1)},
+            )  # fmt: skip
+            nit += nm.nit
+            if nm.fun < res.fun:
+                x, res = nm.x, nm
+                res.success = bool(nm.success)
+        res.nit, res.njev = nit, njev
+        return x, res
+
+
+def _distinct(starts):
+    out = []
+    for x0 in starts:
+        if not any(np.array_equal(x0, y) for y in out):
+            out.append(x0)
+    return out
 
 
 def fit_random_force(problem, eps0, s):
@@ -329,18 +456,23 @@ def fit_random_force(problem, eps0, s):
     from .steady import fit_steady_problem
 
     system = problem.system
-    opts = s.take({"tau_in_intervals": "profiled"})  # refuses unknown names
+    opts = s.take({"tau_in_intervals": "profiled", "force_prior": "shared"})  # refuses unknown
     if opts["tau_in_intervals"] not in ("profiled", "held"):
         raise ValueError(
             "`options['tau_in_intervals']` must be 'profiled' (tau re-estimated at every eps "
             "along the profiles, the default) or 'held' (the data covariance held at "
             f"tau-hat), got {opts['tau_in_intervals']!r}"
         )
+    if opts["force_prior"] not in ("shared", "sparse"):
+        raise ValueError(
+            "`options['force_prior']` must be 'shared' (one variance tau^2 for every force, "
+            "the default) or 'sparse' (a variance per force: for a localized discrepancy), "
+            f"got {opts['force_prior']!r}"
+        )
     standard = fit_steady_problem(
         problem, eps0,
         FitSettings("standard", "auto", s.sigma, s.bounds, None, s.maxiter, {}, True, s.alpha),
     )  # fmt: skip
-    model = RandomForceModel(problem, s.sigma)
     eps_std = np.asarray(standard.eps, float)
     se = standard.uncertainty.stderr
     magnitude = np.maximum(1.0, np.abs(eps_std))
@@ -349,78 +481,30 @@ def fit_random_force(problem, eps0, s):
         # the standard errors, capped at the parameter's magnitude (a flat direction has
         # a huge one, and steps of that size leave the range where the model solves)
         scale = np.where(np.isfinite(se) & (se > 0), np.minimum(se, magnitude), scale)
-    nll0, _, _ = _profiled(model, eps_std)
-    base = nll0
-    nfev = [0]
-
-    def p(x):
-        nfev[0] += 1
-        try:
-            return _profiled(model, eps_std + scale * x)[0]
-        except _FAILURES:
-            return np.inf
-
-    last = {"g": None}
-
-    def fun(x):
-        val = p(x)
-        if not np.isfinite(val):
-            return base + 1e12, np.zeros(x.size)
-        last["g"] = _fd_gradient(p, x, 1e-5)
-        return val, last["g"]
-
-    def stop_when_optimal(intermediate_result):
-        # our own criterion, not the optimizer's (its ftol on a finite-difference gradient
-        # behaves differently across scipy versions): the gradient in standard-error
-        # units below _OPTIMALITY leaves eps within that fraction of a standard error
-        g = last["g"]
-        if g is not None and g.size and np.max(np.abs(g)) < _OPTIMALITY:
-            raise StopIteration
-
     bnds = None
     if s.bounds is not None:
         bnds = [
             (None if lo is None else (lo - e) / c, None if hi is None else (hi - e) / c)
             for (lo, hi), e, c in zip(s.bounds, eps_std, scale, strict=True)
         ]
-    maxiter = 200 if s.maxiter is None else s.maxiter
-    tol = 1e-10 if s.tol is None else s.tol
-    x, nit, njev = np.zeros(system.n_eps), 0, 0
-    for _ in range(_RESTARTS):
-        # the standard errors of a consistent fit can be a poor scale once tau > 0 (the
-        # optimum may lie many of them away): a stalled line search restarts from where
-        # it stopped, with a fresh quasi-Newton memory
-        res = optimize.minimize(
-            fun, x, jac=True, method="L-BFGS-B", bounds=bnds, callback=stop_when_optimal,
-            options={"maxiter": maxiter - nit, "ftol": tol, "gtol": 1e-6},
-        )  # fmt: skip
-        if last["g"] is not None and np.max(np.abs(last["g"]), initial=0.0) < _OPTIMALITY:
-            res.success = True
-        moved = np.max(np.abs(res.x - x)) if x.size else 0.0
-        nit, njev = nit + res.nit, njev + res.njev
-        if res.fun <= nll0:
-            x = res.x
-        if res.success or moved < 1e-8 or nit >= maxiter:
-            break
-    tau_positive = np.isfinite(res.fun) and _profiled(model, eps_std + scale * x)[1] > 0.0
-    if (tau_positive or not res.success) and bnds is None:
-        # with tau > 0 the optimum lies in a long flat valley (the discrepancy trading off
-        # against eps) where a small gradient in standard-error units does not mean close
-        # (a premature stop there made the estimate depend on the equations' units):
-        # finish derivative-free
-        simplex = x + np.vstack([np.zeros(x.size), 10.0 * np.eye(x.size)])
-        nm = optimize.minimize(
-            p, x, method="Nelder-Mead",
-            options={"initial_simplex": simplex, "xatol": 1e-6, "fatol": 1e-12,
-                     "maxfev": 400 * max(x.size, 1)},
-        )  # fmt: skip
-        nit += nm.nit
-        if nm.fun < res.fun:
-            x, res = nm.x, nm
-            res.success = bool(nm.success)
-    res.nit, res.njev = nit, njev
+    search = _Search(
+        eps_std, scale, bnds, 200 if s.maxiter is None else s.maxiter,
+        1e-10 if s.tol is None else s.tol,
+    )  # fmt: skip
+    model = RandomForceModel(problem, s.sigma, "shared")
+    x, res = search.run(model, np.zeros(system.n_eps))
+    if opts["force_prior"] == "sparse":
+        # the sparse prior's profiled likelihood has local minima (forces switching on and
+        # off): searched from the standard estimate and from the shared prior's, the lower
+        # kept
+        shared = model
+        model = RandomForceModel(problem, s.sigma, "sparse")
+        found = [search.run(model, x0) for x0 in _distinct([np.zeros(system.n_eps), x])]
+        x, res = min(found, key=lambda xr: xr[1].fun)
+        model.n_solves += shared.n_solves
+    p = search.objective(model)
     eps = eps_std + scale * x
-    val, s_hat, lin = _profiled(model, eps)
+    val, g_hat, lin = _profiled(model, eps)
     grad = _fd_gradient(p, x, 1e-5)
     optimality = float(np.max(np.abs(grad))) if grad.size else 0.0
     at_bound = _at_bound(eps, s.bounds)
@@ -428,20 +512,20 @@ def fit_random_force(problem, eps0, s):
     # about a thousandth of a standard error of the optimum
     if res.success or optimality < _OPTIMALITY:
         status = FitStatus.CONVERGED
-    elif res.nit >= maxiter:
+    elif res.nit >= search.maxiter:
         status = FitStatus.MAX_ITERATIONS
     else:
         status = FitStatus.STALLED
-    lam, lam_sd = model.forces(lin, s_hat)
-    unc = _uncertainty(p, x, scale, standard, s_hat, model, lin)
+    lam, lam_sd = model.forces(lin, g_hat)
+    unc = _uncertainty(p, x, scale, standard, g_hat, model, lin)
     message = str(res.message)
     if status == FitStatus.CONVERGED:
         # a small gradient is not an optimum where the data no longer determine eps (an
         # estimate run off towards infinity, e.g. a reaction rate 10^eps0 -> 0): the same
         # refusal as the standard fit's
-        if s_hat == 0.0 and not standard.success and np.allclose(eps, standard.eps):
+        if not np.any(g_hat) and not standard.success and np.allclose(eps, standard.eps):
             status, message = standard.status, f"tau = 0, the standard fit: {standard.message}"
-        elif s_hat > 0.0 and _singular(_gauss_newton_information(model, lin, s_hat)):
+        elif np.any(g_hat) and _singular(_gauss_newton_information(model, lin, g_hat)):
             status = FitStatus.STALLED
             message = (
                 f"{message} [NOT converged: the Gauss-Newton information J^T S^-1 J is "
@@ -449,15 +533,16 @@ def fit_random_force(problem, eps0, s):
                 "combination): the minimum may lie at infinity]"
             )
     T, p_value = model.restricted_test(lin)
-    verdict = _verdict(model, T, p_value, s_hat, lam, lam_sd, s.alpha, at_bound)
-    like = model.conditional_likelihood(lin, s_hat)
+    verdict = _verdict(T, p_value, g_hat, lam, lam_sd, s.alpha, at_bound)
+    like = model.conditional_likelihood(lin, g_hat)
     result = InverseResult(
         eps=eps, loss=val, status=status, message=message,
-        nit=standard.nit + res.nit, nfev=standard.nfev + nfev[0],
+        nit=standard.nit + res.nit, nfev=standard.nfev + search.nfev,
         njev=standard.njev + res.njev, optimality=optimality, method="ecfm",
         optimizer="L-BFGS-B", uncertainty=unc, verdict=verdict,
         extra={
-            "lam": lam, "lam_stderr": lam_sd, "tau": model.tau(s_hat),
+            "lam": lam, "lam_stderr": lam_sd, "tau": rms(g_hat),
+            "force_prior": model.prior, "force_tau": np.sqrt(g_hat),
             "standard": standard, "n_solves": model.n_solves,
         },
     )  # fmt: skip
@@ -489,7 +574,7 @@ def _at_bound(eps, bounds):
     return out
 
 
-def _uncertainty(p, x, scale, standard, s_hat, model, lin):
+def _uncertainty(p, x, scale, standard, g_hat, model, lin):
     """Delta method of the random-force ECFM; the standard fit's where tau = 0.
 
     With tau > 0: the observed information of the profiled marginal likelihood
@@ -501,7 +586,7 @@ def _uncertainty(p, x, scale, standard, s_hat, model, lin):
     the estimate -- the standard fit's Gauss-Newton convention with the estimated
     discrepancy added to the noise; it does not carry tau's uncertainty, and the message
     says so and why."""
-    if s_hat == 0.0:
+    if not np.any(g_hat):
         u = standard.uncertainty
         return Uncertainty(
             u.success, "tau = 0: the standard estimate and its uncertainty", u.cov, u.stderr,
@@ -534,7 +619,7 @@ def _uncertainty(p, x, scale, standard, s_hat, model, lin):
     except np.linalg.LinAlgError as e:
         why = f"the observed information of the profiled marginal likelihood failed ({e})"
     # the expected information with the covariance held at tau-hat
-    F = _gauss_newton_information(model, lin, s_hat)
+    F = _gauss_newton_information(model, lin, g_hat)
     if _singular(F):
         return Uncertainty.failed(
             f"no delta-method uncertainty: {why}, and the Gauss-Newton information J^T S^-1 J "
@@ -551,11 +636,10 @@ def _uncertainty(p, x, scale, standard, s_hat, model, lin):
     )  # fmt: skip
 
 
-def _gauss_newton_information(model, lin, s_hat):
-    """:math:`J^T S^{-1} J` with :math:`S = \\sigma^2 I + \\hat\\tau^2 AA^T`, symmetrized."""
-    tau2 = model.tau(s_hat) ** 2
-    S = model.sigma**2 * np.eye(lin.A.shape[0]) + tau2 * lin.A @ lin.A.T
-    F = lin.J.T @ np.linalg.solve(S, lin.J)
+def _gauss_newton_information(model, lin, g_hat):
+    """:math:`J^T S^{-1} J` with :math:`S = \\sigma^2 I + A\\,\\mathrm{diag}(\\hat g)\\,A^T`,
+    symmetrized."""
+    F = lin.J.T @ np.linalg.solve(model.covariance(lin, g_hat), lin.J)
     return 0.5 * (F + F.T)
 
 
@@ -564,13 +648,13 @@ def _singular(F):
     return not w[0] > 1e-12 * max(w[-1], 0.0)
 
 
-def _verdict(model, T, p, s_hat, lam, lam_sd, alpha, at_bound):
+def _verdict(T, p, g_hat, lam, lam_sd, alpha, at_bound):
     """The verdict of the restricted likelihood-ratio test of tau = 0."""
     zs = np.divide(lam, lam_sd, out=np.zeros_like(lam), where=lam_sd > 0)
     peak = int(np.argmax(np.abs(lam))) if lam.size else None
     parts = [f"restricted likelihood ratio of tau = 0: T = {T:.3g}, p = {p:.3g} (exact null)"]
     details = {
-        "tau": model.tau(s_hat),
+        "tau": rms(g_hat),
         "lr_statistic": T,
         "peak_force_index": peak,
         "force_z": zs,

@@ -142,9 +142,10 @@ def fit(
         Method- and formulation-specific settings by name (e.g. ``{"lr": 1e-2}`` for
         Adam, ``{"penalty": 100}`` for the penalty form, ``{"covariance": "sandwich"}``
         and ``{"polish": False}`` for the steady least-squares fits,
-        ``{"forces": "exact"}`` for the paper's ECFM and ``{"tau_in_intervals": "held"}``
-        for random-force ECFM intervals with tau held at its estimate); an unknown name is
-        refused.
+        ``{"forces": "exact"}`` for the paper's ECFM, ``{"force_prior": "sparse"}`` for
+        random-force ECFM with a variance per force (a localized discrepancy) and
+        ``{"tau_in_intervals": "held"}`` for its intervals with tau held at its
+        estimate); an unknown name is refused.
     uncertainty : bool
         Attach the estimate's uncertainty (costs extra gradient evaluations).
     alpha : float

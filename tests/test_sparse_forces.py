@@ -1,0 +1,140 @@
+"""The random-force ECFM with a variance per force (``options={"force_prior": "sparse"}``):
+the force variances maximize the marginal likelihood (checked against an independent dense
+likelihood: closed form for one force, optimality conditions for many), and on a model
+with a parameter inside the operator and a narrow source left out, the forces concentrate
+at the source while the parameter is recovered."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import optimize
+
+from ecfm_uq.errors import ConvergenceError
+from ecfm_uq.inverse import SteadyProblem, fit
+from ecfm_uq.inverse.sparse_forces import sparse_force_variances
+from ecfm_uq.system import solve_steady
+
+sys.path.insert(0, str(Path(__file__).parent))
+from test_random_force_ecfm import M_OBS, SENS, SOURCE_AT, TRUE, model, readings  # noqa: E402
+
+
+def dense_nll(A, r, s2, g):
+    """-log marginal likelihood (up to a constant) from a dense determinant and solve."""
+    S = s2 * np.eye(A.shape[0]) + A @ np.diag(g) @ A.T
+    return 0.5 * (r @ np.linalg.solve(S, r) + np.linalg.slogdet(S)[1])
+
+
+@pytest.mark.parametrize("signal", [3.0, 0.01])
+def test_one_force_takes_the_likelihood_maximum(signal):
+    rng = np.random.default_rng(0)
+    A = rng.normal(size=(12, 1))
+    r = signal * A[:, 0] + 0.1 * rng.normal(size=12)
+    g, nll = sparse_force_variances(A, r, 0.01, np.zeros(1))
+    # an independent scalar search over log g, and g = 0
+    res = optimize.minimize_scalar(
+        lambda u: dense_nll(A, r, 0.01, [np.exp(u)]), bounds=(-30, 10), method="bounded",
+        options={"xatol": 1e-10},
+    )  # fmt: skip
+    if res.fun < dense_nll(A, r, 0.01, [0.0]):
+        np.testing.assert_allclose(g[0], np.exp(res.x), rtol=1e-6)
+    else:
+        assert g[0] == 0.0  # the data do not need the force
+    assert signal < 1 or g[0] > 0
+    np.testing.assert_allclose(nll, dense_nll(A, r, 0.01, g), rtol=1e-12)
+
+
+def test_many_forces_end_at_a_point_no_single_variance_improves():
+    rng = np.random.default_rng(1)
+    A = rng.normal(size=(20, 8))
+    lam = np.zeros(8)
+    lam[[2, 6]] = [4.0, -3.0]  # a localized discrepancy: two forces of eight
+    r = A @ lam + 0.1 * rng.normal(size=20)
+    g, nll = sparse_force_variances(A, r, 0.01, np.full(8, 0.5))
+    np.testing.assert_allclose(nll, dense_nll(A, r, 0.01, g), rtol=1e-12)
+    assert g[2] > 0 and g[6] > 0
+    assert np.count_nonzero(g) < 8  # sparse: some forces switched off
+    # optimality by finite differences of the dense likelihood: stationary in the active
+    # variances, not decreasing into the inactive ones
+    for i in range(8):
+        h = 1e-6 * max(g[i], 1e-3)
+        e = np.zeros(8)
+        e[i] = h
+        up = (dense_nll(A, r, 0.01, g + e) - nll) / h
+        if g[i] > 0:
+            down = (nll - dense_nll(A, r, 0.01, g - e)) / h
+            assert abs(0.5 * (up + down)) < 1e-4 * (1 + 1 / g[i]), (i, up, down)
+        else:
+            assert up > -1e-6, (i, up)
+    # and the posterior-mean forces are largest where the discrepancy is
+    S = 0.01 * np.eye(20) + A @ np.diag(g) @ A.T
+    post = g * (A.T @ np.linalg.solve(S, r))
+    assert set(np.argsort(-np.abs(post))[:2]) == {2, 6}
+
+
+def test_variances_that_do_not_settle_are_refused(monkeypatch):
+    import ecfm_uq.inverse.sparse_forces as sf
+
+    rng = np.random.default_rng(1)
+    A = rng.normal(size=(20, 8))
+    r = A @ rng.normal(size=8)
+    monkeypatch.setattr(sf, "_MAX_SWEEPS", 1)  # correlated forces need several sweeps
+    with pytest.raises(ConvergenceError, match="did not settle in 1 sweeps.*force_prior"):
+        sf.sparse_force_variances(A, r, 0.01, np.zeros(8))
+
+
+@pytest.mark.parametrize("amplitude", [10.0, 60.0])
+def test_the_forces_concentrate_at_the_missing_source_and_the_parameters_are_recovered(
+    amplitude,
+):
+    v, sigma = readings(amplitude, 1e-3, 1)
+    problem = SteadyProblem(model(), M_OBS, v)
+    res = fit(problem, [1.0, 10.0], formulation="ecfm", sigma=sigma,
+              options={"force_prior": "sparse"})  # fmt: skip
+    shared = fit(problem, [1.0, 10.0], formulation="ecfm", sigma=sigma)
+    std = res.extra["standard"]
+    assert res.success, res.message
+    assert res.extra["force_prior"] == "sparse"
+    assert not res.verdict.consistent and res.verdict.p_value < 1e-3
+    lam = np.abs(res.extra["lam"])
+    assert np.argmax(lam) == np.argmin(np.abs(SENS - SOURCE_AT))
+    assert np.count_nonzero(res.extra["force_tau"]) < SENS.size  # forces switched off
+    # the source goes into the forces, not into the parameters: closer to the truth than
+    # the standard fit and the shared-variance fit
+    assert np.all(np.abs(res.eps - TRUE) <= np.abs(std.eps - TRUE))
+    assert np.all(np.abs(res.eps - TRUE) <= np.abs(shared.eps - TRUE))
+    assert np.all(np.abs(res.eps - TRUE) < 0.02 * TRUE)
+    # the posterior mean and standard deviations from a dense computation: the force-to-
+    # sensor map by one solve per force (the model is linear in the forces)
+    system = model()
+    m0 = M_OBS @ solve_steady(system, res.eps).Theta[:, 0]
+    A = np.column_stack(
+        [M_OBS @ solve_steady(system, res.eps, lam=e).Theta[:, 0] - m0
+         for e in np.eye(SENS.size)]
+    )  # fmt: skip
+    G = np.diag(res.extra["force_tau"] ** 2)
+    S = sigma**2 * np.eye(v.size) + A @ G @ A.T
+    post = G @ A.T @ np.linalg.solve(S, v - m0)
+    cov = G - G @ A.T @ np.linalg.solve(S, A @ G)
+    np.testing.assert_allclose(res.extra["lam"], post, rtol=1e-6, atol=1e-9 * np.abs(post).max())
+    np.testing.assert_allclose(
+        res.extra["lam_stderr"], np.sqrt(np.maximum(np.diag(cov), 0)), rtol=1e-5,
+        atol=1e-9 * np.abs(post).max(),
+    )  # fmt: skip
+
+
+def test_on_consistent_data_without_forces_it_is_the_standard_estimate():
+    v, sigma = readings(0.0, 0.02, 0)
+    res = fit(SteadyProblem(model(), M_OBS, v), [1.0, 10.0], formulation="ecfm", sigma=sigma,
+              options={"force_prior": "sparse"})  # fmt: skip
+    assert res.success and res.verdict.consistent
+    np.testing.assert_array_equal(res.extra["force_tau"], 0.0)
+    np.testing.assert_array_equal(res.eps, res.extra["standard"].eps)
+
+
+def test_an_unknown_force_prior_is_named():
+    v, sigma = readings(0.0, 0.02, 0)
+    with pytest.raises(ValueError, match=r"options\['force_prior'\].*'shared'.*'sparse'"):
+        fit(SteadyProblem(model(), M_OBS, v), [1.0, 10.0], formulation="ecfm", sigma=sigma,
+            options={"force_prior": "laplace"})  # fmt: skip
