@@ -27,6 +27,7 @@ from ..errors import ConvergenceError
 __all__ = ["sparse_force_variances"]
 
 _MAX_SWEEPS = 5000
+_CANCELLATION = 1e-6  # below this 1 - g s (or 1 + delta s) loses digits: solve afresh
 
 
 def sparse_force_variances(A, r, sigma2, g0, rtol=1e-12):
@@ -73,13 +74,26 @@ def sparse_force_variances(A, r, sigma2, g0, rtol=1e-12):
             Sa = Si @ a
             s, q = float(a @ Sa), float(Sa @ r)
             den = 1.0 - g[i] * s  # S_{-i}^-1 from S^-1 (Sherman-Morrison, force i removed)
-            s_m, q_m = s / den, q / den
-            new = max((q_m * q_m - s_m) / (s_m * s_m), 0.0) if s_m > 0.0 else 0.0
+            exact = not den > _CANCELLATION  # force i dominates S: 1 - g s cancels
+            if exact:
+                g_i, g[i] = g[i], 0.0
+                S_m = sigma2 * np.eye(C) + (A * g) @ A.T
+                g[i] = g_i
+                w = np.linalg.solve(S_m, np.column_stack([a, r]))
+                s_m, q_m = float(a @ w[:, 0]), float(a @ w[:, 1])
+            else:
+                s_m, q_m = s / den, q / den
+            new = _best_variance(s_m, q_m)
             delta = new - g[i]
-            if delta != 0.0:
-                Si -= (delta / (1.0 + delta * s)) * np.outer(Sa, Sa)
-                change = max(change, abs(delta))
-                g[i] = new
+            if delta == 0.0:
+                continue
+            change = max(change, abs(delta))
+            g[i] = new
+            den = 1.0 + delta * s
+            if exact or not den > _CANCELLATION:
+                Si = np.linalg.inv(sigma2 * np.eye(C) + (A * g) @ A.T)
+            else:
+                Si -= (delta / den) * np.outer(Sa, Sa)
         val = _nll(A, r, sigma2, g)
         if change <= rtol * max(g.max(initial=0.0), 1e-300) or abs(prev - val) <= rtol * max(
             1.0, abs(val)
@@ -91,6 +105,17 @@ def sparse_force_variances(A, r, sigma2, g0, rtol=1e-12):
         f"{change:.3g} of {g.max():.3g}); the forces may be nearly collinear at the sensors: "
         "use fewer forces or the shared prior (options={'force_prior': 'shared'})"
     )
+
+
+def _best_variance(s, q):
+    """The maximizer :math:`(q^2 - s)/s^2` of one force's variance, or 0; written as
+    :math:`(q/s)^2 - 1/s` so that a force of small effect (tiny ``s``) does not underflow
+    :math:`s^2`."""
+    if not (s > 0.0 and np.isfinite(s) and np.isfinite(q)) or q * q <= s:
+        return 0.0
+    ratio = q / s
+    new = ratio * ratio - 1.0 / s
+    return new if np.isfinite(new) and new > 0.0 else 0.0
 
 
 def _nll(A, r, sigma2, g):
