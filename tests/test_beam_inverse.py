@@ -125,6 +125,8 @@ def test_penalty_form_stops_at_a_stationary_point_of_an_unbounded_objective(beam
     # first-order conditions of log(0.5|lam|^2) + alpha Lambda hold at SLSQP's answer ...
     assert abs(p.grad_eps[0]) < 1e-3 * abs(like.evaluate([0.5]).grad_eps[0])
     np.testing.assert_allclose(alpha * p.grad_lam, -lam / (0.5 * lam @ lam), rtol=1e-2)
+    # (and so the fit is converged: the objective is flat as the forces are scaled)
+    assert abs(2.0 + alpha * lam @ p.grad_lam) < 0.1 and pen.success, pen.message
     # ... its eps is the inner-outer one for this data set ...
     assert abs(pen.eps[0] - io.eps[0]) < 1e-2
     # ... but it is no minimum: shrinking the forces at the standard eps goes lower

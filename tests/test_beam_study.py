@@ -104,6 +104,8 @@ def test_penalty_form_is_reported_honestly(paper):
     assert pen["collapsed_equal_standard"]
     assert pen["n_forces_collapsed"] + pen["n_local_minimum_near_inner_outer"] == ss["n"]
     assert pen["n_other"] == 0
+    # and the result says which: the fits down the valley are not converged, the others are
+    assert pen["n_failed"] == pen["n_forces_collapsed"]
 
 
 def test_another_true_load_is_recovered(heavy):

@@ -252,6 +252,10 @@ def test_penalty_form_runs_slsqp_and_reports(linear):
     # objective reduces to the standard one: same eps
     assert res.extra["force_norm"] < 1e-6
     assert res.eps[0] == pytest.approx(std.eps[0], abs=1e-4)
+    # ... which is no minimum, and the result says so: the objective still falls as the
+    # forces shrink (slope 2 per unit log of their scale, the log term's)
+    assert not res.success and "lam -> 0 valley" in res.message
+    assert res.extra["force_scaling_slope"] == pytest.approx(2.0, abs=1e-3)
 
 
 def test_nonlinear_system_uses_finite_difference_hessian(nonlinear):
