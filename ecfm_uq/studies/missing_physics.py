@@ -146,11 +146,11 @@ def _figure(fem, src, fits, nearest, s, out_dir):
     ax = axes[0]
     ax.tripcolor(x, y, tri, fem.nodal(src), shading="gouraud", cmap="Greys")
     ax.plot(*fem.sensors.T, "o", color="C0", ms=4)
-    ax.set_title("the source missing from the model, and the 25 sensors")
+    ax.set_title("the source missing from the model\nand the 25 sensors", fontsize=9)
     panels = (
         (axes[1], "paper_ecfm", "paper ECFM: |forces| (exact match)"),
-        (axes[2], "random_force_ecfm", "random-force ECFM: |forces| / std. dev."),
-        (axes[3], "sparse_force_ecfm", "sparse-force ECFM: |forces| / std. dev."),
+        (axes[2], "random_force_ecfm", "random-force ECFM, one variance: |forces| / std. dev."),
+        (axes[3], "sparse_force_ecfm", "random-force ECFM, sparse prior: |forces| / std. dev."),
     )
     for ax, name, title in panels:
         res = fits[name]
@@ -179,7 +179,7 @@ def summary_rows(result):
         rf = result[name]
         rows += [
             {
-                "quantity": f"missing source, 2-D FE model: largest {what} force at the "
+                "quantity": f"missing source, 2-D FE model, {what}: largest force at the "
                 "sensor nearest the source",
                 "paper": "yes, >= 10x the median force (issue 20)",
                 "ours": f"sensor {rf['peak_sensor']} (nearest {result['nearest_sensor']}), "
@@ -188,13 +188,13 @@ def summary_rows(result):
                 and (rf["peak_over_median_force"] or 0) >= 10.0,
             },
             {
-                "quantity": f"missing source: verdict of the {what}",
+                "quantity": f"missing source, {what}: verdict",
                 "paper": "not consistent",
                 "ours": f"consistent={rf['consistent']} (p = {rf['p_value']:.3g})",
                 "holds": not rf["consistent"],
             },
             {
-                "quantity": f"missing source: |eps0 - truth|, {what} vs standard",
+                "quantity": f"missing source, {what}: |eps0 - truth| vs the standard fit's",
                 "paper": "no further than standard",
                 "ours": f"{rf['error']:.4f} vs {std['error']:.4f}",
                 "holds": rf["error"] <= std["error"],
