@@ -14,7 +14,8 @@ from ecfm_uq.studies import missing_physics as study  # noqa: E402
 @pytest.fixture(scope="module")
 def result(tmp_path_factory):
     out = tmp_path_factory.mktemp("mp")
-    assert main(["reproduce", "missing-physics", "--out", str(out), "--quiet"]) == 0
+    assert main(["reproduce", "missing-physics", "--out", str(out), "--quiet",
+                 "--noise-seeds", "4"]) == 0  # fmt: skip
     res = json.loads((out / "missing-physics" / "result.json").read_text())
     res["_dir"] = out / "missing-physics"
     return res
@@ -35,7 +36,7 @@ def test_random_force_ecfm_maps_the_missing_source_and_flags_the_model(result):
 
 def test_without_the_source_the_model_is_consistent(tmp_path):
     assert main(["reproduce", "missing-physics", "--out", str(tmp_path), "--quiet",
-                 "--source-amplitude", "0"]) == 0  # fmt: skip
+                 "--source-amplitude", "0", "--noise-seeds", "0"]) == 0  # fmt: skip
     res = json.loads((tmp_path / "missing-physics" / "result.json").read_text())
     rf = res["random_force_ecfm"]
     assert rf["consistent"] and rf["tau"] == 0.0 and abs(rf["eps"] - 0.2) < 0.01
@@ -49,3 +50,22 @@ def test_a_variance_per_force_puts_the_source_in_the_forces_and_recovers_eps(res
     assert 0 < sp["n_forces_used"] < 25  # forces the data do not need are switched off
     # the conductivity is not traded for the source: far closer than the other fits
     assert sp["error"] < 0.25 * min(std["error"], rf["error"])
+
+
+def test_over_noise_draws_the_sparse_map_stays_at_the_source(result):
+    seeds = result["noise_seeds"]
+    assert seeds["n"] == 4
+    sp, rf = seeds["sparse_force_ecfm"], seeds["random_force_ecfm"]
+    for r in (sp, rf):
+        assert len(r["eps"]) == 4 and r["fraction_peak_at_nearest"] == 1.0
+        assert r["fraction_inconsistent"] == 1.0
+    assert sp["fraction_ratio_at_least_claim"] == 1.0
+    assert max(abs(e - 0.2) for e in sp["eps"]) < 0.01  # the conductivity is not traded
+    assert min(sp["ratio_min_median_max"]) >= 10.0
+
+
+def test_bad_noise_seeds_are_refused(tmp_path, capsys):
+    assert main(["reproduce", "missing-physics", "--out", str(tmp_path), "--quiet",
+                 "--noise-seeds", "-1"]) != 0  # fmt: skip
+    assert "--noise-seeds must be non-negative" in capsys.readouterr().err
+    assert not (tmp_path / "missing-physics" / "result.json").exists()

@@ -5,7 +5,7 @@ A 2-D P1 diffusion model on the unit square (scikit-fem,
 :func:`ecfm_uq.problems.fem_diffusion.build_fem_diffusion`, deterministic: chaos order 0)
 with its log-conductivity :math:`\\epsilon_0` to calibrate, 25 point sensors and Gaussian
 constraint forces at them. The data come from the same model plus a narrow source the
-model does not have, with 0.1 % noise of known sigma. Three fits of the same data
+model does not have, with 0.1 % noise of known sigma. Four fits of the same data
 (:func:`~ecfm_uq.inverse.fit`):
 
 * ``standard``: least squares; the conductivity absorbs the source;
@@ -17,8 +17,9 @@ model does not have, with 0.1 % noise of known sigma. Three fits of the same dat
   (``options={"force_prior": "sparse"}``), the prior of a localized discrepancy.
 
 Recorded: the estimates and their distance to the truth, the verdicts, the sensor of the
-largest force against the sensor nearest the source, and the largest over the median force.
-This module only reads settings, calls the library and draws the figure.
+largest force against the sensor nearest the source, and the largest over the median force;
+then (``noise_seeds``) the two random-force fits over that many noise draws, to show how
+much of that is the one data set's luck. This module only reads settings, calls the library and draws the figure.
 """
 
 from __future__ import annotations
@@ -48,7 +49,10 @@ DEFAULTS = {
     "source_width": 0.04,
     "source_amplitude": 10.0,
     "relative_noise": 1e-3,
+    "noise_seeds": 40,  # the random-force fits repeated over this many noise draws
 }
+RATIO_CLAIM = 10.0  # issue 20: the largest force at least 10x the median force
+PRIORS = {"random_force_ecfm": "shared", "sparse_force_ecfm": "sparse"}
 
 
 def add_arguments(parser):
@@ -58,6 +62,13 @@ def add_arguments(parser):
         type=float,
         default=DEFAULTS["source_amplitude"],
         help=f"amplitude of the missing source (default {DEFAULTS['source_amplitude']:g})",
+    )
+    parser.add_argument(
+        "--noise-seeds",
+        type=int,
+        default=DEFAULTS["noise_seeds"],
+        help="noise draws over which the random-force fits are repeated, from --seed on "
+        f"(default {DEFAULTS['noise_seeds']}; 0: the one data set only)",
     )
 
 
@@ -70,6 +81,9 @@ def settings_from_args(args):
     if not np.isfinite(args.source_amplitude):
         raise ValueError(f"--source-amplitude must be finite, got {args.source_amplitude}")
     s["source_amplitude"] = float(args.source_amplitude)
+    if args.noise_seeds < 0:
+        raise ValueError(f"--noise-seeds must be non-negative, got {args.noise_seeds}")
+    s["noise_seeds"] = int(args.noise_seeds)
     return s
 
 
@@ -98,18 +112,15 @@ def run(settings, out_dir, progress):
     )  # fmt: skip
     clean = fem.M_obs @ solve_steady(truth, [s["true_eps"]]).Theta[:, 0]
     sigma = s["relative_noise"] * float(np.abs(clean).mean())
-    v = clean + sigma * np.random.default_rng(s["seed"]).standard_normal(clean.size)
-    problem = SteadyProblem(system, fem.M_obs, v)
+    problem = SteadyProblem(system, fem.M_obs, _noisy(clean, sigma, s["seed"]))
     eps0 = [s["eps0"]]
     progress.log("missing-physics: four fits")
     fits = {
         "standard": fit(problem, eps0, sigma=sigma),
         "paper_ecfm": fit(problem, eps0, formulation="ecfm", sigma=sigma,
                           options={"forces": "exact"}),
-        "random_force_ecfm": fit(problem, eps0, formulation="ecfm", sigma=sigma),
-        "sparse_force_ecfm": fit(problem, eps0, formulation="ecfm", sigma=sigma,
-                                 options={"force_prior": "sparse"}),
     }  # fmt: skip
+    fits.update((name, _random_force_fit(problem, eps0, sigma, p)) for name, p in PRIORS.items())
     nearest = int(np.argmin(np.linalg.norm(fem.sensors - s["source_at"], axis=1)))
     result = {"settings": s, "sigma": sigma, "nearest_sensor": nearest}
     for name, res in fits.items():
@@ -134,8 +145,54 @@ def run(settings, out_dir, progress):
             blk["peak_force_z"] = float(z.max())
             blk["n_forces_used"] = int(np.count_nonzero(res.extra["force_tau"]))
         result[name] = blk
+    if s["noise_seeds"]:
+        result["noise_seeds"] = _noise_seeds(problem, clean, sigma, nearest, s, progress)
     _figure(fem, src, fits, nearest, s, out_dir)
     return result
+
+
+def _noisy(clean, sigma, seed):
+    return clean + sigma * np.random.default_rng(seed).standard_normal(clean.size)
+
+
+def _random_force_fit(problem, eps0, sigma, prior):
+    return fit(problem, eps0, formulation="ecfm", sigma=sigma, options={"force_prior": prior})
+
+
+def _noise_seeds(problem, clean, sigma, nearest, s, progress):
+    """The random-force fits of both priors over ``noise_seeds`` noise draws (seeds from
+    ``seed`` on): how the force map and the estimate vary with the noise."""
+    n = s["noise_seeds"]
+    rows = {name: {"eps": [], "ratio": [], "at_least_claim": [], "peak_at_nearest": [],
+                   "consistent": [], "n_forces_used": []} for name in PRIORS}  # fmt: skip
+    with progress.bar(n, "noise seeds") as bar:
+        for seed in range(s["seed"], s["seed"] + n):
+            data = problem.with_data(_noisy(clean, sigma, seed))
+            for name, prior in PRIORS.items():
+                res = _random_force_fit(data, [s["eps0"]], sigma, prior)
+                a = np.abs(res.extra["lam"])
+                med = float(np.median(a))
+                r = rows[name]
+                r["eps"].append(float(res.eps[0]))
+                # None where the median force is zero (more than half switched off)
+                r["ratio"].append(float(a.max() / med) if med > 0 else None)
+                r["at_least_claim"].append(bool(a.max() > 0 and a.max() >= RATIO_CLAIM * med))
+                r["peak_at_nearest"].append(bool(int(np.argmax(a)) == nearest))
+                r["consistent"].append(bool(res.verdict.consistent))
+                r["n_forces_used"].append(int(np.count_nonzero(res.extra["force_tau"])))
+            bar.update()
+    out = {"n": n, "seeds": f"numpy default_rng({s['seed']}) ... default_rng({s['seed'] + n - 1})"}
+    for name, r in rows.items():
+        ratio = [x for x in r["ratio"] if x is not None]
+        r["ratio_min_median_max"] = (
+            [min(ratio), float(np.median(ratio)), max(ratio)] if ratio else None
+        )
+        r["eps_min_max"] = [min(r["eps"]), max(r["eps"])]
+        r["fraction_peak_at_nearest"] = float(np.mean(r["peak_at_nearest"]))
+        r["fraction_ratio_at_least_claim"] = float(np.mean(r["at_least_claim"]))
+        r["fraction_inconsistent"] = float(1.0 - np.mean(r["consistent"]))
+        out[name] = r
+    return out
 
 
 def _figure(fem, src, fits, nearest, s, out_dir):
@@ -185,7 +242,7 @@ def summary_rows(result):
                 "ours": f"sensor {rf['peak_sensor']} (nearest {result['nearest_sensor']}), "
                 f"{rf['peak_over_median_force'] or 0:.1f}x the median force",
                 "holds": rf["peak_sensor"] == result["nearest_sensor"]
-                and (rf["peak_over_median_force"] or 0) >= 10.0,
+                and (rf["peak_over_median_force"] or 0) >= RATIO_CLAIM,
             },
             {
                 "quantity": f"missing source, {what}: verdict",
@@ -200,4 +257,23 @@ def summary_rows(result):
                 "holds": rf["error"] <= std["error"],
             },
         ]
+    seeds = result.get("noise_seeds")
+    for name, what in (("random_force_ecfm", "random-force ECFM"),
+                       ("sparse_force_ecfm", "random-force ECFM, sparse prior")):  # fmt: skip
+        if not seeds:
+            break
+        r, n = seeds[name], seeds["n"]
+        lo, med, hi = r["ratio_min_median_max"] or (0.0, 0.0, 0.0)
+        rows.append(
+            {
+                "quantity": f"missing source, {what}, over {n} noise draws: largest force at "
+                f"the nearest sensor, >= {RATIO_CLAIM:g}x the median force",
+                "paper": "not claimed (one data set in issue 20)",
+                "ours": f"nearest in {r['fraction_peak_at_nearest']:.2f}, "
+                f">= {RATIO_CLAIM:g}x in {r['fraction_ratio_at_least_claim']:.2f} "
+                f"(ratio {lo:.1f} / {med:.1f} / {hi:.1f} min / median / max; eps "
+                f"{r['eps_min_max'][0]:.4f} to {r['eps_min_max'][1]:.4f})",
+                "holds": None,
+            }
+        )
     return rows
