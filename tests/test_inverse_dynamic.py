@@ -8,6 +8,7 @@ from ecfm_uq.chaos import ChaosBasis
 from ecfm_uq.errors import ConvergenceError
 from ecfm_uq.inverse.diagnostics import (
     condition_number,
+    fd_gradient,
     fd_hessian,
     loss_surface,
     taylor_remainders,
@@ -172,6 +173,21 @@ def test_adam_closed_form_first_step_and_convergence():
 def test_adam_bad_input(kw, exc, match):
     with pytest.raises(exc, match=match):
         adam(lambda x: (float(x @ x), 2 * x), [1.0], **kw)
+
+
+def test_fd_gradient_is_second_order_with_a_step_per_coordinate():
+    def f(y):
+        return float(np.exp(y[0]) * y[1] ** 2)
+
+    x = np.array([0.1, 0.7])
+    exact = np.exp(x[0]) * np.array([x[1] ** 2, 2 * x[1]])
+    steps = np.array([1e-2, 3e-2])  # unequal steps: the error of each scales with its own
+    e1 = np.abs(fd_gradient(f, x, steps) - exact)
+    e2 = np.abs(fd_gradient(f, x, steps / 2) - exact)
+    assert np.all((3.5 < e1[0] / e2[0]) & (e1[0] / e2[0] < 4.5))
+    assert e2[1] < 1e-12  # y1^2: central differences are exact on a quadratic
+    # a scalar step is used for every coordinate
+    np.testing.assert_array_equal(fd_gradient(f, x, 1e-2), fd_gradient(f, x, [1e-2, 1e-2]))
 
 
 def test_fd_hessian_exact_on_quadratic_and_second_order_on_cubic():

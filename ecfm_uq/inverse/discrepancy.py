@@ -77,6 +77,7 @@ from scipy import optimize, stats
 
 from ..errors import ConvergenceError, ModelEvaluationError
 from ..system import solve_steady
+from .diagnostics import fd_gradient, fd_hessian
 from .loglik import LogLikelihood
 from .result import InverseResult, Uncertainty
 from .sparse_forces import sparse_force_variances
@@ -106,7 +107,7 @@ class Linearization:
     w2: np.ndarray  # squared residual in the eigenbasis
     xi: np.ndarray  # eigenvalues of K^T A A^T K / a0^2, K the complement of J
     q: np.ndarray  # squared error contrasts in that eigenbasis, over sigma^2
-    J: np.ndarray | None = None  # M dE[theta]/deps, (C, n_eps)
+    J: np.ndarray  # M dE[theta]/deps, (C, n_eps)
 
 
 class RandomForceModel:
@@ -254,13 +255,7 @@ class RandomForceModel:
         scale = np.asarray(scale, float)
 
         def evaluate(eps):
-            val = self.profiled_nll(eps)
-            g = np.empty(eps.size)
-            for j in range(eps.size):
-                e = np.zeros(eps.size)
-                e[j] = h * scale[j]
-                g[j] = (self.profiled_nll(eps + e) - self.profiled_nll(eps - e)) / (2 * e[j])
-            return val, g
+            return self.profiled_nll(eps), fd_gradient(self.profiled_nll, eps, h * scale)
 
         return LogLikelihood(
             evaluate, self.system.n_eps, self.v.size, "random forces",
@@ -292,7 +287,7 @@ class RandomForceModel:
 
     def conditional_likelihood(self, lin, g):
         """:math:`\\tfrac12 r(\\epsilon)^T S_0^{-1} r(\\epsilon)` with the data covariance
-        :math:`S_0 = \\sigma^2 I + \\hat\\tau^2 A A^T` held at the estimate: the likelihood
+        :math:`S_0 = \\sigma^2 I + A\\,\\mathrm{diag}(g)\\,A^T` held at the estimate: the likelihood
         of :math:`\\epsilon` conditional on the estimated discrepancy (generalized least
         squares), exact gradient :math:`-J^T S_0^{-1} r`. With :math:`\\hat\\tau = 0` it is
         the standard likelihood with ``sigma`` known."""
@@ -347,15 +342,6 @@ def _profiled(model, eps):
     return val, g, lin
 
 
-def _fd_gradient(f, x, h):
-    g = np.empty(x.size)
-    for j in range(x.size):
-        e = np.zeros(x.size)
-        e[j] = h
-        g[j] = (f(x + e) - f(x - e)) / (2 * h)
-    return g
-
-
 class _Search:
     """Minimizes the profiled marginal likelihood over eps in scaled coordinates
     ``x = (eps - eps_std) / scale``: L-BFGS-B with central-difference gradients and
@@ -386,7 +372,7 @@ class _Search:
             val = p(x)
             if not np.isfinite(val):
                 return base + 1e12, np.zeros(x.size)
-            last["g"] = _fd_gradient(p, x, 1e-5)
+            last["g"] = fd_gradient(p, x, 1e-5)
             return val, last["g"]
 
         def stop_when_optimal(intermediate_result):
@@ -436,14 +422,6 @@ class _Search:
                 res.success = bool(nm.success)
         res.nit, res.njev = nit, njev
         return x, res
-
-
-def _distinct(starts):
-    out = []
-    for x0 in starts:
-        if not any(np.array_equal(x0, y) for y in out):
-            out.append(x0)
-    return out
 
 
 def fit_random_force(problem, eps0, s):
@@ -499,13 +477,14 @@ def fit_random_force(problem, eps0, s):
         # kept
         shared = model
         model = RandomForceModel(problem, s.sigma, "sparse")
-        found = [search.run(model, x0) for x0 in _distinct([np.zeros(system.n_eps), x])]
+        starts = [np.zeros(system.n_eps)] + ([x] if np.any(x) else [])
+        found = [search.run(model, x0) for x0 in starts]
         x, res = min(found, key=lambda xr: xr[1].fun)
         model.n_solves += shared.n_solves
     p = search.objective(model)
     eps = eps_std + scale * x
     val, g_hat, lin = _profiled(model, eps)
-    grad = _fd_gradient(p, x, 1e-5)
+    grad = fd_gradient(p, x, 1e-5)
     optimality = float(np.max(np.abs(grad))) if grad.size else 0.0
     at_bound = _at_bound(eps, s.bounds)
     # unit-free: the gradient in standard-error units; 1e-3 leaves the estimate within
@@ -592,18 +571,15 @@ def _uncertainty(p, x, scale, standard, g_hat, model, lin):
             u.success, "tau = 0: the standard estimate and its uncertainty", u.cov, u.stderr,
             u.intervals, u.level, u.method, u.noise_model, u.dof, u.jacobian,
         )  # fmt: skip
-    n, h = x.size, 1e-3
-    H = np.empty((n, n))
     eps = np.asarray(standard.eps, float) + scale * x
     z = stats.norm.ppf(0.975)
     why = None
     try:
-        for j in range(n):
-            e = np.zeros(n)
-            e[j] = h
-            H[:, j] = (_fd_gradient(p, x + e, 1e-5) - _fd_gradient(p, x - e, 1e-5)) / (2 * h)
-        H = 0.5 * (H + H.T)
-        w = np.linalg.eigvalsh(H) if np.all(np.isfinite(H)) else np.array([np.nan])
+        try:
+            H = fd_hessian(lambda y: fd_gradient(p, y, 1e-5), x, 1e-3)
+            w = np.linalg.eigvalsh(H)
+        except ValueError:  # the model cannot be solved next to the estimate
+            w = np.array([np.nan])
         if w[0] > 1e-10 * w[-1]:
             cov = np.linalg.inv(H) * np.outer(scale, scale)
             se = np.sqrt(np.diag(cov))

@@ -37,6 +37,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from ..errors import ConvergenceError, ModelEvaluationError
+from .diagnostics import fd_gradient
 
 __all__ = [
     "LikelihoodRatioTest",
@@ -280,15 +281,10 @@ class _Profiler:
                 if self.by_differences:
                     # a value-only likelihood: central differences in the free parameters
                     # alone (in units of their scale), not the full gradient
-                    val = self.like.value(point(x))
-                    g = np.empty(free.size)
-                    for k in range(free.size):
-                        dx = np.zeros(free.size)
-                        dx[k] = _FD_STEP
-                        g[k] = (self.like.value(point(x + dx)) - self.like.value(point(x - dx))) / (
-                            2 * _FD_STEP
-                        )
-                    return val, g
+                    def value(y):
+                        return self.like.value(point(y))
+
+                    return value(x), fd_gradient(value, x, _FD_STEP)
                 val, g = self.like(point(x))
             except _MODEL_FAILURES:
                 # where the model cannot be solved: a wall the line search backs off from
