@@ -132,13 +132,8 @@ def run(settings, out_dir, progress):
             "p_value": res.verdict.p_value,
             "test": res.verdict.test,
         }
-        lam = np.asarray(res.extra.get("lam", np.zeros(0)))
-        if lam.size:
-            a = np.abs(lam)
-            blk["peak_sensor"] = int(np.argmax(a))
-            med = float(np.median(a))
-            # no forces at all (tau = 0): no peak to speak of
-            blk["peak_over_median_force"] = float(a.max() / med) if med > 0 else None
+        if np.size(res.extra.get("lam", ())):  # the fits with constraint forces
+            blk.update(_force_map(res))
         if "tau" in res.extra:
             blk["tau"] = float(res.extra["tau"])
             z = np.abs(res.verdict["force_z"])
@@ -149,6 +144,18 @@ def run(settings, out_dir, progress):
         result["noise_seeds"] = _noise_seeds(problem, clean, sigma, nearest, s, progress)
     _figure(fem, src, fits, nearest, s, out_dir)
     return result
+
+
+def _force_map(res):
+    """Where the largest force sits and how it compares with the median force (``None``
+    where the median force is zero: no forces, or more than half switched off)."""
+    a = np.abs(np.asarray(res.extra["lam"]))
+    med = float(np.median(a))
+    return {
+        "peak_sensor": int(np.argmax(a)),
+        "peak_over_median_force": float(a.max() / med) if med > 0 else None,
+        "at_least_claim": bool(a.max() > 0 and a.max() >= RATIO_CLAIM * med),
+    }
 
 
 def _noisy(clean, sigma, seed):
@@ -170,14 +177,11 @@ def _noise_seeds(problem, clean, sigma, nearest, s, progress):
             data = problem.with_data(_noisy(clean, sigma, seed))
             for name, prior in PRIORS.items():
                 res = _random_force_fit(data, [s["eps0"]], sigma, prior)
-                a = np.abs(res.extra["lam"])
-                med = float(np.median(a))
-                r = rows[name]
+                fm, r = _force_map(res), rows[name]
                 r["eps"].append(float(res.eps[0]))
-                # None where the median force is zero (more than half switched off)
-                r["ratio"].append(float(a.max() / med) if med > 0 else None)
-                r["at_least_claim"].append(bool(a.max() > 0 and a.max() >= RATIO_CLAIM * med))
-                r["peak_at_nearest"].append(bool(int(np.argmax(a)) == nearest))
+                r["ratio"].append(fm["peak_over_median_force"])
+                r["at_least_claim"].append(fm["at_least_claim"])
+                r["peak_at_nearest"].append(fm["peak_sensor"] == nearest)
                 r["consistent"].append(bool(res.verdict.consistent))
                 r["n_forces_used"].append(int(np.count_nonzero(res.extra["force_tau"])))
             bar.update()
