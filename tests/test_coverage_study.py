@@ -88,8 +88,9 @@ def test_profile_intervals_are_honest_with_a_parameter_in_the_operator(result, f
     assert (result["_dir"] / "operator.png").stat().st_size > 0
 
 
-def test_discrepancy_test_grows_from_its_size_to_full_power(result):
-    rows = result["discrepancy"]["rows"]
+@pytest.mark.parametrize("key", ["rows", "rows_sparse"])
+def test_discrepancy_test_grows_from_its_size_to_full_power(result, key):
+    rows = result["discrepancy"][key]
     rejects = [r["tau_test_rejects"] for r in rows]
     assert rows[0]["amplitude"] == 0.0 and rejects[0] <= 0.15  # 40 data sets at alpha 0.05
     assert rejects == sorted(rejects) and rejects[-1] >= 0.8

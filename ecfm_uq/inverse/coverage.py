@@ -276,13 +276,16 @@ def interval_coverage(
     }
 
 
-def discrepancy_power(problem, clean_by_amplitude, sigma, eps0, n_datasets=200, seed=0, alpha=0.05):
+def discrepancy_power(
+    problem, clean_by_amplitude, sigma, eps0, n_datasets=200, seed=0, alpha=0.05, options=None
+):
     """Size and power of the test "can this model explain these data?".
 
     For each amplitude of a physics missing from the model (``clean_by_amplitude``:
     amplitude -> noise-free readings), R noisy data sets are fitted by the random-force
-    ECFM (its restricted likelihood-ratio test of tau = 0) and the standard fit (its chi2
-    test); amplitude 0 gives the size.
+    ECFM (its restricted likelihood-ratio test of tau = 0; ``options`` of the fit, e.g.
+    ``{"force_prior": "sparse"}``) and the standard fit (its chi2 test); amplitude 0 gives
+    the size.
 
     Returns
     -------
@@ -299,7 +302,8 @@ def discrepancy_power(problem, clean_by_amplitude, sigma, eps0, n_datasets=200, 
         tau_rej, chi_rej, rms = [], [], []
         for _ in range(n):
             v = clean + sigma * rng.normal(size=clean.size)
-            res = fit(problem.with_data(v), eps0, formulation="ecfm", sigma=sigma, alpha=alpha)
+            res = fit(problem.with_data(v), eps0, formulation="ecfm", sigma=sigma, alpha=alpha,
+                      options=options)  # fmt: skip
             std = res.extra["standard"]
             tau_rej.append(not res.verdict.consistent)
             chi_rej.append(not std.verdict.consistent)
