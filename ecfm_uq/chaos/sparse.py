@@ -544,7 +544,9 @@ def _fit_sparse(
                 "pass fewer `n_samples`, or let the model return fewer output values (e.g. "
                 "the sensors you need or a coarser field)"
             )
-            if need > memory_budget():
+            if compress == "randomized":
+                cheaper += ", or compress=True (streams the evaluations as they arrive)"
+            elif need > memory_budget():
                 # the evaluations do not fit even once: compress them as they arrive, with
                 # the largest sketch that fits
                 for k in _STREAM_COLUMNS:

@@ -306,6 +306,10 @@ def test_fit_pce_compresses_the_field_as_it_arrives_when_it_cannot_be_stored(env
     assert d["compression_error"].max() <= 1e-6
     np.testing.assert_allclose(pce.mean, ref.mean, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(pce.first_order(), ref.first_order(), atol=1e-8)
+    np.testing.assert_allclose(pce.total(), ref.total(), atol=1e-8)
+    # compress="randomized" asks for that method: refused there, not silently streamed
+    with pytest.raises(MemoryBudgetError, match="compress=True"):
+        fit_pce(field, INPUTS, "lars", compress="randomized", **kw)
 
 
 def test_a_consumer_receives_the_rows_in_order_and_nothing_is_stored():
