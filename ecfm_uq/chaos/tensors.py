@@ -261,7 +261,7 @@ def expectation_tensor(basis, rank, *, sparse=False):
         return np.diag(np.asarray(basis.norms2, dtype=float))
 
     alpha = np.ascontiguousarray(basis.indices)
-    tables, parity = _germ_tables(basis)
+    tables, parity = _stacked_tables(basis.germs, basis.order, basis.normalized)
     if sparse:
         idx, val = triple_sparse_mixed(alpha, tables, parity)
         return SparseTensor3(idx, val, (P, P, P))
@@ -273,23 +273,13 @@ def expectation_tensor(basis, rank, *, sparse=False):
     return triple_dense_mixed(alpha, tables)
 
 
-def _germ_tables(basis):
-    """The exact 1-D triple products of each germ of ``basis``, stacked
-    (dim, p+1, p+1, p+1), and which germs are symmetric (their parity rule holds).
-    Legendre keeps v0.2's table (:func:`triple_product_1d`), also unnormalized."""
-    if basis.is_legendre:
-        t = triple_product_1d(basis.order, basis.normalized)
-        tables = np.ascontiguousarray(np.broadcast_to(t, (basis.dim, *t.shape)))
-        return tables, np.ones(basis.dim, dtype=bool)
-    return _stacked_tables(basis.germs, basis.order)
-
-
-def _stacked_tables(germs, order):
-    """Each germ's exact 1-D triple products to ``order``, stacked, and their symmetry."""
+def _stacked_tables(germs, order, normalized=True):
+    """Each germ's exact 1-D triple products to ``order``, stacked (dim, p+1, p+1, p+1),
+    and which germs are symmetric (their parity rule holds)."""
     cache = {}
     for g in germs:
         if g not in cache:
-            cache[g] = g.triple(order)
+            cache[g] = g.triple(order, normalized)
     return np.stack([cache[g] for g in germs]), np.array([g.symmetric for g in germs])
 
 
