@@ -92,8 +92,8 @@ def evaluate_samples(
         ``None``: a local ``concurrent.futures.ProcessPoolExecutor(max_workers=workers)``
         (run in-process when ``workers == 1``), created and shut down here. Otherwise any
         executor whose ``map(f, chunks)`` returns results or futures, e.g. a
-        ``ThreadPoolExecutor`` or a ``dask.distributed.Client`` (whose futures are
-        gathered with ``client.gather``).
+        ``ThreadPoolExecutor`` or a ``dask.distributed.Client`` (each future's result is
+        taken in order as its rows are filled or streamed, never all gathered at once).
     workers : int
         Worker count for the default pool and for the default chunk size.
     chunksize : int, optional
@@ -170,8 +170,6 @@ def evaluate_samples(
     def run(parts):
         if executor is None:
             return map(task, parts)
-        if callable(getattr(executor, "gather", None)):
-            return executor.gather(executor.map(task, parts))
         return executor.map(task, parts)
 
     out = consume = shape = None

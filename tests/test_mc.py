@@ -69,6 +69,29 @@ def test_dask_client_gives_identical_numbers(beam):
     np.testing.assert_array_equal(out, serial)
 
 
+def test_a_client_s_futures_are_taken_one_by_one_not_gathered():
+    """A dask-like client (map returns futures, gather exists): the rows are filled from
+    each future in order; gathering every chunk first would hold them all at once."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from ecfm_uq.executor import evaluate_samples
+
+    class Client:
+        def __init__(self, pool):
+            self.pool = pool
+
+        def map(self, f, parts):
+            return [self.pool.submit(f, p) for p in parts]
+
+        def gather(self, futures):
+            raise AssertionError("gather holds every chunk's result at once")
+
+    w = draw_germ(50, seed=3)
+    with ThreadPoolExecutor(2) as pool:
+        out = evaluate_samples(powers, w, Client(pool), chunksize=8)
+    np.testing.assert_array_equal(out, evaluate_samples(powers, w, workers=1))
+
+
 def test_moments_against_closed_form():
     w = draw_germ(40000, seed=5)
     y = monte_carlo(powers, w, workers=1)
