@@ -166,19 +166,24 @@ def right_multiply(X, G, G_sparse=None):
 _COUPLING_ROUNDOFF = 1e-13
 
 
-def _sparse_coupling(G):
-    """CSR copy of a coupling worth multiplying sparsely, else ``None``.
+def _without_roundoff(G):
+    """``G`` with the round-off of integrals that vanish exactly set to zero.
 
-    A coupling computed by quadrature carries round-off where its integrals vanish;
-    counted as nonzeros those entries would make every coupling dense (an affine germ's
-    35 x 35 coupling at order 3: 30 entries, ~1 200 at 1e-17), so they are dropped from the
-    sparse copy (a change of the product at the round-off level of its largest entry).
+    A coupling computed by quadrature carries round-off where its integrals vanish; kept,
+    those entries would make every coupling dense (an affine germ's 35 x 35 coupling at
+    order 3: 30 entries, ~1 200 at 1e-17) in the matrix-free products and in the assembled
+    sparse Jacobian alike (a change at the round-off level of the largest entry).
     """
+    big = np.abs(G) > _COUPLING_ROUNDOFF * np.abs(G).max(initial=0.0)
+    return G if big.all() else np.where(big, G, 0.0)
+
+
+def _sparse_coupling(G):
+    """CSR copy of a coupling worth multiplying sparsely, else ``None``."""
     P = G.shape[0]
-    big = np.abs(G) > _COUPLING_ROUNDOFF * np.abs(G).max()
-    if P < 10 or np.count_nonzero(big) > 0.25 * P * P:
+    if P < 10 or np.count_nonzero(G) > 0.25 * P * P:
         return None
-    return sp.csr_matrix(np.where(big, G, 0.0))
+    return sp.csr_matrix(G)
 
 
 class LinearTerm:
@@ -218,14 +223,15 @@ class LinearTerm:
     def bind(self, E2):
         """A copy bound to a system with Gram matrix ``E2`` (P, P); ``self`` is unchanged.
 
-        The copy's ``G`` is the given coupling, or ``E2`` when none was given.
+        The copy's ``G`` is the given coupling, or ``E2`` when none was given, without its
+        round-off entries (:func:`_without_roundoff`).
         """
         G = E2 if self._G_given is None else self._G_given
         if G.shape != E2.shape:
             raise ValueError(f"term {self.name!r}: `G` has shape {G.shape}, expected {E2.shape}")
         bound = copy.copy(self)
-        bound.G = G
-        bound._G_sparse = _sparse_coupling(G)
+        bound.G = _without_roundoff(G)
+        bound._G_sparse = _sparse_coupling(bound.G)
         bound._kron = {}
         bound._abs = None
         bound.__dict__.pop("_symmetric", None)
