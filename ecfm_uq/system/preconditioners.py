@@ -10,11 +10,10 @@ linear terms whose couplings share an eigenbasis). Each has ``apply(R)`` and
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg as sla
 import scipy.sparse as sp
 
 from ..errors import SingularSystemError
-from .factors import _lu_any
+from .factors import DenseFactor, _lu_any, dense_lu
 from .plan import VANISHING_BLOCK
 
 
@@ -136,22 +135,21 @@ class KroneckerPreconditioner:
             if not lam[0] > VANISHING_BLOCK * abs(lam).max():
                 self.fallback = "chaos factor not positive definite: mean-based"
                 A = E2
-        try:
-            self._A = sla.lu_factor(A, check_finite=True)
-        except (ValueError, np.linalg.LinAlgError):
-            self._A = None
-        if self._A is None or not np.all(np.abs(np.diag(self._A[0])) > 0):
+        # the plan's singular-pivot rule (a pivot of 1e-17 is singular, not merely nonzero)
+        lu = dense_lu(A)
+        if lu is None:
             self.fallback = "chaos factor singular: mean-based"
-            self._A = sla.lu_factor(E2)
+            lu = dense_lu(E2)
+        self._A = DenseFactor(lu)
         self.A = A
 
     def apply(self, R):
         """Apply to ``R`` of shape (N, P): :math:`\\bar K^{-1} R A^{-1}`."""
-        return sla.lu_solve(self._A, self._solve(R).T, trans=1).T
+        return self._A.solve_transpose(self._solve(R).T).T
 
     def apply_transpose(self, R):
         """The transposed preconditioner (for adjoint solves)."""
-        return sla.lu_solve(self._A, self._solve_t(R).T).T
+        return self._A.solve(self._solve_t(R).T).T
 
 
 class _ChaosBlockDiagonal:
