@@ -37,9 +37,10 @@ Rules of ``preconditioner="auto"``
 ``"nodal"`` for a nonlinear one-germ system, else ``"decoupled"`` when the couplings
 (and :math:`\\mathbb E[\\Psi\\Psi^T]`) share an eigenbasis, each for ``N <= 5000``;
 else ``"mean"`` (``"mean-amg"`` beyond ``N = 400 000``). ``"kronecker"`` (Ullmann's
-:math:`\\bar K\\otimes A`, as cheap as the mean-based one) is available by name: 20-37 %
-fewer CG iterations on a lognormal conductivity, as many on the affine fields and the
-nonlinear models measured; it is not the default so that what ``"auto"`` runs (and
+:math:`\\bar K\\otimes A`, as cheap as the mean-based one) is available by name: on a
+lognormal conductivity (``benchmarks/fem_lognormal.py``, docs/fem.md's tables) 0-32 %
+fewer CG iterations at s = 0.5 and 18-55 % at s = 1 from order 2 on (9 % more at order
+1), as many on the affine fields and the nonlinear models measured; it is not the default so that what ``"auto"`` runs (and
 reports) stays what it was.
 
 Rules of ``compiled="auto"``
