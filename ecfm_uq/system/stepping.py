@@ -48,9 +48,9 @@ def _warm_start(fun, states):
     r, J = fun(last)
     D = np.column_stack([(states[j + 1] - states[j]).ravel() for j in range(len(states) - 1)])
     JD = np.column_stack([J.matvec(D[:, j]) for j in range(D.shape[1])])
-    # normal equations of the few columns (their Gram matrix is tiny); pinv drops the
-    # directions in which the differences are (nearly) dependent
-    c = np.linalg.pinv(JD.T @ JD, rcond=1e-10, hermitian=True) @ (JD.T @ -r)
+    # least squares on the few columns themselves (the normal equations would square
+    # their condition number, and the differences of a smooth march are nearly parallel)
+    c = np.linalg.lstsq(JD, -r, rcond=None)[0]
     # the residual there is known without another evaluation (the residual is affine)
     return last + D @ c, (r + JD @ c, J)
 
