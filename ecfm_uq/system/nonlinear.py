@@ -41,9 +41,7 @@ class NewtonInfo:
     status: SolveStatus = SolveStatus.CONVERGED
 
 
-def newton(
-    fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None, scale=None, linear=False, first=None
-):
+def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None, scale=None, first=None):
     """Newton's method on ``fun(z) -> (r, J)``.
 
     Parameters
@@ -68,11 +66,10 @@ def newton(
         ``scale(z) -> float``, the magnitude of the terms the residual sums at ``z``
         (:meth:`GalerkinSystem.residual_scale`); evaluated only while
         :math:`\\|r\\| \\ge` ``tol``.
-    linear : bool
-        ``fun`` is affine in ``z`` (its Jacobian does not depend on ``z``). With a Krylov
-        solver the first solve then aims at ``tol`` itself and, once the residual meets
-        it, no further solve is made (one Krylov solve per linear system, more only where
-        one falls short); the returned factors are those of the constant Jacobian. Direct
+        A linear system -- a Jacobian operator whose ``is_linear`` is true, i.e. ``fun``
+        affine in ``z`` -- costs one Krylov solve: the first solve aims at ``tol`` itself
+        and, once the residual meets it, no further solve is made (more only where one
+        falls short); the returned factors are those of the constant Jacobian. Direct
         solvers keep their one refinement step (a back-substitution with the same
         factors: it costs little and leaves the answer at round-off).
     first : (r, J), optional
@@ -96,7 +93,7 @@ def newton(
         ok = status == SolveStatus.CONVERGED
         return NewtonInfo(ok, k, rnorm, message, label, its, status)
 
-    one_solve = linear and linear_solver is not None and linear_solver.iterative
+    iterative = linear_solver is not None and linear_solver.iterative
     for k in range(maxiter + 1):
         try:
             r, J = first if (k == 0 and first is not None) else fun(z)
@@ -122,14 +119,18 @@ def newton(
             rtol = None
         else:
             factor = linear_solver.factorize(J)
-            rtol = linear_solver.newton_rtol(rnorm, tol, floor, linear=linear)
+            rtol = linear_solver.newton_rtol(rnorm, tol, floor, linear=_is_linear(J))
         if factor is None:
             message = failure_message(SolveStatus.SINGULAR_JACOBIAN, maxiter)
             return z, None, info(SolveStatus.SINGULAR_JACOBIAN, k, message)
         # an affine residual: the Jacobian (and its factors) is the same everywhere, so
         # a correction step would only refine below tol; a start counts as solved only
         # if it is as good as a solve would make it (a warm start of a march step)
-        if one_solve and newton_converged(rnorm, tol if k else NEWTON_ETA_FACTOR * tol, floor):
+        if (
+            iterative
+            and _is_linear(J)
+            and newton_converged(rnorm, tol if k else NEWTON_ETA_FACTOR * tol, floor)
+        ):
             return z, factor, info(SolveStatus.CONVERGED, k, "converged")
         try:
             dz = factor.solve(r, rtol=rtol)
@@ -183,3 +184,9 @@ def _check_constraint(system, constraint, n_rows=None):
     if v.shape != want:
         raise ValueError(f"`v` must have shape {want}, got {v.shape}")
     return M_obs, v
+
+
+def _is_linear(J):
+    """Whether a Jacobian operator says it does not depend on the state (a dense array
+    does not say)."""
+    return getattr(J, "is_linear", False) is True

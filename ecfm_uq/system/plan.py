@@ -81,7 +81,7 @@ Shared thresholds and the Krylov acceptance rule
     floor also bounds the forcing term from below, and a Krylov answer at the round-off
     floor of :math:`|J||x|` is accepted (the generic path; the compiled marches apply
     the floor to Newton's termination and to the forcing term).
-Linear systems (``newton(..., linear=True)``; :attr:`GalerkinSystem.is_linear`)
+Linear systems (a Jacobian operator with ``is_linear``; :attr:`GalerkinSystem.is_linear`)
     With a Krylov solver a linear system costs **one solve**: its forcing term is not
     capped at :math:`10^{-4}` (it aims at :math:`0.05\\,\\mathrm{tol}` at once), and
     Newton stops as soon as the residual

@@ -236,7 +236,6 @@ def solve_steady(
     n = N * P
     Theta0 = system.zeros() if Theta0 is None else as_finite_array("Theta0", Theta0, shape=(N, P))
     linear = LinearSolver(system, opts, constrained=M_obs is not None, steady=True)
-    affine = system.is_linear  # one linear solve, no refinement once tol is met
     if M_obs is None:
         lam = system.check_lam(lam)
 
@@ -248,7 +247,7 @@ def solve_steady(
             return system.residual_scale(z.reshape(N, P), eps, lam)
 
         z, factor, info = newton(
-            fun, Theta0.ravel(), tol, maxiter, linear_solver=linear, scale=scale, linear=affine
+            fun, Theta0.ravel(), tol, maxiter, linear_solver=linear, scale=scale
         )
         Theta, lam_out = z.reshape(N, P), lam
     else:
@@ -266,9 +265,7 @@ def solve_steady(
             return s + _constraint_scale(Cth, z[:n], v)
 
         z0 = np.concatenate([Theta0.ravel(), np.zeros(system.n_forces)])
-        z, factor, info = newton(
-            fun, z0, tol, maxiter, linear_solver=linear, scale=scale, linear=affine
-        )
+        z, factor, info = newton(fun, z0, tol, maxiter, linear_solver=linear, scale=scale)
         Theta, lam_out = z[:n].reshape(N, P), z[n:]
     message = info.message
     if info.success and linear.name == "decoupled":

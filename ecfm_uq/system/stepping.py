@@ -232,7 +232,6 @@ def march(
             maxiter,
             linear_solver=linear,
             scale=scale,
-            linear=system.is_linear,
             first=first,
         )
         nits[s] = info.nit
