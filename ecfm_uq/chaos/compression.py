@@ -40,16 +40,6 @@ def _row_blocks(n, width):
     return [(a, min(a + step, n)) for a in range(0, n, step)]
 
 
-def _column_var(Y):
-    """Column variances of Y in blocks of rows (no (n, m) temporary)."""
-    n = len(Y)
-    mean = Y.mean(axis=0)
-    ss = np.zeros(Y.shape[1])
-    for a, b in _row_blocks(n, Y.shape[1]):
-        ss += ((Y[a:b] - mean) ** 2).sum(axis=0)
-    return ss / n
-
-
 def _exact_pca_bytes(n, m):
     """Peak of the exact compression: Y, its centred copy, LAPACK's copy, U, V^T, energies."""
     r = min(n, m)
@@ -234,7 +224,8 @@ def compress_outputs(
         ok = np.flatnonzero(rel.max(axis=1) <= tol)
         K = max(int(ok[0]) if ok.size else len(S), 1)
         out = (U[:, :K] * S[:K], Vt[:K], ybar, rel[K])
-        info = dict(method="exact", rank=K)
+        # the column variances (np.var's arithmetic, on the centred copy already here)
+        info = dict(method="exact", rank=K, variance=(Yc * Yc).mean(axis=0))
         return (*out, info) if return_info else out
     oversample = check_int("oversample", oversample, minimum=0)
     power_iterations = check_int("power_iterations", power_iterations, minimum=0)
@@ -258,6 +249,7 @@ def compress_outputs(
         sketch_columns=ell,
         passes=passes + 2,
         power_iterations=power_iterations,
+        variance=total / n,
     )
     out = (Z, V, ybar, error)
     return (*out, info) if return_info else out
@@ -336,9 +328,13 @@ class StreamingSketch:
             self.s2[cols] += (d * d).sum(axis=0)
         self.rows += len(block)
 
+    def _total(self):
+        """(m,) sums of squared deviations from the mean."""
+        return np.maximum(self.s2 - self.s1**2 / self.n, 0.0)
+
     def variance(self):
         """(m,) variances of the streamed components (population, ddof = 0)."""
-        return np.maximum(self.s2 - self.s1**2 / self.n, 0.0) / self.n
+        return self._total() / self.n
 
     def compress(self, tol):
         """``Z, V, ybar, error, info`` as :func:`compress_outputs` (error estimated)."""
@@ -346,7 +342,7 @@ class StreamingSketch:
             raise RuntimeError(f"the sketch holds {self.rows} of {self.n} rows")
         n = self.n
         ybar = self.shift + self.s1 / n
-        total = np.maximum(self.s2 - self.s1**2 / n, 0.0)
+        total = self._total()
         scale = np.maximum(np.abs(ybar), np.sqrt(total / n))
         const = total <= (1e-13 * scale) ** 2 * n
         # centred in place (the sketches are linear in Y); each big array is dropped as
@@ -382,6 +378,7 @@ class StreamingSketch:
             K = len(S)
         Z = Q @ (Ub[:, :K] * S[:K])
         info = dict(method="streaming", rank=K, sketch_columns=self.k, passes=1)
+        info["variance"] = total / n
         info["tolerance_met"] = bool(est.max() <= tol)
         if not info["tolerance_met"]:
             warnings.warn(

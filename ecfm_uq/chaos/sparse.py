@@ -41,7 +41,6 @@ from ..memory import check_allocation, memory_budget
 from .basis import ChaosBasis
 from .compression import (
     StreamingSketch,
-    _column_var,
     _exact_pca_bytes,
     _randomized_pca_bytes,
     _row_blocks,
@@ -585,7 +584,6 @@ def _fit_sparse(
         if streamed:
             sketch = stream.pop(0)  # dropped once compressed: only its results stay
             Z, V, ybar, comp_err, info = sketch.compress(tol)
-            var_stream = sketch.variance()
             del sketch
         else:
             Z, V, ybar, comp_err, info = compress_outputs(
@@ -605,11 +603,7 @@ def _fit_sparse(
         # component LOO error: the scores' (relative to their variances), mapped through
         # V onto each component's variance, plus what the compression discarded
         var_z = Z.var(axis=0)
-        # the exact path had room for an (n, m) temporary; the randomized one has not
-        if streamed:
-            var_yf = var_stream
-        else:
-            var_yf = yf.var(axis=0) if info["method"] == "exact" else _column_var(yf)
+        var_yf = info["variance"]  # each compression path's column variances
         var_y = np.maximum(var_yf, np.finfo(float).tiny)
         errors = (err * var_z) @ V**2 / var_y + comp_err
         errors = np.where(var_yf > 0, errors, 0.0)
