@@ -18,13 +18,14 @@ the same statistics are estimated non-intrusively from deterministic solves
 
 from __future__ import annotations
 
+import math
 import numbers
 from typing import NamedTuple
 
 import numpy as np
 
 from ._validation import as_finite_array, check_int
-from .executor import evaluate_samples
+from .executor import NonFiniteOutputError, evaluate_samples
 from .memory import check_allocation
 
 __all__ = [
@@ -149,36 +150,28 @@ def mc_moments(outputs):
 
 
 def _node_outputs(fn, nodes):
-    """``fn`` at each Gauss node, stacked; a non-finite output raises (never a NaN moment).
+    """``fn`` at each Gauss node, stacked (:func:`~ecfm_uq.executor.evaluate_samples`, in
+    process); a non-finite output raises (never a NaN moment).
 
     The first node's output sizes the (n, m) array, checked against the memory budget
     (with the two temporaries of the moments) before the other nodes run.
     """
-    first = np.asarray(fn(nodes[0]), dtype=float)
-    check_allocation(
-        8.0 * 3 * len(nodes) * first.size,
-        f"the outputs of `fn` at {len(nodes)} Gauss nodes ({first.size} values each)",
-        "let `fn` return only the values you need (e.g. the sensors), or fewer `n_points`",
-    )
-    y = np.empty((len(nodes), *first.shape))
-    y[0] = first
-    for i in range(1, len(nodes)):
-        yi = np.asarray(fn(nodes[i]), dtype=float)
-        if yi.shape != first.shape:
-            raise ValueError(
-                f"`fn` returned outputs of different shapes: {first.shape} at Gauss node 0 "
-                f"and {yi.shape} at node {i}"
-            )
-        y[i] = yi
-    bad = ~np.isfinite(y.reshape(len(nodes), -1)).all(axis=1)
-    if bad.any():
-        i = int(np.argmax(bad))
-        omega = np.array2string(np.asarray(nodes[i]), precision=6)
+
+    def check(n, shape):
+        check_allocation(
+            8.0 * 3 * n * math.prod(shape),
+            f"the outputs of `fn` at {n} Gauss nodes ({math.prod(shape)} values each)",
+            "let `fn` return only the values you need (e.g. the sensors), or fewer `n_points`",
+        )  # None: the executor fills its own (n, m) array
+
+    try:
+        return evaluate_samples(fn, nodes, workers=1, name="fn", check=check)
+    except NonFiniteOutputError as e:
+        omega = np.array2string(np.asarray(nodes[e.index]), precision=6)
         raise ValueError(
-            f"`fn` returned NaN or inf at Gauss node {i} (omega={omega}); "
+            f"`fn` returned NaN or inf at Gauss node {e.index} (omega={omega}); "
             "check the model at that germ value"
-        )
-    return y
+        ) from e
 
 
 def quadrature_moments(fn, n_points, dim=1):

@@ -220,6 +220,25 @@ def test_sampler_refuses_buckling(beam):
         beam.response_function(3.0)
 
 
+def test_quadrature_moments_refuse_outputs_over_the_budget_after_one_node():
+    from ecfm_uq.errors import MemoryBudgetError
+    from ecfm_uq.memory import set_memory_budget
+
+    calls = []
+
+    def field(omega):
+        calls.append(omega)
+        return np.full(10_000, float(np.sum(omega)))
+
+    previous = set_memory_budget(1e6)  # 3 x 16 nodes x 10^4 values x 8 B = 3.8 MB
+    try:
+        with pytest.raises(MemoryBudgetError, match="Gauss nodes"):
+            quadrature_moments(field, 4, dim=2)
+    finally:
+        set_memory_budget(previous)
+    assert len(calls) == 1  # refused from the first output, before the other 15 ran
+
+
 def test_quadrature_references_refuse_non_finite_outputs():
     # a model that returns NaN at a Gauss node must not give a NaN mean or PCE silently
     with pytest.raises(ValueError, match="NaN or inf"):
