@@ -10,8 +10,8 @@ corrected LOO error over the field, and the largest difference of the first-orde
 total indices from the per-component fits on those 100 components.
 
 Then the same fit under a memory budget of 64 MiB (``ECFM_UQ_MEMORY_BUDGET`` would do the
-same), where the exact SVD of the 300 x 10 000 evaluations (about 170 MiB at its peak) is
-refused and the randomized SVD in blocks runs instead: its time, the peak of the arrays
+same), where the exact SVD of the 300 x 10 000 evaluations (161 MiB at its peak, as
+printed) is refused and the randomized SVD in blocks runs instead: its time, the peak of the arrays
 it allocates during the fit (``tracemalloc``, after a warm-up fit, the evaluations
 included), the components kept, the
 largest compression error and the largest index difference from the exact-path fit.

@@ -247,7 +247,7 @@ def compress_outputs(
         method="randomized",
         rank=K,
         sketch_columns=ell,
-        passes=passes + 2,
+        passes=passes + 3,  # and the mean, the variances and the measured residual
         power_iterations=power_iterations,
         variance=total / n,
     )
