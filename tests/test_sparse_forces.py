@@ -138,3 +138,33 @@ def test_an_unknown_force_prior_is_named():
     with pytest.raises(ValueError, match=r"options\['force_prior'\].*'shared'.*'sparse'"):
         fit(SteadyProblem(model(), M_OBS, v), [1.0, 10.0], formulation="ecfm", sigma=sigma,
             options={"force_prior": "laplace"})  # fmt: skip
+
+
+def test_a_stochastic_fe_model_with_a_missing_source():
+    """Built differently from the rods above: a scikit-fem model with a random
+    conductivity (two germs, chaos order 2), the conductivity exponent inside the
+    operator, 25 sensors, and a narrow source missing from the mean load."""
+    pytest.importorskip("skfem")
+    from ecfm_uq.problems.fem_diffusion import build_fem_diffusion
+    from ecfm_uq.system import GalerkinSystem, LoadTerm
+
+    g = np.linspace(0.1, 0.9, 5)
+    sensors = np.array([(x, y) for y in g for x in g])
+    fem = build_fem_diffusion(12, 2, sensors=sensors, force_width=0.06, inclusion=None,
+                              modes=((1, 0), (0, 1)), sigmas=(0.3, 0.2))  # fmt: skip
+    src = build_fem_diffusion(12, 0, sensors=[[0.62, 0.37]], force_width=0.04, inclusion=None,
+                              modes=((1, 0),), sigmas=(0.0,)).Gamma[:, 0]  # fmt: skip
+    system = fem.system
+    truth = GalerkinSystem([*system.terms, LoadTerm.constant(10.0 * src)], system.n_eps,
+                           basis=system.basis)  # fmt: skip
+    clean = fem.M_obs @ system.mean(solve_steady(truth, [0.2]).Theta)
+    sigma = 1e-3 * np.abs(clean).mean()
+    v = clean + sigma * np.random.default_rng(0).standard_normal(clean.size)
+    res = fit(SteadyProblem(system, fem.M_obs, v), [0.0], formulation="ecfm", sigma=sigma,
+              options={"force_prior": "sparse"})  # fmt: skip
+    std = res.extra["standard"]
+    assert res.success and not res.verdict.consistent
+    lam = np.abs(res.extra["lam"])
+    nearest = int(np.argmin(np.linalg.norm(sensors - [0.62, 0.37], axis=1)))
+    assert np.argmax(lam) == nearest and lam.max() >= 10 * np.median(lam)
+    assert abs(res.eps[0] - 0.2) < 0.25 * abs(std.eps[0] - 0.2)
