@@ -40,6 +40,13 @@ def _row_blocks(n, width):
     return [(a, min(a + step, n)) for a in range(0, n, step)]
 
 
+def _constant(total, ybar, n):
+    """The components that do not vary (their spread below 1e-13 of their size): their
+    discarded share is 0 whatever the rank."""
+    scale = np.maximum(np.abs(ybar), np.sqrt(total / n))
+    return total <= (1e-13 * scale) ** 2 * n
+
+
 def _exact_pca_bytes(n, m):
     """Peak of the exact compression: Y, its centred copy, LAPACK's copy, U, V^T, energies."""
     r = min(n, m)
@@ -216,8 +223,7 @@ def compress_outputs(
         U, S, Vt = np.linalg.svd(Yc, full_matrices=False)
         energy = S[:, None] ** 2 * Vt**2  # (r, m): component m's variance along direction j
         total = energy.sum(axis=0)
-        scale = np.maximum(np.abs(ybar), np.sqrt(total / len(Y)))
-        const = total <= (1e-13 * scale) ** 2 * len(Y)
+        const = _constant(total, ybar, len(Y))
         tail = np.cumsum(energy[::-1], axis=0)[::-1]  # tail[k] = discarded when keeping k
         rel = np.where(const, 0.0, tail / np.where(const, 1.0, total))
         rel = np.vstack([rel, np.zeros((1, rel.shape[1]))])
@@ -234,8 +240,7 @@ def compress_outputs(
     total = np.zeros(m)
     for a, b in blocks:
         total += ((Y[a:b] - ybar) ** 2).sum(axis=0)
-    scale = np.maximum(np.abs(ybar), np.sqrt(total / n))
-    const = total <= (1e-13 * scale) ** 2 * n
+    const = _constant(total, ybar, n)
     Z, V, K, ell, passes = _randomized_pca(
         Y, ybar, total, const, tol, oversample, power_iterations, seed
     )
@@ -343,8 +348,7 @@ class StreamingSketch:
         n = self.n
         ybar = self.shift + self.s1 / n
         total = self._total()
-        scale = np.maximum(np.abs(ybar), np.sqrt(total / n))
-        const = total <= (1e-13 * scale) ** 2 * n
+        const = _constant(total, ybar, n)
         # centred in place (the sketches are linear in Y); each big array is dropped as
         # soon as it is used, so the peak is the sketches plus the small SVD
         X = self.X - ybar @ self.Omega
