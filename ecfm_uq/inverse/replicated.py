@@ -140,16 +140,18 @@ def _trust_region(fun, eps0, bounds, gtol, maxiter, trust_radius):
     trust-constr also stops, with ``success=True``, when the trust radius falls below
     ``xtol``. That is what happens when trial points keep failing (``fun`` returns
     ``inf`` where the forward or inner solve fails): the radius shrinks onto the edge
-    of the solvable region while the gradient there is large. A step-length stop whose
-    last trial failed and whose optimality misses ``gtol`` is reported as
-    ``success=False`` (a step-length stop amid finite values is round-off in the
-    objective near its minimum and stays a success).
+    of the solvable region while the gradient there is large. A step-length stop next to
+    a failed trial (within 1e-6 of the answer, relative) whose optimality misses
+    ``gtol`` is reported as ``success=False`` (a step-length stop amid finite values is
+    round-off in the objective near its minimum and stays a success). Which trial came
+    last is the radius' accident: the failures around the answer decide.
     """
-    finite = []
+    failed = []  # the trial points where the objective could not be evaluated
 
     def tracked(x):
         z, g = fun(x)
-        finite.append(bool(np.isfinite(z)))
+        if not np.isfinite(z):
+            failed.append(np.array(x, dtype=float))
         return z, g
 
     z0, g0 = tracked(np.array(eps0, dtype=float))
@@ -184,12 +186,14 @@ def _trust_region(fun, eps0, bounds, gtol, maxiter, trust_radius):
                 "initial_barrier_tolerance": 1e-8,
             },
         )
-    if res.status == 2 and not finite[-1] and not res.optimality <= gtol * scale:
+    near = 1e-6 * max(1.0, float(np.linalg.norm(res.x)))
+    at_edge = any(np.linalg.norm(x - res.x) <= near for x in failed)
+    if res.status == 2 and at_edge and not res.optimality <= gtol * scale:
         res.success = False
         res.message = (
             f"{res.message} but the optimality {res.optimality:.3e} > gtol "
             f"{gtol * scale:.3e}: the trust region collapsed onto the edge of the region "
-            "where the model can be solved (the last trial step failed)"
+            "where the model can be solved (trial steps next to it failed)"
         )
     return res
 
