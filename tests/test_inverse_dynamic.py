@@ -8,11 +8,11 @@ from ecfm_uq.chaos import ChaosBasis
 from ecfm_uq.errors import ConvergenceError
 from ecfm_uq.inverse.diagnostics import (
     condition_number,
-    fd_gradient,
     fd_hessian,
     loss_surface,
     taylor_remainders,
 )
+from ecfm_uq.inverse.finite_differences import fd_gradient
 from ecfm_uq.inverse.dynamic import DynamicInverseProblem
 from ecfm_uq.inverse.optimizers import adam
 from ecfm_uq.problems.burgers import BurgersModel

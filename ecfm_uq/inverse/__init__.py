@@ -35,6 +35,7 @@ from .likelihood import (
     sensor_moments,
 )
 from .loglik import LogLikelihood
+from .model_problem import ModelProblem
 from .noise import ConsistencyTest, consistency_test, noise_bounds, sample_moments
 from .noisy import ConstrainedInverse, fit_noisy_ecfm, fit_standard_slsqp
 from .optimizers import adam
@@ -46,6 +47,7 @@ from .steady import ecfm_objective, fit_steady, standard_objective
 
 __all__ = [
     "FitStatus",
+    "ModelProblem",
     "ReplicatedProblem",
     "SteadyProblem",
     "Uncertainty",

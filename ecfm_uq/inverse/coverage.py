@@ -264,7 +264,7 @@ def interval_coverage(
             continue
         est.append(res.eps)
         delta.append(res.eps_ci95)
-        rejected += not res.verdict.consistent
+        rejected += res.verdict.consistent is False
     if not est:
         raise ConvergenceError(f"no data set gave an interval: all {failed} fits failed")
     return {

@@ -29,23 +29,6 @@ def _grad_of(out):
     return np.asarray(out, dtype=float)
 
 
-def fd_gradient(fun, x, h):
-    """Gradient of a scalar ``fun`` by central differences,
-    :math:`g_j = (f(x + h_j e_j) - f(x - h_j e_j)) / (2h_j)` (2n calls; a non-finite value
-    passes through, for the caller to treat as a failure).
-
-    ``h``: one step for every coordinate, or one per coordinate.
-    """
-    x = np.asarray(x, dtype=float)
-    steps = np.broadcast_to(np.asarray(h, dtype=float), x.shape)
-    g = np.empty(x.size)
-    for j in range(x.size):
-        e = np.zeros(x.size)
-        e[j] = steps[j]
-        g[j] = (fun(x + e) - fun(x - e)) / (2 * e[j])
-    return g
-
-
 def fd_hessian(fun, x, h=1e-3, *, kind="gradient"):
     """Hessian of an objective by central finite differences, error :math:`O(h^2)`.
 

@@ -77,12 +77,13 @@ from scipy import optimize, stats
 
 from ..errors import ConvergenceError, ModelEvaluationError
 from ..system import solve_steady
-from .diagnostics import fd_gradient, fd_hessian
+from .diagnostics import fd_hessian
+from .finite_differences import fd_gradient
 from .loglik import LogLikelihood
 from .result import InverseResult, Uncertainty
 from .sparse_forces import sparse_force_variances
 from .status import FitStatus
-from .verdict import decide
+from .verdict import at_bound, decide
 
 __all__ = ["RandomForceModel", "fit_random_force"]
 
@@ -486,7 +487,7 @@ def fit_random_force(problem, eps0, s):
     val, g_hat, lin = _profiled(model, eps)
     grad = fd_gradient(p, x, 1e-5)
     optimality = float(np.max(np.abs(grad))) if grad.size else 0.0
-    at_bound = _at_bound(eps, s.bounds)
+    hits = at_bound(eps, s.bounds)
     # unit-free: the gradient in standard-error units; 1e-3 leaves the estimate within
     # about a thousandth of a standard error of the optimum
     if res.success or optimality < _OPTIMALITY:
@@ -512,7 +513,7 @@ def fit_random_force(problem, eps0, s):
                 "combination): the minimum may lie at infinity]"
             )
     T, p_value = model.restricted_test(lin)
-    verdict = _verdict(T, p_value, g_hat, lam, lam_sd, s.alpha, at_bound)
+    verdict = _verdict(T, p_value, g_hat, lam, lam_sd, s.alpha, hits)
     like = model.conditional_likelihood(lin, g_hat)
     result = InverseResult(
         eps=eps, loss=val, status=status, message=message,
@@ -540,17 +541,6 @@ def fit_random_force(problem, eps0, s):
                 "data covariance at tau-hat"
             )
     return result
-
-
-def _at_bound(eps, bounds):
-    if bounds is None:
-        return []
-    out = []
-    for m, (lo, hi) in enumerate(bounds):
-        for b in (lo, hi):
-            if b is not None and abs(eps[m] - b) <= 1e-8 * max(1.0, abs(b)):
-                out.append(m)
-    return out
 
 
 def _uncertainty(p, x, scale, standard, g_hat, model, lin):

@@ -211,7 +211,9 @@ def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options):
     ----------
     residual : callable
         ``eps -> (r (n,), J (n, p), payload)``; may raise ConvergenceError (the trial
-        point is rejected: the trust region shrinks).
+        point is rejected: the trust region shrinks). ``J`` may be a callable of no
+        argument (a Jacobian computed only where the optimizer asks for it: at accepted
+        points, not at rejected trials).
     eps0 : (p,) ndarray
     bounds : list of (lo, hi) or None
     tol : float or None
@@ -243,17 +245,24 @@ def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options):
     cache = {}
     counts = {"nfev": 0, "njev": 0}
 
-    def evaluate(x):
+    def evaluate(x, with_jacobian=False):
         key = np.asarray(x, dtype=float).tobytes()
         if key not in cache:
             counts["nfev"] += 1
             try:
                 cache.clear()
-                cache[key] = residual(np.array(x, dtype=float))
+                cache[key] = list(residual(np.array(x, dtype=float)))
             except ConvergenceError as e:
                 failures.append(str(e))
                 cache[key] = None
-        return cache[key]
+        ev = cache[key]
+        if with_jacobian and ev is not None and callable(ev[1]):
+            try:  # a lazy Jacobian (differenced by the problem): only where asked for
+                ev[1] = ev[1]()
+            except ConvergenceError as e:
+                failures.append(str(e))
+                cache[key] = ev = None
+        return ev
 
     first = evaluate(eps0)
     if first is None:
@@ -274,7 +283,7 @@ def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options):
         return np.asarray(ev[0], dtype=float) / scale
 
     def jac(x):
-        ev = evaluate(x)
+        ev = evaluate(x, with_jacobian=True)
         counts["njev"] += 1
         if ev is None:  # not reached: TRF asks for J only at accepted points
             return np.zeros((r0.size, np.size(x)))
@@ -289,7 +298,7 @@ def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options):
     kw.update(options)
     res = sopt.least_squares(fun, eps0, jac=jac, bounds=(lb, ub), max_nfev=maxiter, **kw)
     x = np.asarray(res.x)
-    ev = evaluate(x)
+    ev = evaluate(x, with_jacobian=True)
     nit = int(res.njev or 0)
     msg = str(res.message)
     if failures:
@@ -306,7 +315,7 @@ def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options):
     )  # fmt: skip
 
     def cached(e):
-        ev = evaluate(e)
+        ev = evaluate(e, with_jacobian=True)
         if ev is None:
             raise ConvergenceError(failures[-1])
         return ev

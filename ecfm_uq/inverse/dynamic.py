@@ -552,19 +552,19 @@ _OBJECTIVE = {
 def _verdict(problem, res, s, traj=None):
     """Whether the unforced model's trajectory at the estimate explains the data
     (``traj``: that trajectory if the caller has it)."""
-    from .verdict import EXTREME_DECADES, _at_bound, _extreme, decide, residual_verdict
+    from .verdict import EXTREME_DECADES, FORCE_RULE, _extreme, at_bound, decide, residual_verdict
 
-    at_bound = _at_bound(res.eps, s.bounds)
+    hits = at_bound(res.eps, s.bounds)
     extreme = _extreme(problem.system, res.eps, EXTREME_DECADES)
     saved = dict(problem._last)  # the check must not move the optimizer's warm starts
     try:
         traj = problem.solve(res.eps, "standard") if traj is None else traj
     except ConvergenceError as e:
         return decide(
-            "chi2" if s.sigma is not None else "force-to-data (noise-free)",
+            "chi2" if s.sigma is not None else FORCE_RULE,
             None if s.sigma is None else 0.0, s.alpha,
             [f"the unforced model cannot be marched at the estimate: {e}"],
-            explained=False, at_bound=at_bound, extreme=extreme,
+            explained=False, at_bound=hits, extreme=extreme,
         )  # fmt: skip
     finally:
         problem._last = saved
@@ -574,6 +574,6 @@ def _verdict(problem, res, s, traj=None):
         lam = res.extra["lam"][1:]
         details["peak_force_index"] = int(np.argmax(np.abs(lam).max(axis=0)))
     return residual_verdict(
-        e, problem.V[1:], s.sigma, s.alpha, problem.system.n_eps, at_bound=at_bound,
-        extreme=extreme, details=details,
+        e, problem.V[1:], s.sigma, s.alpha, problem.system.n_eps, at_bound=hits,
+        extreme=extreme, details=details, forces="lam" in res.extra,
     )  # fmt: skip

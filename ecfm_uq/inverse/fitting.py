@@ -35,6 +35,8 @@ import numbers
 import warnings
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 from .._validation import check_int, check_positive
 from ..system.plan import dense_unknowns
 from ..threads import library_threads
@@ -50,7 +52,7 @@ class FitSettings:
 
     formulation: str
     method: str
-    sigma: float | None
+    sigma: object
     bounds: list | None
     tol: float | None
     maxiter: int | None
@@ -74,9 +76,11 @@ class FitSettings:
 
 def _problem_kind(problem):
     from .dynamic import DynamicInverseProblem
+    from .model_problem import ModelProblem
     from .problems import ReplicatedProblem, SteadyProblem
 
     for cls, kind in (
+        (ModelProblem, "model"),
         (SteadyProblem, "steady"),
         (DynamicInverseProblem, "dynamic"),
         (ReplicatedProblem, "replicated"),
@@ -84,21 +88,38 @@ def _problem_kind(problem):
         if isinstance(problem, cls):
             return kind
     raise TypeError(
-        f"`problem` must be a SteadyProblem, DynamicInverseProblem or ReplicatedProblem, got "
-        f"{type(problem).__name__}; e.g. fit(SteadyProblem(system, M_obs, v), eps0)"
+        "`problem` must be a ModelProblem, SteadyProblem, DynamicInverseProblem or "
+        f"ReplicatedProblem, got {type(problem).__name__}; e.g. "
+        "fit(ModelProblem(model, data), eps0) for a model that is a Python function"
     )
 
 
-def _check_sigma(sigma):
+def _check_sigma(sigma, kind, n_data):
     if sigma is None:
         return None
+    if kind == "model":
+        from .noise_model import noise_model
+
+        noise_model(sigma, n_data)  # raises naming `sigma` and the shapes it may take
+        return sigma
+    if not isinstance(sigma, numbers.Real) and np.ndim(sigma) > 0:
+        raise TypeError(
+            f"`sigma` for a {kind} problem is one noise standard deviation for every "
+            "observation in this version; a per-observation sigma or a covariance is taken "
+            "by ModelProblem (or whiten the data and the model's predictions by hand)"
+        )
     try:
         return check_positive("sigma", sigma)
     except (TypeError, ValueError) as e:
         raise type(e)(f"{e}; `sigma` is the known sensor noise standard deviation") from e
 
 
-@library_threads(size=lambda problem, *a, **k: dense_unknowns(problem.system))
+def _size(problem, *args, **kwargs):
+    system = getattr(problem, "system", None)
+    return None if system is None else dense_unknowns(system)
+
+
+@library_threads(size=_size)
 def fit(
     problem,
     eps0,
@@ -176,11 +197,12 @@ def fit(
         maxiter = check_int("maxiter", maxiter, minimum=1)
     if not isinstance(uncertainty, bool | numbers.Integral):
         raise TypeError(f"`uncertainty` must be True or False, got {uncertainty!r}")
+    n_eps = problem.system.n_eps if kind != "model" else np.size(eps0)
     settings = FitSettings(
         formulation=formulation,
         method=method,
-        sigma=_check_sigma(sigma),
-        bounds=check_bounds(bounds, problem.system.n_eps),
+        sigma=_check_sigma(sigma, kind, getattr(problem, "n_data", None)),
+        bounds=check_bounds(bounds, n_eps),
         tol=tol,
         maxiter=maxiter,
         options=dict(options or {}),
@@ -194,6 +216,10 @@ def fit(
         settings = replace(
             settings, options={k: v for k, v in settings.options.items() if k != "forces"}
         )
+    if kind == "model":
+        from .model_problem import fit_model_problem
+
+        return fit_model_problem(problem, eps0, settings)
     if kind == "steady" and forces == "random" and settings.sigma is not None:
         from .discrepancy import fit_random_force as fitter
     elif kind == "steady":

@@ -26,11 +26,11 @@ no :class:`LogLikelihood` and :func:`~ecfm_uq.inverse.profile_intervals` says so
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["LogLikelihood", "likelihood_of"]
+__all__ = ["LogLikelihood", "gaussian_likelihood", "likelihood_of"]
 
 
 @dataclass(frozen=True)
@@ -61,6 +61,12 @@ class LogLikelihood:
     description: str
     exact_gradient: bool = True  # False: finite differences, accurate to about 1e-6
     value_only: Callable | None = None  # the value without the gradient's extra solves
+    #: for a Gaussian least-squares likelihood: ``residual(eps)`` the whitened residual,
+    #: ``residual_jacobian(eps, columns)`` its Jacobian's columns and ``of_rss(rss)`` the
+    #: likelihood of a sum of squares, so profiles re-optimize by least squares
+    residual: Callable | None = None
+    residual_jacobian: Callable | None = None
+    of_rss: Callable | None = None
 
     def __call__(self, eps):
         return self.evaluate(np.asarray(eps, dtype=float))
@@ -100,6 +106,47 @@ def _least_squares(rss_and_grad, n_data, n_eps, sigma, what, rss_only=None):
     return LogLikelihood(
         evaluate, n_eps, n_data, "profiled sigma", f"{what}, Gaussian noise, sigma profiled out"
     )
+
+
+def gaussian_likelihood(residual, n_data, n_eps, noise, what, residual_columns):
+    """The :class:`LogLikelihood` of a whitened least-squares residual, or why there is none.
+
+    ``residual(eps) -> (r, J, payload)`` with ``r`` whitened by ``noise``
+    (:class:`~.noise_model.NoiseModel`) and ``J`` its Jacobian (or a callable giving it);
+    ``residual_columns(eps, columns)`` the Jacobian's ``columns`` alone (cheaper to
+    difference). Known noise: :math:`\\ell = \\tfrac12\\|r\\|^2`; unknown:
+    :math:`\\tfrac n2\\log\\|r\\|^2` (sigma profiled out).
+    """
+
+    def jacobian(J):
+        return J() if callable(J) else J
+
+    def rss_and_grad(eps):
+        r, J, _ = residual(eps)
+        return float(r @ r), 2.0 * jacobian(J).T @ r
+
+    def rss_only(eps):
+        r = residual(eps)[0]
+        return float(r @ r)
+
+    like = _least_squares(rss_and_grad, n_data, n_eps, 1.0 if noise.known else None, what, rss_only)
+    if isinstance(like, str):
+        return like
+    if noise.known:
+        desc = f"{what}, Gaussian noise ({noise.describe()})"
+
+        def of_rss(rss):
+            return 0.5 * rss
+    else:
+        desc = like.description
+
+        def of_rss(rss):
+            return 0.5 * n_data * np.log(rss) if rss > 0 else -np.inf
+
+    return replace(
+        like, description=desc, residual=lambda eps: residual(eps)[0],
+        residual_jacobian=residual_columns, of_rss=of_rss,
+    )  # fmt: skip
 
 
 def likelihood_of(problem, formulation, sigma):

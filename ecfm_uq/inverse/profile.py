@@ -12,9 +12,14 @@ covers the truth far less often than it says. The profile likelihood does not as
     \\ell_p(t) = \\min_{\\epsilon:\\ \\epsilon_i = t} \\ell(\\epsilon), \\qquad
     \\{t : 2(\\ell_p(t) - \\ell(\\hat\\epsilon)) \\le \\chi^2_{1,\\,\\mathrm{level}}\\}
 
-is the likelihood-ratio interval (Wilks). Each profile point re-optimizes the other
-parameters (L-BFGS-B on the exact gradient: the adjoint where the problem uses it),
-warm-started from the previous point; the profile walks out from the estimate with steps
+is the likelihood-ratio interval (Wilks). With :math:`\\sigma` estimated (profiled out)
+the threshold is the profile-t one of Bates & Watts, :math:`\\tfrac n2\\log(1 +
+F_{1,n-p}/(n-p))` (:func:`profile_threshold`: exact for a linear model, where the
+chi-squared threshold under-covers with few data), and the delta-method intervals beside
+it use the same rule (Student-t with :math:`n - p` degrees of freedom). Each profile point
+re-optimizes the other parameters — by trust-region least squares on the residual for a
+Gaussian likelihood (the Jacobian's free columns only), else L-BFGS-B on the exact
+gradient (the adjoint where the problem uses it) — warm-started from the previous point; the profile walks out from the estimate with steps
 sized by the delta-method standard error, growing where the profile is flat, and the
 crossing is refined by Brent's method. A profile that does not reach the threshold
 before the parameter's bound, before the model fails, or within ``max_steps`` steps
@@ -37,7 +42,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from ..errors import ConvergenceError, ModelEvaluationError
-from .diagnostics import fd_gradient
+from .finite_differences import fd_gradient
 
 __all__ = [
     "LikelihoodRatioTest",
@@ -72,7 +77,7 @@ class Profile:
     eps : (k, n_eps) ndarray
         The re-optimized parameters along the profile.
     threshold : float
-        :math:`\\tfrac12\\chi^2_{1,\\mathrm{level}}`, the crossing level of ``delta``.
+        The crossing level of ``delta`` (:func:`profile_threshold`).
     interval : (2,) ndarray
         The likelihood-ratio interval (an end may be a bound or infinite).
     reasons : tuple of str
@@ -166,6 +171,32 @@ class LikelihoodRatioTest:
     dof: int
     p_value: float
     eps: np.ndarray
+
+
+def profile_threshold(like, level):
+    """The crossing level of :math:`\\ell_p(t) - \\hat\\ell`.
+
+    Known noise: :math:`\\tfrac12\\chi^2_{1,\\mathrm{level}}` (Wilks). Sigma profiled out
+    (:math:`\\ell = \\tfrac n2\\log S`, :math:`S` the sum of squares): the profile-t
+    interval of Bates & Watts (1988, Sec. 6.1), :math:`S(t) \\le S(\\hat\\epsilon)\\,(1 +
+    F_{1,n-p,\\mathrm{level}}/(n - p))`, i.e. :math:`\\tfrac n2\\log(1 + F/(n - p))`, which
+    is exact for a model linear in its parameters (the t interval) and does not
+    under-cover with few data as the chi-squared threshold does.
+    """
+    if like.noise == "profiled sigma":
+        dof = like.n_data - like.n_eps
+        F = stats.f.ppf(level, 1, dof)
+        return 0.5 * like.n_data * np.log1p(F / dof)
+    return 0.5 * stats.chi2.ppf(level, 1)
+
+
+def _quantile(result, level):
+    """The delta-method quantile at ``level`` on the fit's own rule: Student-t with the
+    uncertainty's ``dof`` where sigma was estimated, normal otherwise."""
+    unc = result.uncertainty
+    dof = None if unc is None else unc.dof
+    q = 0.5 + 0.5 * level
+    return stats.norm.ppf(q) if dof is None else stats.t.ppf(q, dof)
 
 
 def _likelihood(result):
@@ -311,10 +342,13 @@ class _Profiler:
         for k, x_start in enumerate([*starts, np.zeros(free.size)]):
             if k == len(starts) and best is not None and best.success:
                 break
-            res = optimize.minimize(
-                fun, x_start, jac=True, method="L-BFGS-B", bounds=bnds,
-                options=self.inner_options,
-            )  # fmt: skip
+            if self.like.residual is not None:
+                res = self._least_squares(point, free, s, x_start, bnds)
+            else:
+                res = optimize.minimize(
+                    fun, x_start, jac=True, method="L-BFGS-B", bounds=bnds,
+                    options=self.inner_options,
+                )  # fmt: skip
             if best is None or res.fun < best.fun:
                 best = res
         res = best
@@ -326,6 +360,40 @@ class _Profiler:
         eps[free] = self.eps_hat[free] + s * res.x
         self.visited.append(eps.copy())
         return float(res.fun) - self.ell_hat, eps
+
+    def _least_squares(self, point, free, s, x_start, bnds):
+        """The inner problem of a Gaussian likelihood by trust-region least squares on its
+        residual (the Jacobian's free columns only: a differenced model pays for those)."""
+        like = self.like
+        n = like.n_data
+
+        def fun(x):
+            self.nfev += 1
+            try:
+                r = like.residual(point(x))
+            except _MODEL_FAILURES:
+                return np.full(n, np.inf)  # the trust region shrinks away from it
+            return r
+
+        def jac(x):
+            return like.residual_jacobian(point(x), free) * s
+
+        lb = np.array([b[0] for b in bnds], dtype=float)
+        ub = np.array([b[1] for b in bnds], dtype=float)
+        x_start = np.clip(x_start, lb, ub)
+        if not np.all(np.isfinite(fun(x_start))):
+            return optimize.OptimizeResult(x=x_start, fun=self.ell_hat + _WALL, success=False)
+        try:
+            res = optimize.least_squares(
+                fun, x_start, jac=jac, bounds=(lb, ub), method="trf", x_scale="jac",
+                ftol=1e-12, xtol=1e-12, gtol=1e-12, max_nfev=200,
+            )  # fmt: skip
+        except _MODEL_FAILURES:
+            return optimize.OptimizeResult(x=x_start, fun=self.ell_hat + _WALL, success=False)
+        r = res.fun
+        return optimize.OptimizeResult(
+            x=res.x, fun=float(like.of_rss(float(r @ r))), success=res.status > 0
+        )
 
 
 def _walk(prof, i, direction, threshold, start_step, bound, max_steps):
@@ -470,14 +538,14 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
             "sigma unknown has no likelihood interval: pass `sigma` to fit"
         )
     se, naive, scale = _scales(result, like, eps_hat)
-    threshold = np.full(n, 0.5 * stats.chi2.ppf(level, 1))
+    threshold = np.full(n, profile_threshold(like, level))
     if like.noise == "replicated" and naive is not None:
         # a pseudo-likelihood is not the data's likelihood: its curvature is not the
         # estimate's precision. Magnitude adjustment (Chandler & Bate 2007): scale the
         # threshold by the robust (sandwich) over the naive (inverse-Hessian) variance
         robust = np.where(np.isfinite(se), se**2, np.diag(naive))
         threshold = threshold * robust / np.diag(naive)
-    z = stats.norm.ppf(0.5 + 0.5 * level)
+    z = _quantile(result, level)
     delta_ci = np.column_stack([eps_hat - z * se, eps_hat + z * se])
 
     recentred = []

@@ -97,14 +97,17 @@ class Verdict(Mapping):
     """Whether the fitted model explains the data: a test of stated size, one rule for all.
 
     ``consistent`` is ``p_value >= alpha`` (the data are compatible with the model plus
-    its noise at level ``alpha``), and no parameter ran to a bound or to an extreme value.
-    For noise-free data (no noise model) there is no test of stated size: ``p_value`` and
-    ``alpha`` are ``None`` and the rule is that the constraint forces change the
-    observations by at most ``rtol`` of the data (``details["force_to_data"]``).
+    its noise at level ``alpha``). For the exact-match ECFM on noise-free data there is no
+    test of stated size: ``p_value`` and ``alpha`` are ``None`` and the rule is that the
+    constraint forces change the observations by at most ``rtol`` of the data
+    (``details["force_to_data"]``). A least-squares fit without a noise level or
+    replicates has no test at all: ``consistent`` is ``None`` and ``message`` says what to
+    give. See :mod:`ecfm_uq.inverse.verdict`.
 
     Attributes
     ----------
-    consistent : bool
+    consistent : bool or None
+        ``None``: no test (no noise level, no replicates).
     p_value : float or None
     alpha : float or None
         The test's size (default 0.05).
@@ -117,6 +120,10 @@ class Verdict(Mapping):
     details : dict
         Test-specific numbers (``chi2``, ``force_to_data``, ``peak_sensor_index``,
         ``peak_force_index``, ``at_bound``, ``extreme``, ...).
+    identifiability : str
+        Parameters at a bound (which side) or coefficients at an extreme value: a finding
+        about what the data determine, reported beside the test, never folded into
+        ``consistent``; empty when there is none.
 
     Notes
     -----
@@ -124,13 +131,14 @@ class Verdict(Mapping):
     v0.2 dict form.
     """
 
-    consistent: bool
+    consistent: bool | None
     p_value: float | None = None
     alpha: float | None = None
     test: str = ""
     statistic: float | None = None
     message: str = ""
     details: dict = field(default_factory=dict)
+    identifiability: str = ""
 
     def _view(self):
         out = {
@@ -239,6 +247,7 @@ class InverseResult:
         uncertainty_message="",
         eps_jacobian=None,
         covariance_method=None,
+        dof=None,
     ):
         self.eps = np.asarray(eps, dtype=float)
         self.loss = float(loss)
@@ -265,6 +274,7 @@ class InverseResult:
                 eps_stderr,
                 eps_ci95,
                 noise_model=noise_model,
+                dof=dof,
                 jacobian=eps_jacobian,
                 method=(covariance_method or "implicit") if computed else "",
             )
@@ -275,6 +285,7 @@ class InverseResult:
         self.likelihood = None  # set by fit: a LogLikelihood, or why there is none
         self.interval_likelihood = None  # set by fit where the intervals use another one
         self.bounds = None  # the bounds the fit ran with
+        self.names = None  # parameter names, where the problem has them
 
     # -- status ---------------------------------------------------------------------------
     @property
@@ -316,11 +327,27 @@ class InverseResult:
         self.uncertainty = dataclasses.replace(self.uncertainty, message=str(value))
 
     def __repr__(self):
+        consistent = None if self.verdict is None else self.verdict.consistent
         return (
-            f"InverseResult(method={self.method!r}, eps={np.array2string(self.eps, precision=6)}, "
-            f"loss={self.loss:.3e}, success={self.success}, status={self.status.name}, "
-            f"nit={self.nit}, message={self.message!r})"
+            f"<InverseResult {self.method} {self.status.name}: eps="
+            f"{np.array2string(self.eps, precision=6)}, consistent={consistent}>"
         )
+
+    def summary(self, level=0.95):
+        """A table of the fit, as statsmodels and lmfit print one.
+
+        One row per parameter: estimate, standard error, the ``level`` interval (the
+        profile-likelihood interval where :func:`~ecfm_uq.inverse.profile_likelihood` has
+        run at that level, else the delta-method one, labelled), then the status, the
+        measured optimality and the verdict with its test and p-value.
+
+        Returns
+        -------
+        str
+        """
+        from .summary_table import summary_table
+
+        return summary_table(self, level)
 
 
 def _alias_property(old, new):

@@ -218,7 +218,7 @@ def fit_steady_problem(problem, eps0, s):
         system, M_obs, v, res.x, lam, bounds, sigma=sigma, alpha=s.alpha,
         n_fitted=system.n_eps, solution=free,
     )  # fmt: skip
-    if not verdict.consistent:
+    if verdict.consistent is False:
         msg += f" [{verdict.message}]"
     return InverseResult(
         **unc,

@@ -31,6 +31,7 @@ from scipy import stats
 
 from .._validation import as_finite_array
 from ..errors import ConvergenceError, NonIdentifiableError
+from .finite_differences import fd_jacobian
 
 #: an information matrix whose smallest/largest singular value is below this is singular
 #: (its finite-difference entries carry ~1e-10 relative round-off)
@@ -395,6 +396,7 @@ def estimate_uncertainty(
         "eps_ci95": ci,
         "noise_model": noise_model,
         "eps_jacobian": D,
+        "dof": dof,
         "covariance_method": (
             "implicit" if hessian is None and deps_dv is None else "gauss-newton"
         ),
@@ -403,19 +405,9 @@ def estimate_uncertainty(
 
 def _fd_jacobian(f, x, rel_step=1e-6, stencil=2):
     """Central-difference Jacobian of ``f`` at ``x`` (the stencil of
-    :func:`implicit_covariance`)."""
-    cols = []
-    for k in range(x.size):
-        h = rel_step * max(abs(x[k]), 1.0)
-
-        def at(t, k=k, h=h):
-            xt = x.copy()
-            xt[k] += t * h
-            return f(xt)
-
-        d1 = at(1.0) - at(-1.0)
-        if stencil == 2:
-            cols.append(d1 / (2 * h))
-        else:
-            cols.append((8 * d1 - (at(2.0) - at(-2.0))) / (12 * h))
-    return np.column_stack(cols)
+    :func:`implicit_covariance`: 2 or 4 points, steps ``rel_step * max(|x|, 1)``)."""
+    x = np.asarray(x, dtype=float)
+    return fd_jacobian(
+        f, x, method="3-point" if stencil == 2 else "5-point",
+        steps=rel_step * np.maximum(np.abs(x), 1.0),
+    )  # fmt: skip

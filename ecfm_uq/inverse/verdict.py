@@ -3,21 +3,27 @@
 An optimizer's ``success`` only says that it stopped at a stationary point. Every fit
 also answers "can this model explain these data?" with a :class:`~.result.Verdict`
 built by :func:`decide`, the one rule: a test of stated size ``alpha`` (default
-:data:`DEFAULT_ALPHA` = 0.05 for every formulation) whose p-value is at least ``alpha``,
-and no parameter at a bound or at an extreme value. The test depends on what the data
-carry:
+:data:`DEFAULT_ALPHA` = 0.05 for every formulation) and ``consistent = p_value >= alpha``.
+The test depends on what the data carry:
 
-* one data set with known noise sigma: the chi-squared test of the unforced model's
-  residual at the estimate, :math:`\\|e\\|^2/\\sigma^2 \\sim \\chi^2_{C - n_\\epsilon}`
-  (:func:`consistency_verdict`);
+* one data set with known noise (``sigma``: a number, one per observation or a
+  covariance): the chi-squared test of the unforced model's whitened residual at the
+  estimate, :math:`\\|W e\\|^2 \\sim \\chi^2_{n - n_\\epsilon}` (:func:`residual_verdict`);
 * the paper's noisy ECFM: its z and chi-squared moment bounds (Eq. ecfm_noise), combined
   by Bonferroni (:func:`moments_bounds_verdict`);
 * replicated data: z-tests of the sensor means against the model's moments, Bonferroni
   over the sensors (:func:`~ecfm_uq.inverse.moments.moment_verdict`);
-* noise-free data (no noise model): no test has a size; the rule is that the constraint
-  forces change the observations by at most ``rtol`` of the data (for ECFM, paper Eq.
-  ecfm: they vanish at a consistent fit and stay large on data the model cannot
-  explain).
+* the random-force ECFM: the restricted likelihood-ratio test of :math:`\tau = 0`;
+* the exact-match ECFM on noise-free data (paper Eq. ecfm): no test has a size; the
+  forces must change the observations by at most ``rtol`` of the data (they vanish at a
+  consistent fit and stay large on data the model cannot explain), labelled as such;
+* a least-squares fit with neither ``sigma`` nor replicates: **no test**. A residual has
+  no scale to be judged against, so ``consistent`` is ``None`` and the message says what
+  to give (``sigma``, replicates).
+
+An estimate at a bound or a coefficient at an extreme value is an identifiability
+finding, not a failed test: it is reported in ``Verdict.identifiability`` (which
+parameters, which side) and in the message, and never changes ``consistent``.
 """
 
 from __future__ import annotations
@@ -36,6 +42,10 @@ FORCE_TO_DATA_RTOL = 1e-3
 EXTREME_DECADES = 8.0
 #: the size of every consistency test unless the caller chooses another
 DEFAULT_ALPHA = 0.05
+#: the name of the exact-match ECFM's rule (noise-free data, no test of stated size)
+FORCE_RULE = "force-to-data (exact-match ECFM, noise-free)"
+#: a parameter within this fraction of its box's width of a bound is at it
+AT_BOUND_RTOL = 1e-8
 
 
 def check_alpha(alpha):
@@ -56,16 +66,17 @@ def decide(test, p_value, alpha, parts, *, statistic=None, explained=None, at_bo
     test : str
         Name of the test.
     p_value : float or None
-        ``None`` for the noise-free rule (then ``explained`` decides).
+        ``None`` for a rule without a size (then ``explained`` decides) or no test.
     alpha : float or None
         The test's size.
     parts : list of str
         Sentences describing the test's outcome (joined into the message).
     statistic : float, optional
-    explained : bool, optional
-        Whether the data are explained, for the noise-free rule.
-    at_bound : sequence of int
-        Parameters at a bound.
+    explained : bool or None, optional
+        Whether the data are explained, for a rule without a p-value; ``None`` (and no
+        ``p_value``): no test, ``consistent`` is ``None``.
+    at_bound : sequence of int or of (int, str)
+        Parameters at a bound (with the side, ``"lower"``/``"upper"``).
     extreme : sequence of (name, value)
         Coefficients at an extreme value.
     details : dict, optional
@@ -76,26 +87,51 @@ def decide(test, p_value, alpha, parts, *, statistic=None, explained=None, at_bo
     """
     if p_value is not None:
         explained = bool(p_value >= alpha)
-    parts = list(parts)
+    at_bound = [b if isinstance(b, tuple) else (int(b), "") for b in at_bound]
+    findings = []
     if at_bound:
-        parts.append(f"parameters {list(at_bound)} are at a bound")
+        where = ", ".join(f"{i} ({side})" if side else str(i) for i, side in at_bound)
+        findings.append(
+            f"parameters [{where}] at a bound: the data do not keep them inside (a ridge or "
+            "a flat likelihood); see profile_likelihood(result).regions"
+        )
     if extreme:
         name, c = extreme[0]
-        parts.append(f"coefficient of term {name!r} is extreme ({c:.3g})")
-    consistent = bool(explained and not at_bound and not extreme)
-    word = "model and data are consistent" if consistent else "NOT consistent"
+        findings.append(f"coefficient of term {name!r} is extreme ({c:.3g})")
+    parts = list(parts)
+    consistent = None if explained is None else bool(explained)
+    word = {
+        True: "model and data are consistent",
+        False: "NOT consistent",
+        None: "no consistency test",
+    }[consistent]
     details = dict(details or {})
-    details.setdefault("at_bound", list(at_bound))
+    details.setdefault("at_bound", [i for i, _ in at_bound])
     details.setdefault("extreme", list(extreme))
+    message = f"{word}: " + "; ".join(parts)
+    if findings:
+        message += "; identifiability: " + "; ".join(findings)
     return Verdict(
         consistent=consistent,
         p_value=None if p_value is None else float(p_value),
         alpha=None if p_value is None else float(alpha),
         test=test,
         statistic=None if statistic is None else float(statistic),
-        message=f"{word}: " + "; ".join(parts),
+        message=message,
         details=details,
+        identifiability="; ".join(findings),
     )
+
+
+def no_test(reason=None, *, at_bound=(), extreme=(), details=None):
+    """The verdict of a fit whose data carry no noise model: ``consistent=None``."""
+    reason = reason or (
+        "without a noise level a residual has no scale to be judged against; pass "
+        "`sigma` (a number, one per observation or a covariance) or fit replicated data "
+        "for a chi-squared test"
+    )
+    return decide("none", None, None, [reason], explained=None, at_bound=at_bound,
+                  extreme=extreme, details=details)  # fmt: skip
 
 
 def moments_bounds_verdict(test, sigma, alpha=DEFAULT_ALPHA, at_bound=()):
@@ -208,9 +244,10 @@ def consistency_verdict(
         out["peak_force_index"] = int(np.argmax(np.abs(lam)))
     sol = solve_steady(system, eps, **dict(solve_options or {})) if solution is None else solution
     at_bound, extreme = _at_bound(eps, bounds), _extreme(system, eps, extreme_decades)
+    forces = lam is not None and lam.size > 0
     if not sol.success:
         parts = [f"the unforced model cannot be solved at eps={eps.tolist()}: {sol.message}"]
-        test = "chi2" if sigma is not None else "force-to-data (noise-free)"
+        test = "chi2" if sigma is not None else FORCE_RULE
         return decide(
             test, None if sigma is None else 0.0, alpha, parts, explained=False,
             at_bound=at_bound, extreme=extreme, details=out,
@@ -218,17 +255,18 @@ def consistency_verdict(
     e = v - M_obs @ system.mean(sol.Theta)
     return residual_verdict(
         e, v, sigma, alpha, n_fitted, rtol=rtol, at_bound=at_bound, extreme=extreme,
-        details=out,
+        details=out, forces=forces,
     )  # fmt: skip
 
 
 def residual_verdict(e, v, sigma=None, alpha=DEFAULT_ALPHA, n_fitted=0, *, rtol=FORCE_TO_DATA_RTOL,
-                     at_bound=(), extreme=(), details=None):  # fmt: skip
+                     at_bound=(), extreme=(), details=None, forces=False):  # fmt: skip
     """The verdict from the unforced model's residual ``e = v - M theta(eps, lam=0)``.
 
     With ``sigma``: the chi-squared test :math:`\\|e\\|^2/\\sigma^2 \\sim
-    \\chi^2_{n - n_{fitted}}` at size ``alpha``. Without: the noise-free rule
-    ``force_to_data = ||e|| / ||v|| <= rtol``.
+    \\chi^2_{n - n_{fitted}}` at size ``alpha``. Without: for the exact-match ECFM
+    (``forces``) the noise-free rule ``force_to_data = ||e|| / ||v|| <= rtol``; for a
+    least-squares fit no test (:func:`no_test`).
 
     Parameters
     ----------
@@ -257,6 +295,8 @@ def residual_verdict(e, v, sigma=None, alpha=DEFAULT_ALPHA, n_fitted=0, *, rtol=
     force = out.get("peak_force_index")
     where = "" if force is None else f"; largest force {force}"
     if sigma is None:
+        if not forces:
+            return no_test(at_bound=at_bound, extreme=extreme, details=out)
         explained = out["force_to_data"] <= rtol
         parts = [
             f"the forces change the observations by {out['force_to_data']:.2e} of the "
@@ -264,7 +304,7 @@ def residual_verdict(e, v, sigma=None, alpha=DEFAULT_ALPHA, n_fitted=0, *, rtol=
             f"{out['peak_sensor_index']}{where}"
         ]
         return decide(
-            "force-to-data (noise-free)", None, alpha, parts, explained=explained,
+            FORCE_RULE, None, alpha, parts, explained=explained,
             at_bound=at_bound, extreme=extreme, details=out,
         )  # fmt: skip
     sigma = check_positive("sigma", sigma)
@@ -313,17 +353,29 @@ def check_bounds(bounds, n_eps):
     return pairs
 
 
-def _at_bound(eps, bounds):
+def at_bound(eps, bounds, rtol=AT_BOUND_RTOL):
+    """The parameters at a bound, as ``(index, "lower" | "upper")`` pairs: the one test
+    (within ``rtol`` of the box's width, or of the parameter's size when a side is open)."""
     if bounds is None:
         return []
     hits = []
     for m, (x, b) in enumerate(zip(eps, bounds, strict=False)):
         lo, hi = (None, None) if b is None else b
-        width = (hi - lo) if lo is not None and hi is not None else 1.0
-        tol = 1e-8 * max(abs(width), 1e-300)
-        if (lo is not None and x <= lo + tol) or (hi is not None and x >= hi - tol):
-            hits.append(m)
+        lo = None if lo is None or not np.isfinite(lo) else lo
+        hi = None if hi is None or not np.isfinite(hi) else hi
+        if lo is not None and hi is not None:
+            width = hi - lo
+        else:
+            width = max(abs(x), abs(lo or 0.0), abs(hi or 0.0), 1e-300)
+        tol = rtol * max(abs(width), 1e-300)
+        if lo is not None and x <= lo + tol:
+            hits.append((m, "lower"))
+        elif hi is not None and x >= hi - tol:
+            hits.append((m, "upper"))
     return hits
+
+
+_at_bound = at_bound
 
 
 def _extreme(system, eps, decades):
@@ -340,3 +392,14 @@ def _extreme(system, eps, decades):
         if c != 0.0 and abs(np.log10(abs(c))) > decades:
             found.append((term.name, c))
     return found
+
+
+def model_verdict(r, v, noise, n_fitted, bounds, eps, *, alpha=DEFAULT_ALPHA, failed=None):
+    """The verdict of a least-squares fit of whitened residual ``r`` to whitened data ``v``:
+    the chi-squared test with known noise, no test without (:func:`no_test`)."""
+    hits = at_bound(eps, bounds)
+    if failed is not None:
+        return decide("chi2" if noise.known else "none", 0.0 if noise.known else None, alpha,
+                      [f"the model cannot be evaluated at the estimate: {failed}"],
+                      explained=False if noise.known else None, at_bound=hits)  # fmt: skip
+    return residual_verdict(r, v, 1.0 if noise.known else None, alpha, n_fitted, at_bound=hits)
