@@ -13,7 +13,13 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from .studies import available_studies, default_settings, load_study, run_study
+from .studies import (
+    STUDY_NAMES,
+    default_settings,
+    load_study,
+    missing_requirements,
+    run_study,
+)
 from .studies._common import write_atomic
 
 
@@ -33,7 +39,7 @@ def render_summary(entries):
     for name, rows, figures, error, seconds in entries:
         lines += [f"## {name}", ""]
         if error is not None:
-            lines += [f"**FAILED**: {error}", ""]
+            lines += [error if error.startswith("skipped") else f"**FAILED**: {error}", ""]
             continue
         lines += [f"Result: [`{name}/result.json`]({name}/result.json), {seconds:.1f} s.", ""]
         lines += ["| quantity | paper | ours | holds |", "|---|---|---|---|"]
@@ -56,24 +62,35 @@ def reproduce_all(out, progress, seed=None, names=None):
         After writing the summary, if any study failed (the message names them).
     """
     out = Path(out)
-    names = available_studies() if names is None else list(names)
+    names = list(STUDY_NAMES) if names is None else list(names)
     entries, failed = [], []
     with progress.bar(len(names), "studies") as bar:
         for name in names:
             progress.log(f"running {name} ...")
             t0 = time.perf_counter()
+            missing = missing_requirements(name)
+            if missing:  # an optional extra not installed: skipped, and said how to get it
+                req, extra = missing[0]
+                why = f'needs {req}: pip install -e ".[{extra}]"'
+                entries.append((name, [], [], f"skipped ({why})", 0.0))
+                progress.report(f"{name}: skipped, {why}")
+                bar.update()
+                continue
             try:
                 settings = default_settings(name, out, seed)
                 result = run_study(name, settings, out, progress)
                 rows = load_study(name).summary_rows(result)
                 figures = sorted((out / name).glob("*.png"))
                 entries.append((name, rows, figures, None, time.perf_counter() - t0))
+                progress.report(f"{name}: {entries[-1][-1]:.0f} s, results in {out / name}")
             except Exception as e:  # noqa: BLE001 - recorded, then re-raised as one failure
                 msg = f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"
                 entries.append((name, [], [], msg, time.perf_counter() - t0))
                 failed.append(f"{name} ({msg})")
+                progress.report(f"{name}: FAILED after {entries[-1][-1]:.0f} s: {msg}")
             bar.update()
     write_atomic(out / "summary.md", render_summary(entries))
+    progress.report(f"wrote {out / 'summary.md'}")
     if failed:
         raise RuntimeError("studies failed: " + "; ".join(failed))
     return entries

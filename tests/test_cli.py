@@ -108,3 +108,64 @@ def test_data_flows_one_way_studies_summary_cli():
         imported = {n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
         imported |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
         assert not any(m.split(".")[-1] == "cli" for m in imported), (mod.__name__, imported)
+
+
+def test_study_description_renders_as_written():
+    """argparse %-formats help strings, not descriptions: '95%' stays '95%'."""
+    r = run_cli("reproduce", "coverage", "--help")
+    assert r.returncode == 0, r.stderr
+    assert "95%" in r.stdout and "%%" not in r.stdout
+
+
+def test_written_files_have_the_usual_permissions(tmp_path):
+    import os
+    import stat
+
+    from ecfm_uq.plotting import pyplot, save_figure
+
+    old = os.umask(0o022)
+    try:
+        write_json(tmp_path / "r.json", {"a": 1})
+        fig, _ = pyplot().subplots()
+        save_figure(fig, tmp_path / "f.png")
+    finally:
+        os.umask(old)
+    for name in ("r.json", "f.png"):
+        assert stat.S_IMODE((tmp_path / name).stat().st_mode) == 0o644, name
+
+
+def test_reproduce_all_writes_a_line_per_study_to_a_log(tmp_path, monkeypatch):
+    """Not a terminal (a log file under nohup or CI): one line per study with its seconds
+    and folder, a skipped study says which extra installs it, the last line names
+    summary.md."""
+    import io
+
+    from ecfm_uq import summary
+    from ecfm_uq.studies._common import Progress
+
+    def fake_run(name, settings, out, progress):
+        (out / name).mkdir(parents=True, exist_ok=True)
+        return {"name": name}
+
+    monkeypatch.setattr(summary, "default_settings", lambda name, out, seed: {})
+    monkeypatch.setattr(summary, "run_study", fake_run)
+    monkeypatch.setattr(summary, "load_study", lambda name: type("M", (), {
+        "summary_rows": staticmethod(lambda r: [])}))  # fmt: skip
+    monkeypatch.setattr(
+        summary, "missing_requirements", lambda name: [("skfem", "fem")] if name == "b" else []
+    )
+    log = io.StringIO()
+    summary.reproduce_all(tmp_path, Progress(stream=log), names=["a", "b"])
+    lines = log.getvalue().splitlines()
+    assert lines[0].startswith("a: ") and f"results in {tmp_path / 'a'}" in lines[0]
+    assert lines[1] == 'b: skipped, needs skfem: pip install -e ".[fem]"'
+    assert lines[-1] == f"wrote {tmp_path / 'summary.md'}"
+    assert "skipped" in (tmp_path / "summary.md").read_text()
+
+
+def test_a_study_without_its_extra_names_the_extra(monkeypatch):
+    from ecfm_uq import studies
+
+    monkeypatch.setattr(studies, "missing_requirements", lambda name: [("skfem", "fem")])
+    with pytest.raises(RuntimeError, match=r'pip install -e "\.\[fem\]"'):
+        studies.run_study("missing-physics", {}, "unused", None)

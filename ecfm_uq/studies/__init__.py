@@ -32,8 +32,10 @@ __all__ = [
     "STUDY_NAMES",
     "add_common_arguments",
     "available_studies",
+    "check_requirements",
     "default_settings",
     "load_study",
+    "missing_requirements",
     "run_study",
 ]
 
@@ -47,20 +49,34 @@ def load_study(name):
     return importlib.import_module(f"ecfm_uq.studies.{_module_name(name)}")
 
 
+#: the extra that installs a study's optional requirement (``pip install -e ".[extra]"``)
+EXTRAS = {"skfem": "fem"}
+
+
+def missing_requirements(name):
+    """The optional packages study ``name`` needs and does not have, with their extras."""
+    mod = load_study(name)
+    return [
+        (req, EXTRAS.get(req, req))
+        for req in getattr(mod, "REQUIRES", ())
+        if importlib.util.find_spec(req) is None
+    ]
+
+
+def check_requirements(name):
+    """Raise a RuntimeError naming the extra to install if study ``name`` lacks one."""
+    missing = missing_requirements(name)
+    if missing:
+        req, extra = missing[0]
+        raise RuntimeError(
+            f'study {name!r} needs {req}, which is not installed: pip install -e ".[{extra}]" '
+            f"(or pip install ecfm-uq[{extra}])"
+        )
+
+
 def available_studies():
-    """Names of the studies whose modules are installed."""
-    names = []
-    for name in STUDY_NAMES:
-        try:
-            mod = load_study(name)
-        except ModuleNotFoundError as e:
-            if e.name != f"ecfm_uq.studies.{_module_name(name)}":
-                raise
-            continue
-        # a study needing an optional extra (e.g. scikit-fem) is skipped without it
-        if all(importlib.util.find_spec(req) is not None for req in getattr(mod, "REQUIRES", ())):
-            names.append(name)
-    return names
+    """Names of the studies whose requirements (optional extras) are installed."""
+    return [name for name in STUDY_NAMES if not missing_requirements(name)]
 
 
 def add_common_arguments(p):
@@ -82,6 +98,7 @@ def default_settings(name, out, seed=None):
 
 def run_study(name, settings, out_root, progress):
     """Run one study with ``settings`` and write ``out_root/name/result.json``."""
+    check_requirements(name)
     mod = load_study(name)
     out_dir = Path(out_root) / name
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -7,12 +7,11 @@ Study modules hold no numerics: they read settings, call the library, and write
 from __future__ import annotations
 
 import json
-import os
 import sys
-import tempfile
-from pathlib import Path
 
 import numpy as np
+
+from .._files import atomic_path
 
 
 def to_jsonable(obj):
@@ -40,17 +39,8 @@ def to_jsonable(obj):
 
 def write_atomic(path, data, mode="w"):
     """Write ``data`` to ``path`` via a temporary file and an atomic rename."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, mode) as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_path(path, suffix=".tmp") as tmp, open(tmp, mode) as fh:
+        fh.write(data)
 
 
 def write_json(path, result):
@@ -66,6 +56,7 @@ class Progress:
 
     def __init__(self, quiet=False, stream=None):
         self.stream = sys.stderr if stream is None else stream
+        self.quiet = quiet
         self.enabled = (not quiet) and hasattr(self.stream, "isatty") and self.stream.isatty()
 
     def bar(self, total, desc):
@@ -74,8 +65,14 @@ class Progress:
         return tqdm(total=total, desc=desc, disable=not self.enabled, file=self.stream, leave=False)
 
     def log(self, msg):
+        """A line on a terminal only (progress detail)."""
         if self.enabled:
             print(msg, file=self.stream)
+
+    def report(self, msg):
+        """A line on any stream, a terminal or a log file, unless ``quiet``."""
+        if not self.quiet:
+            print(msg, file=self.stream, flush=True)
 
 
 QUIET = Progress(quiet=True)
