@@ -312,13 +312,18 @@ def _heat_system(F=None, forces=True, n=8):
 
 
 def test_bfgs_fit_on_unexplainable_data_says_the_coefficient_ran_away():
-    """Standard BFGS on data of the wrong sign drives 10**eps up; the verdict says so."""
+    """Standard BFGS on data of the wrong sign drives 10**eps up; the verdict says so: an
+    identifiability finding (no noise level given, so no consistency test), and with sigma
+    the chi-squared test fails too."""
     system, M = _heat_system(forces=False)
     v = -np.ones(3)  # a positive load can never give negative deflections
     res = fit_steady(system, M, v, [0.0], "standard", options={"maxiter": 200})
     assert np.all(np.isfinite(res.eps))
-    assert res.extra["verdict"]["consistent"] is False
+    assert res.verdict.consistent is None
+    assert "coefficient of term 'linear' is extreme" in res.verdict.identifiability
     assert "coefficient of term 'linear' is extreme" in res.message
+    res = fit_steady(system, M, v, [0.0], "standard", options={"maxiter": 200}, sigma=0.1)
+    assert res.verdict.consistent is False
 
 
 def test_objective_overflow_is_a_convergence_error_not_overflow_error():

@@ -10,13 +10,30 @@ DOCS = Path(__file__).resolve().parents[1] / "docs"
 
 def test_getting_started_tutorial_recovers_parameters():
     text = (DOCS / "getting-started.md").read_text()
-    code = re.findall(r"```python\n(.*?)```", text, re.S)[0]
+    code = re.findall(r"```python\n(.*?)```", text, re.S)[1]
     code = code.replace("    print(res)", "    results[formulation] = res")
     ns = {"results": {}}
     exec(compile(code, "getting-started.md", "exec"), ns)
     for res in ns["results"].values():
         assert res.success, res.message
         np.testing.assert_allclose(res.eps, [0.3, 2.0], rtol=1e-6)
+
+
+def test_getting_started_function_model_matches_r_nls():
+    """The Michaelis-Menten example is Bates & Watts' Puromycin (treated) data: R's
+    ``nls`` gives V_max = 212.7 (se 6.947), K_m = 0.06412 (se 0.008281), and MASS's
+    ``confint`` (profile-t) V_max in [197.3, 229.3], K_m in [0.04693, 0.08616]."""
+    text = (DOCS / "getting-started.md").read_text()
+    code = re.findall(r"```python\n(.*?)```", text, re.S)[0]
+    ns = {}
+    exec(compile(code.replace("print(res.summary())", ""), "getting-started.md", "exec"), ns)
+    res = ns["res"]
+    assert res.success and res.verdict.consistent is None
+    np.testing.assert_allclose(res.eps, [212.7, 0.06412], rtol=5e-4)
+    np.testing.assert_allclose(res.uncertainty.stderr, [6.947, 0.008281], rtol=5e-4)
+    iv = res.extra["profile"].intervals
+    r = np.array([[197.3, 229.3], [0.04693, 0.08616]])
+    assert np.all(np.abs(iv - r) <= 2e-3 * (r[:, 1:] - r[:, :1])), iv
 
 
 def test_fem_tutorial_runs_and_recovers_parameters():

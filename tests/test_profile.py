@@ -56,18 +56,20 @@ def test_linear_model_intervals_are_the_closed_form(known_sigma):
     res = fit(SteadyProblem(system, M_OBS, v), [1.0, 1.0], sigma=sigma if known_sigma else None)
     eps_hat, rss_hat = np.linalg.lstsq(J, v, rcond=None)[:2]
     np.testing.assert_allclose(res.eps, eps_hat, rtol=1e-7)
-    q = stats.chi2.ppf(0.95, 1)
     cii = np.diag(np.linalg.inv(J.T @ J))
-    if known_sigma:  # 2 delta ell = (t - eps_hat)^2 / (sigma^2 c_ii)
-        half = np.sqrt(q * sigma**2 * cii)
-    else:  # n log(RSS(t)/RSS_hat) = q with RSS(t) = RSS_hat + (t - eps_hat)^2 / c_ii
-        half = np.sqrt(rss_hat[0] * np.expm1(q / v.size) * cii)
+    if known_sigma:  # 2 delta ell = (t - eps_hat)^2 / (sigma^2 c_ii) <= chi2_1
+        half = np.sqrt(stats.chi2.ppf(0.95, 1) * sigma**2 * cii)
+    else:  # profile-t: RSS(t) = RSS_hat + (t - eps_hat)^2 / c_ii <= RSS_hat (1 + F/(n-p)),
+        # the Student-t interval t_{n-p} s sqrt(c_ii) of linear regression
+        dof = v.size - 2
+        half = stats.t.ppf(0.975, dof) * np.sqrt(rss_hat[0] / dof * cii)
     ci = profile_intervals(res, 0.95)
     np.testing.assert_allclose(ci, np.column_stack([eps_hat - half, eps_hat + half]), rtol=1e-6)
     summary = res.extra["profile"]
-    if known_sigma:  # quadratic likelihood: the delta method is exact and agrees
-        assert not summary.disagree.any(), summary.message
-        np.testing.assert_allclose(summary.delta_intervals, ci, rtol=1e-6)
+    # a linear model: the delta method is exact, on the same quantile, and agrees
+    assert not summary.disagree.any(), summary.message
+    np.testing.assert_allclose(summary.delta_intervals, ci, rtol=1e-6)
+    assert res.uncertainty.dof == (None if known_sigma else v.size - 2)
 
 
 def test_likelihood_ratio_test_is_the_closed_form_quadratic():

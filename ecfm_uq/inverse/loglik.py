@@ -108,7 +108,30 @@ def _least_squares(rss_and_grad, n_data, n_eps, sigma, what, rss_only=None):
     )
 
 
-def gaussian_likelihood(residual, n_data, n_eps, noise, what, residual_columns):
+def remember_last_point(residual):
+    """``residual(eps) -> (r, J, payload)`` remembering its last point and that point's
+    Jacobian (``J`` a callable evaluated once): the residual and then its Jacobian at the
+    same point cost one model evaluation, not two."""
+    last = {}
+
+    def remembered(eps):
+        key = np.asarray(eps, dtype=float).tobytes()
+        if last.get("key") != key:
+            r, J, payload = residual(eps)
+            box = {}
+
+            def jacobian():
+                if "J" not in box:
+                    box["J"] = J() if callable(J) else J
+                return box["J"]
+
+            last.update(key=key, value=(r, jacobian, payload))
+        return last["value"]
+
+    return remembered
+
+
+def gaussian_likelihood(residual, n_data, n_eps, noise, what, residual_columns=None):
     """The :class:`LogLikelihood` of a whitened least-squares residual, or why there is none.
 
     ``residual(eps) -> (r, J, payload)`` with ``r`` whitened by ``noise``
@@ -117,6 +140,12 @@ def gaussian_likelihood(residual, n_data, n_eps, noise, what, residual_columns):
     difference). Known noise: :math:`\\ell = \\tfrac12\\|r\\|^2`; unknown:
     :math:`\\tfrac n2\\log\\|r\\|^2` (sigma profiled out).
     """
+
+    residual = remember_last_point(residual)
+    if residual_columns is None:
+
+        def residual_columns(eps, columns):
+            return residual(eps)[1]()[:, columns]
 
     def jacobian(J):
         return J() if callable(J) else J
@@ -133,7 +162,7 @@ def gaussian_likelihood(residual, n_data, n_eps, noise, what, residual_columns):
     if isinstance(like, str):
         return like
     if noise.known:
-        desc = f"{what}, Gaussian noise ({noise.describe()})"
+        desc = f"{what}, Gaussian noise {noise.describe()}"
 
         def of_rss(rss):
             return 0.5 * rss
@@ -187,21 +216,18 @@ def likelihood_of(problem, formulation, sigma):
             "intervals"
         )
     if isinstance(problem, SteadyProblem):
-        from ..system import solve_steady
-        from .steady import standard_objective
+        from .noise_model import noise_model
+        from .steady import lazy_standard_residual
 
-        solve_kw = {**problem.solve_options, "gradient": problem.gradient}
+        noise = noise_model(sigma, problem.v.size)
 
-        def rss(eps):
-            z, g, _ = standard_objective(problem.system, problem.M_obs, problem.v, eps, **solve_kw)
-            return 2.0 * z, 2.0 * g
+        def residual(eps):
+            r, J, sol = lazy_standard_residual(
+                problem.system, problem.M_obs, problem.v, eps, **problem.solve_options
+            )
+            return noise.whiten(r), lambda: noise.whiten(J()), sol
 
-        def rss_only(eps):
-            sol = solve_steady(problem.system, eps, strict=True, **problem.solve_options)
-            r = problem.M_obs @ problem.system.mean(sol.Theta) - problem.v
-            return float(r @ r)
-
-        return _least_squares(rss, problem.v.size, n_eps, sigma, "steady least squares", rss_only)
+        return gaussian_likelihood(residual, problem.v.size, n_eps, noise, "steady least squares")
     if isinstance(problem, DynamicInverseProblem):
         dt = problem.dt
 

@@ -247,7 +247,7 @@ class ModelProblem:
 def fit_model_problem(problem, eps0, s):
     """:func:`~ecfm_uq.inverse.fit` for a :class:`ModelProblem` (validated settings ``s``)."""
     from .drivers import least_squares_scaled
-    from .loglik import gaussian_likelihood
+    from .loglik import gaussian_likelihood, remember_last_point
     from .noise_model import noise_model
     from .result import InverseResult
     from .status import FitStatus
@@ -266,7 +266,7 @@ def fit_model_problem(problem, eps0, s):
             "(trust-region reflective, the default)"
         )
     # run to round-off (scipy's 1e-8 stops ENSO and MGH09 at 1e-6 of NIST's values);
-    # whether the stop is an optimum is decided by the relative-offset test afterwards
+    # whether the end is an optimum is the relative-offset test's say
     options = s.take({"polish": True, "x_scale": "jac", "ftol": 1e-15, "xtol": 1e-15,
                       "gtol": 1e-15})  # fmt: skip
     eps0 = as_finite_array("eps0", eps0, ndim=1)
@@ -280,7 +280,7 @@ def fit_model_problem(problem, eps0, s):
     if problem.names is not None and len(problem.names) != p:
         raise ValueError(f"`names` has {len(problem.names)} entries for {p} parameters")
     noise = noise_model(s.sigma, n)
-    residual = problem.residual_function(noise, typical=eps0)
+    residual = remember_last_point(problem.residual_function(noise, typical=eps0))
     maxiter = 2000 if s.maxiter is None else s.maxiter
     try:
         out = least_squares_scaled(residual, eps0, bounds, s.tol, maxiter, options)

@@ -465,7 +465,7 @@ def fit_replicated_problem(problem, eps0, s):
     )
     eps_hat = np.asarray(x[: system.n_eps], dtype=float)
     verdict = moment_verdict(p.mu, p.var, like.v, alpha=s.alpha)
-    if verdict.consistent is False:
+    if verdict.consistent is False or verdict.identifiability:
         msg += f" [{verdict.message}]"
     if not s.uncertainty:
         unc = {"uncertainty_message": "not computed (uncertainty=False)"}

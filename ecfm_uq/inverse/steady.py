@@ -100,10 +100,20 @@ def standard_residual(system, M_obs, v, eps, **solve_kw):
     """
     M_obs, v = _data(system, M_obs, v)
     solve_kw.pop("gradient", None)
+    r, J, sol = lazy_standard_residual(system, M_obs, v, eps, **solve_kw)
+    return r, J(), sol
+
+
+def lazy_standard_residual(system, M_obs, v, eps, **solve_kw):
+    """:func:`standard_residual` with the Jacobian as a callable: the sensitivity solves
+    run only when it is called (a trial point an optimizer rejects needs none)."""
     sol = solve_steady(system, eps, strict=True, **solve_kw)
-    dTheta, _ = sol.eps_sensitivity()
-    J = M_obs @ np.einsum("ikm,k->im", dTheta, system.E1)
-    return M_obs @ system.mean(sol.Theta) - v, np.asarray(J), sol
+
+    def jacobian():
+        dTheta, _ = sol.eps_sensitivity()
+        return np.asarray(M_obs @ np.einsum("ikm,k->im", dTheta, system.E1))
+
+    return M_obs @ system.mean(sol.Theta) - v, jacobian, sol
 
 
 def ecfm_residual(system, M_obs, v, eps, **solve_kw):
@@ -218,7 +228,7 @@ def fit_steady_problem(problem, eps0, s):
         system, M_obs, v, res.x, lam, bounds, sigma=sigma, alpha=s.alpha,
         n_fitted=system.n_eps, solution=free,
     )  # fmt: skip
-    if verdict.consistent is False:
+    if verdict.consistent is False or verdict.identifiability:
         msg += f" [{verdict.message}]"
     return InverseResult(
         **unc,
