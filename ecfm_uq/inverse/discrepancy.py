@@ -431,7 +431,7 @@ def fit_random_force(problem, eps0, s):
     Starts from the standard estimate (``tau = 0``) and minimizes the marginal likelihood
     with ``tau`` profiled out.
     """
-    from .fitting import FitSettings
+    from .settings import FitSettings
     from .steady import fit_steady_problem
 
     system = problem.system

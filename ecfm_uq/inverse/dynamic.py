@@ -308,6 +308,27 @@ class DynamicInverseProblem:
         method = self.standard_objective if formulation == "standard" else self.ecfm_objective
         return method(eps, gradient=False)[0]
 
+    def log_likelihood(self, formulation, sigma):
+        """The :class:`~.loglik.LogLikelihood` of a standard fit: Gaussian least squares
+        over the ``n = P C`` readings (sigma known, or profiled out), or why there is none."""
+        from .loglik import least_squares_likelihood, no_likelihood
+
+        if formulation != "standard":
+            return no_likelihood(formulation)
+        dt = self.dt
+
+        def rss(eps):  # z = dt/2 * sum of squared residuals over the P readings
+            z, g, _ = self.standard_objective(eps, gradient=True)
+            return 2.0 * z / dt, 2.0 * g / dt
+
+        def rss_only(eps):
+            return 2.0 * self.loss(eps, "standard") / dt
+
+        return least_squares_likelihood(
+            rss, int(np.size(self.V[1:])), self.system.n_eps, sigma,
+            "trajectory least squares", rss_only,
+        )  # fmt: skip
+
     # -- optimization ----------------------------------------------------------------------
     def fit(
         self,

@@ -33,45 +33,17 @@ from __future__ import annotations
 
 import numbers
 import warnings
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 
 from .._validation import check_int, check_positive
 from ..system.plan import dense_unknowns
 from ..threads import library_threads
-from .loglik import likelihood_of
+from .settings import FitSettings
 from .verdict import DEFAULT_ALPHA, check_alpha, check_bounds
 
-__all__ = ["FitSettings", "fit"]
-
-
-@dataclass(frozen=True)
-class FitSettings:
-    """The validated arguments of :func:`fit`, handed to the problem kind's fitter."""
-
-    formulation: str
-    method: str
-    sigma: object
-    bounds: list | None
-    tol: float | None
-    maxiter: int | None
-    options: dict = field(default_factory=dict)
-    uncertainty: bool = True
-    alpha: float = DEFAULT_ALPHA
-
-    def take(self, known):
-        """``options`` completed by the defaults in ``known`` (name -> default).
-
-        Raises TypeError naming any option this formulation and method do not know.
-        """
-        unknown = sorted(set(self.options) - set(known))
-        if unknown:
-            raise TypeError(
-                f"`options` has unknown name(s) {unknown} for formulation="
-                f"{self.formulation!r}, method={self.method!r}; known: {sorted(known)}"
-            )
-        return {**known, **self.options}
+__all__ = ["fit"]
 
 
 def _problem_kind(problem):
@@ -220,7 +192,9 @@ def fit(
         from .model_problem import fit_model_problem
 
         return fit_model_problem(problem, eps0, settings)
-    if kind == "steady" and forces == "random" and settings.sigma is not None:
+    if kind == "steady" and (formulation == "noisy-ecfm" or method == "all-at-once"):
+        from .noisy import fit_all_at_once as fitter
+    elif kind == "steady" and forces == "random" and settings.sigma is not None:
         from .discrepancy import fit_random_force as fitter
     elif kind == "steady":
         from .steady import fit_steady_problem as fitter
@@ -231,7 +205,7 @@ def fit(
     result = fitter(problem, eps0, settings)
     # what the profile likelihood needs: the likelihood (or why there is none), the bounds
     if result.likelihood is None:
-        result.likelihood = likelihood_of(problem, settings.formulation, settings.sigma)
+        result.likelihood = problem.log_likelihood(settings.formulation, settings.sigma)
     result.bounds = settings.bounds
     return result
 

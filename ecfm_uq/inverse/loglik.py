@@ -1,10 +1,12 @@
 """The negative log-likelihood of a fit as a function of :math:`\\epsilon`.
 
 A fit "has a likelihood" when its objective is (up to a constant and a positive factor) the
-negative log-likelihood of the data under a stated noise model. :func:`likelihood_of`
-decides that once, for every problem kind and formulation, and returns a
-:class:`LogLikelihood` (or the reason there is none); the profile-likelihood intervals and
-likelihood-ratio tests of :mod:`.profile` are built on it.
+negative log-likelihood of the data under a stated noise model. Each problem kind says
+so once, in its ``log_likelihood(formulation, sigma)`` method, with the builders here
+(:func:`gaussian_likelihood` for a whitened residual, :func:`least_squares_likelihood`
+for a sum of squares and its gradient), returning a :class:`LogLikelihood` or the reason
+there is none; the profile-likelihood intervals and likelihood-ratio tests of
+:mod:`.profile` are built on it.
 
 =====================  ==================  ==============================================
 problem                formulation         :math:`\\ell(\\epsilon)` (negative log-likelihood)
@@ -30,7 +32,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["LogLikelihood", "gaussian_likelihood", "likelihood_of"]
+__all__ = [
+    "LogLikelihood",
+    "gaussian_likelihood",
+    "least_squares_likelihood",
+    "no_likelihood",
+    "remember_last_point",
+]
 
 
 @dataclass(frozen=True)
@@ -77,7 +85,7 @@ class LogLikelihood:
         return float(self.value_only(eps) if self.value_only else self.evaluate(eps)[0])
 
 
-def _least_squares(rss_and_grad, n_data, n_eps, sigma, what, rss_only=None):
+def least_squares_likelihood(rss_and_grad, n_data, n_eps, sigma, what, rss_only=None):
     """``rss_and_grad(eps) -> (||r||^2, d||r||^2/deps)`` to :class:`LogLikelihood`."""
     if sigma is not None:
         s2 = float(sigma) ** 2
@@ -158,7 +166,9 @@ def gaussian_likelihood(residual, n_data, n_eps, noise, what, residual_columns=N
         r = residual(eps)[0]
         return float(r @ r)
 
-    like = _least_squares(rss_and_grad, n_data, n_eps, 1.0 if noise.known else None, what, rss_only)
+    like = least_squares_likelihood(
+        rss_and_grad, n_data, n_eps, 1.0 if noise.known else None, what, rss_only
+    )
     if isinstance(like, str):
         return like
     if noise.known:
@@ -178,66 +188,10 @@ def gaussian_likelihood(residual, n_data, n_eps, noise, what, residual_columns=N
     )  # fmt: skip
 
 
-def likelihood_of(problem, formulation, sigma):
-    """The :class:`LogLikelihood` of a fit, or a string saying why it has none.
-
-    Parameters
-    ----------
-    problem : SteadyProblem, DynamicInverseProblem or ReplicatedProblem
-    formulation : str
-        The formulation the fit ran.
-    sigma : float or None
-        The known noise standard deviation given to the fit.
-    """
-    from .dynamic import DynamicInverseProblem
-    from .problems import ReplicatedProblem, SteadyProblem
-
-    n_eps = problem.system.n_eps
-    if isinstance(problem, ReplicatedProblem):
-        if formulation != "standard":
-            return (
-                f"formulation={formulation!r} of the pseudo-likelihood optimizes constraint "
-                "forces, not the likelihood of eps; refit with formulation='standard' for "
-                "likelihood intervals"
-            )
-        like = problem.likelihood
-
-        def evaluate(eps):
-            p = like.evaluate(eps, None, order=1)
-            return p.value, p.grad_eps
-
-        return LogLikelihood(
-            evaluate, n_eps, like.C * like.D, "replicated", "pseudo-likelihood of replicated data"
-        )
-    if formulation != "standard":
-        return (
-            f"formulation={formulation!r} minimizes constraint forces, not a likelihood of "
-            "the data; refit with formulation='standard' (with `sigma`) for likelihood "
-            "intervals"
-        )
-    if isinstance(problem, SteadyProblem):
-        from .noise_model import noise_model
-        from .steady import lazy_standard_residual
-
-        noise = noise_model(sigma, problem.v.size)
-
-        def residual(eps):
-            r, J, sol = lazy_standard_residual(
-                problem.system, problem.M_obs, problem.v, eps, **problem.solve_options
-            )
-            return noise.whiten(r), lambda: noise.whiten(J()), sol
-
-        return gaussian_likelihood(residual, problem.v.size, n_eps, noise, "steady least squares")
-    if isinstance(problem, DynamicInverseProblem):
-        dt = problem.dt
-
-        def rss(eps):  # z = dt/2 * sum of squared residuals over the P readings
-            z, g, _ = problem.standard_objective(eps, gradient=True)
-            return 2.0 * z / dt, 2.0 * g / dt
-
-        def rss_only(eps):
-            return 2.0 * problem.loss(eps, "standard") / dt
-
-        n_data = int(np.size(problem.V[1:]))
-        return _least_squares(rss, n_data, n_eps, sigma, "trajectory least squares", rss_only)
-    return f"no likelihood is defined for a {type(problem).__name__}"
+def no_likelihood(formulation):
+    """Why a fit of ``formulation`` has no likelihood of eps (a string, for messages)."""
+    return (
+        f"formulation={formulation!r} minimizes constraint forces, not a likelihood of "
+        "the data; refit with formulation='standard' (with `sigma`) for likelihood "
+        "intervals"
+    )

@@ -89,6 +89,27 @@ class SteadyProblem:
         new.v = as_finite_array("v", v, shape=self.v.shape)
         return new
 
+    def log_likelihood(self, formulation, sigma):
+        """The :class:`~.loglik.LogLikelihood` of a fit of ``formulation`` (the standard
+        one: Gaussian least squares of the sensors' residual), or why there is none."""
+        from .loglik import gaussian_likelihood, no_likelihood
+        from .noise_model import noise_model
+        from .steady import lazy_standard_residual
+
+        if formulation != "standard":
+            return no_likelihood(formulation)
+        noise = noise_model(sigma, self.v.size)
+
+        def residual(eps):
+            r, J, sol = lazy_standard_residual(
+                self.system, self.M_obs, self.v, eps, **self.solve_options
+            )
+            return noise.whiten(r), lambda: noise.whiten(J()), sol
+
+        return gaussian_likelihood(
+            residual, self.v.size, self.system.n_eps, noise, "steady least squares"
+        )
+
 
 class ReplicatedProblem:
     """A stochastic (chaos) model and replicated data, for the pseudo-likelihood fits.
@@ -130,6 +151,28 @@ class ReplicatedProblem:
     def n_replicates(self):
         """Replicates per sensor D."""
         return self.v.shape[1]
+
+    def log_likelihood(self, formulation, sigma):
+        """The pseudo-likelihood :math:`\\Lambda(\\epsilon, 0)` (Eq. Lam) for the standard
+        formulation, or why the force formulations have none."""
+        from .loglik import LogLikelihood
+
+        if formulation != "standard":
+            return (
+                f"formulation={formulation!r} of the pseudo-likelihood optimizes constraint "
+                "forces, not the likelihood of eps; refit with formulation='standard' for "
+                "likelihood intervals"
+            )
+        like = self.likelihood
+
+        def evaluate(eps):
+            p = like.evaluate(eps, None, order=1)
+            return p.value, p.grad_eps
+
+        return LogLikelihood(
+            evaluate, self.system.n_eps, like.C * like.D, "replicated",
+            "pseudo-likelihood of replicated data",
+        )  # fmt: skip
 
 
 def data_size(problem):

@@ -134,6 +134,9 @@ def ecfm_residual(system, M_obs, v, eps, **solve_kw):
 
 
 _OBJECTIVES = {"standard": standard_objective, "ecfm": ecfm_objective}
+#: options of the least-squares method: ours, then scipy.optimize.least_squares' keywords
+LEAST_SQUARES_OPTIONS = ("covariance", "polish", "maxiter", "ftol", "xtol", "gtol", "x_scale",
+                         "loss", "f_scale", "diff_step", "tr_solver", "tr_options", "verbose")  # fmt: skip
 _RESIDUALS = {"standard": standard_residual, "ecfm": ecfm_residual}
 #: the least-squares driver's options (the rest go to scipy.optimize.least_squares) and
 #: the covariance conventions
@@ -149,12 +152,8 @@ _DEFAULT_MAX_NFEV = 2000
 
 def fit_steady_problem(problem, eps0, s):
     """:func:`~ecfm_uq.inverse.fit` for a :class:`~.problems.SteadyProblem` (validated
-    settings ``s``, a :class:`~.fitting.FitSettings`)."""
+    settings ``s``, a :class:`~.settings.FitSettings`)."""
     system = problem.system
-    if s.formulation == "noisy-ecfm" or s.method == "all-at-once":
-        from .noisy import fit_all_at_once
-
-        return fit_all_at_once(problem, eps0, s)
     if s.formulation not in _OBJECTIVES:
         raise ValueError(
             f"unknown `formulation` {s.formulation!r}; choose 'standard', 'ecfm' or 'noisy-ecfm'"
@@ -167,6 +166,8 @@ def fit_steady_problem(problem, eps0, s):
     method = "least-squares" if lsq else s.method
     if not lsq:
         check_minimize_method(method)
+    if lsq:  # by name, before any model solve (scipy would refuse after the first)
+        s.take(dict.fromkeys(LEAST_SQUARES_OPTIONS))
     options = dict(s.options)
     covariance = options.pop("covariance", "gauss-newton")
     if covariance not in _COVARIANCES:

@@ -272,3 +272,22 @@ def test_profile_t_intervals_cover_with_few_data():
         hits += (iv[:, 0] <= TRUTH) & (TRUTH <= iv[:, 1])
     coverage = hits / R
     assert np.all((0.93 <= coverage) & (coverage <= 0.97)), coverage
+
+
+def test_an_unknown_option_of_a_galerkin_fit_is_refused_before_a_solve():
+    """The default least-squares path of a SteadyProblem checks options by name too."""
+    from ecfm_uq.inverse import SteadyProblem
+    from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm
+
+    calls = []
+
+    def load(e, t):
+        calls.append(1)
+        return e[0] * np.ones(3)
+
+    system = GalerkinSystem(
+        [LinearTerm(np.eye(3)), LoadTerm(load, lambda e, t: np.ones((3, 1)))], 1
+    )
+    with pytest.raises(TypeError, match=r"typo.*known"):
+        fit(SteadyProblem(system, np.eye(3), np.ones(3)), [0.5], options={"typo": 1})
+    assert calls == []
