@@ -79,12 +79,18 @@ class Profile:
     threshold : float
         The crossing level of ``delta`` (:func:`profile_threshold`).
     interval : (2,) ndarray
-        The likelihood-ratio interval (an end may be a bound or infinite).
+        The likelihood-ratio interval (an end may be a bound or infinite): the hull of
+        ``regions``.
     reasons : tuple of str
-        Why each end is where it is (``"crossed"`` or the reason it is open).
+        Why each end is where it is (``"crossed"`` or the reason it is open, or where the
+        profile comes back below the threshold).
     delta_method : (2,) ndarray
         :math:`\\hat\\epsilon_i \\pm z\\,\\mathrm{se}_i` at the same level (NaN without
         standard errors).
+    regions : tuple of (lower, upper)
+        Every piece of the parameter's range where the profile is below the threshold:
+        the one around the estimate, and beyond a rise toward a finite bound (a second
+        basin, a ridge to the bound: :func:`profile_likelihood` scans to the bound).
     """
 
     index: int
@@ -95,6 +101,7 @@ class Profile:
     interval: np.ndarray
     reasons: tuple
     delta_method: np.ndarray
+    regions: tuple = ()
 
     @property
     def agrees(self):
@@ -142,6 +149,9 @@ class ProfileSummary:
         True where the delta-method interval is not to be trusted (an end off by more than
         ``AGREEMENT_RTOL`` of its half-width, or an open profile end).
     message : str
+    regions : dict of int -> list of (lower, upper)
+        Each profiled parameter's pieces below the threshold (``intervals`` are their
+        hulls).
     """
 
     level: float
@@ -150,6 +160,7 @@ class ProfileSummary:
     profiles: dict = field(default_factory=dict)
     disagree: np.ndarray = None
     message: str = ""
+    regions: dict = field(default_factory=dict)
 
     def plot(self, names=None):
         """One panel per profiled parameter; returns the figure."""
@@ -380,20 +391,61 @@ class _Profiler:
 
         lb = np.array([b[0] for b in bnds], dtype=float)
         ub = np.array([b[1] for b in bnds], dtype=float)
-        x_start = np.clip(x_start, lb, ub)
-        if not np.all(np.isfinite(fun(x_start))):
-            return optimize.OptimizeResult(x=x_start, fun=self.ell_hat + _WALL, success=False)
         try:
-            res = optimize.least_squares(
-                fun, x_start, jac=jac, bounds=(lb, ub), method="trf", x_scale="jac",
-                ftol=1e-12, xtol=1e-12, gtol=1e-12, max_nfev=200,
-            )  # fmt: skip
+            x, rss, ok = _levenberg_marquardt(fun, jac, x_start, lb, ub)
         except _MODEL_FAILURES:
+            ok, x, rss = False, x_start, np.inf
+        if not np.isfinite(rss):
             return optimize.OptimizeResult(x=x_start, fun=self.ell_hat + _WALL, success=False)
-        r = res.fun
-        return optimize.OptimizeResult(
-            x=res.x, fun=float(like.of_rss(float(r @ r))), success=res.status > 0
-        )
+        return optimize.OptimizeResult(x=x, fun=float(like.of_rss(rss)), success=ok)
+
+
+def _levenberg_marquardt(fun, jac, x0, lb, ub, maxiter=100, rtol=1e-13):
+    """Minimize :math:`\\|r(x)\\|^2` over the box [lb, ub] by Levenberg-Marquardt steps
+    (Marquardt's scaling by the diagonal of :math:`J^TJ`, steps projected on the box).
+
+    The profiles' inner problems are small (the free parameters, in units of their
+    standard errors) and start next to their optimum (warm starts): a few steps, each one
+    residual and one Jacobian, where a general trust-region solver spends milliseconds of
+    its own per iteration. Stops when a step decreases the sum of squares by less than
+    ``rtol`` relative or moves ``x`` by less than ``rtol`` (units of the scale).
+
+    Returns
+    -------
+    x, rss, converged
+    """
+    x = np.clip(np.asarray(x0, dtype=float), lb, ub)
+    r = fun(x)
+    S = float(r @ r)
+    if not np.isfinite(S):
+        return x, np.inf, False
+    mu = None
+    for _ in range(maxiter):
+        J = jac(x)
+        g, A = J.T @ r, J.T @ J
+        d = np.diag(A).copy()
+        d[d <= 0] = 1.0
+        mu = 1e-3 * d.max() if mu is None else mu
+        while True:
+            try:
+                step = np.linalg.solve(A + mu * np.diag(d), -g)
+            except np.linalg.LinAlgError:
+                step = np.full(x.size, np.nan)
+            x1 = np.clip(x + step, lb, ub)
+            r1 = fun(x1) if np.all(np.isfinite(x1)) else np.full(r.size, np.inf)
+            S1 = float(r1 @ r1)
+            if S1 <= S:
+                break
+            mu *= 4.0
+            if mu > 1e16 * d.max():  # no decrease along any damped step: stationary
+                return x, S, True
+        moved = float(np.max(np.abs(x1 - x)))
+        decrease = S - S1
+        x, r, S = x1, r1, S1
+        mu = max(mu / 3.0, 1e-15 * d.max())
+        if decrease <= rtol * S or moved <= rtol * max(1.0, float(np.max(np.abs(x)))):
+            return x, S, True
+    return x, S, False
 
 
 def _walk(prof, i, direction, threshold, start_step, bound, max_steps):
@@ -465,7 +517,80 @@ def _crossing(prof, i, t_in, t_out, start, threshold):
     return optimize.brentq(g, t_in, t_out, xtol=xtol, rtol=1e-12)
 
 
-def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci):
+def _beyond(prof, i, direction, threshold, t_cross, start, bound, n_scan):
+    """Search from a crossing to the (finite) bound for a return of the profile below the
+    threshold (a second basin, a ridge to the bound). Returns (points, regions).
+
+    The profile is evaluated on ``n_scan`` evenly spaced points; every local minimum of
+    those values (the bound included) is refined by a bounded scalar minimization between
+    its neighbours, and where the minimum is below the threshold the region's ends are the
+    crossings on either side (a region reaching the bound ends there). A basin narrower
+    than the grid spacing whose neighbours do not dip is not found.
+    """
+    ts = t_cross + (bound - t_cross) * np.arange(0, n_scan + 1) / n_scan
+    points, values, warm = [(t_cross, threshold, start)], [threshold], start
+    for t in ts[1:]:
+        try:
+            d, warm = prof.at(i, t, warm)
+        except _MODEL_FAILURES:
+            d = np.inf  # the model fails here: not a region
+        points.append((t, d, warm))
+        values.append(d)
+    values = np.array(values)
+    regions = []
+
+    def delta(t, near):
+        try:
+            return prof.at(i, t, near)[0]
+        except _MODEL_FAILURES:
+            return np.inf
+
+    for k in range(1, n_scan + 1):
+        last = k == n_scan
+        if not (values[k] <= values[k - 1] and (last or values[k] <= values[k + 1])):
+            continue
+        if regions and direction * (ts[k] - regions[-1][1 if direction > 0 else 0]) <= 0:
+            continue  # inside a region found already
+        near = points[k][2]
+        lo, hi = sorted((ts[k - 1], ts[k] if last else ts[k + 1]))
+        m = optimize.minimize_scalar(
+            lambda t, near=near: delta(t, near), bounds=(lo, hi), method="bounded",
+            options={"xatol": 1e-6 * abs(hi - lo)},
+        )  # fmt: skip
+        t_min, d_min = (float(m.x), float(m.fun)) if m.fun < values[k] else (ts[k], values[k])
+        if last and values[k] <= m.fun:
+            t_min, d_min = ts[k], values[k]
+        if not d_min < threshold:
+            continue
+        eps_min = prof.at(i, t_min, near)[1]
+        # the grid points bracketing the region: the nearest on either side of t_min
+        # that is at or above the threshold (the crossing itself on the inner side)
+        j = k
+        while j > 0 and (values[j] < threshold or direction * (ts[j] - t_min) >= 0):
+            j -= 1
+        ends = [_region_end(prof, i, t_min, ts[j], eps_min, threshold)]
+        j = k
+        while j < n_scan and (values[j] < threshold or direction * (ts[j] - t_min) <= 0):
+            j += 1
+        if values[j] >= threshold and direction * (ts[j] - t_min) > 0:
+            ends.append(_region_end(prof, i, t_min, ts[j], eps_min, threshold))
+        else:
+            ends.append(bound)  # below the threshold up to the bound: an open end
+        regions.append(tuple(sorted(ends)))
+    return points[1:], regions
+
+
+def _region_end(prof, i, t_in, t_out, start, threshold):
+    """The crossing between ``t_in`` (below the threshold) and ``t_out`` (at or above it);
+    ``t_out`` itself where the two are not bracketed any more (round-off at a crossing
+    found before)."""
+    try:
+        return _crossing(prof, i, t_in, t_out, start, threshold)
+    except ValueError:
+        return t_out
+
+
+def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci, n_scan):
     """Every requested profile, and (decrease, eps) of the lowest point found below the
     estimate's likelihood (None when the estimate is the minimum)."""
     profiles, best = {}, None
@@ -473,11 +598,25 @@ def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci):
         # a quadratic profile crosses z standard errors out: ~3 steps
         step = z * prof.scale[i] / 3
         ends, reasons, pts = [], [], [(prof.eps_hat[i], 0.0, prof.eps_hat)]
+        far = []
         for direction, bound in ((-1, bnds[i][0]), (1, bnds[i][1])):
             p, end, why = _walk(prof, i, direction, threshold[i], step, bound, max_steps)
             pts += p
+            if why == "crossed" and np.isfinite(bound) and n_scan > 0:
+                q, regions = _beyond(
+                    prof, i, direction, threshold[i], end, p[-1][2], bound, n_scan
+                )
+                pts += q
+                far += regions
+                if regions:
+                    why = (
+                        f"crossed at {end:.6g}, but the profile falls below the threshold "
+                        f"again beyond it: {[tuple(np.round(r, 6)) for r in regions]}"
+                    )
             ends.append(end)
             reasons.append(why)
+        regions = sorted([(ends[0], ends[1]), *far])
+        hull = (min(r[0] for r in regions), max(r[1] for r in regions))
         pts.sort(key=lambda q: q[0])
         k = int(np.argmin([q[1] for q in pts]))
         if pts[k][1] < -1e-6 * max(1.0, threshold[i]) and (best is None or pts[k][1] < best[0]):
@@ -488,14 +627,15 @@ def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci):
             np.array([q[1] for q in pts]),
             np.array([q[2] for q in pts]),
             threshold[i],
-            np.array(ends, dtype=float),
+            np.array(hull, dtype=float),
             tuple(reasons),
             delta_ci[i],
+            tuple(regions),
         )
     return profiles, best
 
 
-def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps=40):
+def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps=40, scan=12):
     """Profiles, likelihood-ratio intervals and delta-method intervals of a fit.
 
     Parameters
@@ -511,6 +651,11 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
         Where the profiles stop (default: the fit's ``bounds``; open otherwise).
     max_steps : int
         Steps per side before an end is declared open.
+    scan : int
+        Points on which the range between a crossing and a finite bound is searched for
+        a return below the threshold (``regions``); 0 stops at the crossing. A side
+        without a bound is followed to its crossing only: give bounds to have the whole
+        admissible range searched.
 
     Returns
     -------
@@ -552,7 +697,7 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
     for _ in range(_MAX_RECENTRE + 1):
         profiles, best = _profiles(
             _Profiler(like, eps_hat, ell_hat, scale, bnds), which, threshold, z, bnds,
-            max_steps, delta_ci,
+            max_steps, delta_ci, scan,
         )  # fmt: skip
         if best is None:
             break
@@ -571,7 +716,7 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
     for i, prof_i in profiles.items():
         intervals[i] = prof_i.interval
         notes += [
-            f"eps[{i}] {side} end open: {r}"
+            f"eps[{i}] {side} {'side' if r.startswith('crossed') else 'end open'}: {r}"
             for side, r in zip(("lower", "upper"), prof_i.reasons, strict=True)
             if r != "crossed"
         ]
@@ -584,7 +729,10 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
             f"delta-method interval {delta_ci[i].round(6).tolist()} disagree: the quadratic "
             "approximation behind the standard error is not to be trusted here"
         )
-    summary = ProfileSummary(level, intervals, delta_ci, profiles, disagree, "; ".join(notes))
+    regions = {i: list(prof_i.regions) for i, prof_i in profiles.items()}
+    summary = ProfileSummary(
+        level, intervals, delta_ci, profiles, disagree, "; ".join(notes), regions
+    )
     result.extra["profile"] = summary
     return summary
 

@@ -291,3 +291,35 @@ def test_an_unknown_option_of_a_galerkin_fit_is_refused_before_a_solve():
     with pytest.raises(TypeError, match=r"typo.*known"):
         fit(SteadyProblem(system, np.eye(3), np.ones(3)), [0.5], options={"typo": 1})
     assert calls == []
+
+
+def mirror(e, x=np.linspace(0.1, 3.0, 7)):
+    """A two-parameter model with two basins: the rate enters squared, so b and -b
+    predict the same data."""
+    return e[0] * np.exp(-(e[1] ** 2) * x)
+
+
+def test_profile_regions_report_a_second_basin_inside_the_bounds():
+    """Fitted from a negative rate the estimate is the mirror image -b of the truth; the
+    profile of b rises between the basins and falls below the threshold again: the report
+    lists both regions (the second around the mirror optimum +b, where the truth lies in
+    95 % of data sets), the interval is their hull."""
+    truth = np.array([2.0, 0.8])
+    sigma = 0.02 * np.abs(mirror(truth)).mean()
+    y = mirror(truth) + sigma * np.random.default_rng(3).standard_normal(7)
+    res = fit(ModelProblem(mirror, y), [1.0, -0.3], sigma=sigma,
+              bounds=[(0.1, 5.0), (-2.0, 2.0)])  # fmt: skip
+    assert res.success and res.eps[1] < 0
+    with pytest.warns(UserWarning, match="falls below the threshold again"):
+        from ecfm_uq.inverse import profile_intervals
+
+        hull = profile_intervals(res)
+    summary = res.extra["profile"]
+    (lo1, hi1), (lo2, hi2) = summary.regions[1]
+    # the regions mirror each other (the likelihood is even in b), to the crossings' tolerance
+    np.testing.assert_allclose([lo2, hi2], [-hi1, -lo1], rtol=1e-6)
+    assert lo1 <= res.eps[1] <= hi1 and lo2 <= -res.eps[1] <= hi2  # the mirror optimum
+    np.testing.assert_allclose(hull[1], [lo1, hi2])
+    assert len(summary.regions[0]) == 1  # the amplitude has one region
+    # without the scan only the piece around the estimate
+    assert len(profile_likelihood(res, scan=0).regions[1]) == 1
