@@ -27,6 +27,7 @@ __all__ = [
     "discrepancy_power",
     "interval_coverage",
     "likelihood_coverage",
+    "model_coverage",
     "steady_coverage",
 ]
 
@@ -274,6 +275,62 @@ def interval_coverage(
         "n_not_consistent": rejected,
         "eps": np.array(est),
     }
+
+
+def model_coverage(problem, clean, true_eps, sigma, n_datasets=200, seed=0, *, eps0=None,
+                   bounds=None, known_sigma=True, profile=True):  # fmt: skip
+    """Coverage of the intervals and size of the verdict for a :class:`ModelProblem`.
+
+    Data set r is ``clean + sigma * xi_r`` (``numpy.random.default_rng(seed)``), fitted by
+    :func:`~ecfm_uq.inverse.fit` from ``eps0`` (default the truth) within ``bounds``, with
+    ``sigma`` given (``known_sigma``) or estimated; with ``profile`` its profile regions
+    are computed (:func:`~ecfm_uq.inverse.profile_likelihood`: every piece of a
+    parameter's range below the threshold, scanned to finite bounds).
+
+    Returns
+    -------
+    dict
+        ``delta`` (over the fits with standard errors) and ``regions`` (the truth inside
+        any profile region) per-parameter coverage; ``n_failed`` fits not converged;
+        ``n_at_bound`` estimates at a bound; ``n_not_consistent`` and ``n_no_test`` of
+        the verdicts at 0.05 (``consistent`` False / None).
+    """
+    from .profile import profile_likelihood
+
+    n, seed = _check_common(n_datasets, seed)
+    sigma = check_positive("sigma", sigma)
+    true_eps = np.asarray(true_eps, dtype=float)
+    eps0 = true_eps if eps0 is None else np.asarray(eps0, dtype=float)
+    rng = np.random.default_rng(seed)
+    delta, inside, failed, rejected, no_test, at_bound = [], [], 0, 0, 0, 0
+    for _ in range(n):
+        v = clean + sigma * rng.normal(size=clean.size)
+        res = fit(problem.with_data(v), eps0, sigma=sigma if known_sigma else None,
+                  bounds=bounds, uncertainty=True)  # fmt: skip
+        rejected += res.verdict.consistent is False
+        no_test += res.verdict.consistent is None
+        at_bound += bool(res.verdict.identifiability)
+        if not res.success:
+            failed += 1
+        if res.eps_ci95 is not None:
+            delta.append(res.eps_ci95)
+        if profile:
+            regions = profile_likelihood(res).regions
+            inside.append(
+                [any(lo <= t <= hi for lo, hi in regions[j]) for j, t in enumerate(true_eps)]
+            )
+    out = {
+        "n_failed": failed,
+        "n_not_consistent": rejected,
+        "n_no_test": no_test,
+        "n_at_bound": at_bound,
+        "n_datasets": n,
+    }
+    if delta:
+        out["delta"] = _hits(true_eps, delta)
+    if inside:
+        out["regions"] = {"coverage_per_parameter": np.mean(inside, axis=0)}
+    return out
 
 
 def discrepancy_power(

@@ -11,6 +11,9 @@ checked by name; one result class (:class:`~ecfm_uq.inverse.InverseResult`), who
 =====================  ===============================  ==============================
 problem                formulation                      method (``"auto"`` first)
 =====================  ===============================  ==============================
+ModelProblem           ``"standard"``                   ``"least-squares"`` (trust-region
+                                                        on the whitened residual,
+                                                        derivatives differenced or given)
 SteadyProblem          ``"standard"``, ``"ecfm"``       ``"least-squares"`` (trust-region
                                                         on the residual and its exact
                                                         Jacobian), any gradient method
@@ -110,8 +113,9 @@ def fit(
 
     Parameters
     ----------
-    problem : SteadyProblem, DynamicInverseProblem or ReplicatedProblem
-        The model, its sensors and the data (:mod:`ecfm_uq.inverse.problems`).
+    problem : ModelProblem, SteadyProblem, DynamicInverseProblem or ReplicatedProblem
+        The model and the data: a Python function (:class:`~.model_problem.ModelProblem`)
+        or a Galerkin system with its sensors (:mod:`ecfm_uq.inverse.problems`).
     eps0 : (n_eps,) array_like
         Starting point.
     formulation : str
@@ -121,8 +125,11 @@ def fit(
         replicated data); see the table in :mod:`ecfm_uq.inverse.fitting`.
     method : str
         The optimizer; ``"auto"`` picks the formulation's default.
-    sigma : float, optional
-        Known noise standard deviation of the data (else estimated where needed).
+    sigma : float or array_like, optional
+        Known noise of the data (else estimated where needed): one standard deviation;
+        for a :class:`~.model_problem.ModelProblem` also one per observation or a
+        covariance matrix (:mod:`.noise_model`). Without it a least-squares fit has no
+        consistency test (``verdict.consistent is None``).
     bounds : sequence of (lo, hi), optional
         Bounds on :math:`\\epsilon` (``None`` for an open side).
     tol : float, optional
