@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
+from ..threads import library_threads
 from .profiler import MODEL_FAILURES, Profiler, beyond, walk
 
 __all__ = [
@@ -318,6 +319,7 @@ def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci, n_scan):
     return profiles, best
 
 
+@library_threads()
 def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps=40, scan=12):
     """Profiles, likelihood-ratio intervals and delta-method intervals of a fit.
 
@@ -434,6 +436,7 @@ def profile_intervals(result, level=0.95, **kw):
     return summary.intervals
 
 
+@library_threads()
 def likelihood_ratio_test(result, eps, *, free=None):
     """Test :math:`H_0: \\epsilon = \\epsilon_0` (or a subset of it) by the likelihood ratio.
 
