@@ -1,5 +1,7 @@
 """The `coverage` study (issue 13) with R = 40 data sets: are the reported intervals
-honest? Checked against the binomial law of honest intervals, not a snapshot."""
+honest? Checked against the binomial law of honest intervals, not a snapshot.
+
+Marked slow (the study runs a few minutes even at R = 40): CI runs it in its own step."""
 
 import json
 
@@ -9,6 +11,8 @@ from scipy import stats
 
 from ecfm_uq.cli import main
 from ecfm_uq.studies import coverage as study
+
+pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
@@ -96,3 +100,23 @@ def test_discrepancy_test_grows_from_its_size_to_full_power(result, key):
     assert rejects == sorted(rejects) and rejects[-1] >= 0.8
     rms = [r["residual_rms_over_sigma"] for r in rows]
     assert rms == sorted(rms)
+
+
+def test_function_models_intervals_and_verdicts(result):
+    """Issue 28's rows at R = 40: profile-t and region coverage within the binomial law of
+    honest 95 % intervals; no "inconsistent" without sigma; the chi-squared test's false
+    alarms within the binomial law of its size, with and without a bound reached; the
+    missing offset flagged every time."""
+    fn = result["function"]
+    lo, hi = stats.binom.ppf([0.0005, 0.9995], 40, 0.95) / 40
+    for key in ("small_sample", "two_basins"):
+        for cov in fn[key]["regions"]["coverage_per_parameter"]:
+            assert lo <= cov <= hi, (key, fn[key])
+    assert fn["no_sigma"]["n_not_consistent"] == 0 and fn["no_sigma"]["n_no_test"] == 40
+    top = stats.binom.ppf(0.9995, 40, 0.05)
+    assert fn["sigma"]["n_not_consistent"] <= top
+    assert fn["sigma_bounded"]["n_not_consistent"] <= top
+    assert fn["sigma_bounded"]["n_at_bound"] >= 10  # the truth sits on the bound
+    assert fn["missing_offset"]["n_not_consistent"] == 40
+    quantities = [r["quantity"] for r in study.summary_rows(result)]
+    assert any("two basins" in q for q in quantities)
