@@ -39,6 +39,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from ecfm_uq.inverse import fit  # noqa: E402
 from ecfm_uq.inverse.dynamic import DynamicInverseProblem  # noqa: E402
 from ecfm_uq.problems.burgers import PAPER_TRUE_EPS, BurgersModel  # noqa: E402
 
@@ -179,7 +180,14 @@ def main(argv=None):
         for formulation in ("standard", "ecfm"):
             problem = DynamicInverseProblem(*args_, study_model.M_obs, Vs, tol=1e-10)
             t0 = time.perf_counter()
-            res = problem.fit((1.5, 0.5), formulation, lr=1e-2, epochs=250)
+            res = fit(
+                problem,
+                (1.5, 0.5),
+                formulation=formulation,
+                method="adam",
+                maxiter=250,
+                options={"lr": 1e-2},
+            )
             ours += time.perf_counter() - t0
             t0 = time.perf_counter()
             eps_naive = naive_study(study_model, Vs, formulation, 250, 1e-10)

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from ecfm_uq.chaos import ChaosBasis, expectation_tensor, weighted_gram
 from ecfm_uq.chaos.quadrature import tensor_gauss_legendre
 from ecfm_uq.errors import ConvergenceError, MemoryBudgetError, ModelEvaluationError
-from ecfm_uq.inverse import fit_steady
+from ecfm_uq.inverse import SteadyProblem, fit
 from ecfm_uq.inverse.verdict import consistency_verdict
 from ecfm_uq.memory import set_memory_budget
 from ecfm_uq.spectral import (
@@ -227,19 +227,19 @@ MISTAKES = [
     # -- inverse -----------------------------------------------------------------------
     (
         "ecfm without Gamma",
-        lambda: fit_steady(_ok_system(), np.eye(N), F, [0.0]),
+        lambda: fit(SteadyProblem(_ok_system(), np.eye(N), F), [0.0], formulation="ecfm"),
         ValueError,
         "needs a system with constraint forces",
     ),
     (
         "M_obs wrong columns",
-        lambda: fit_steady(_ok_system(), np.ones((2, 4)), [1.0, 1.0], [0.0], "standard"),
+        lambda: fit(SteadyProblem(_ok_system(), np.ones((2, 4)), [1.0, 1.0]), [0.0]),
         ValueError,
         "`M_obs` must have 3 columns",
     ),
     (
         "unknown formulation",
-        lambda: fit_steady(_ok_system(), np.eye(N), F, [0.0], "ols"),
+        lambda: fit(SteadyProblem(_ok_system(), np.eye(N), F), [0.0], formulation="ols"),
         ValueError,
         "unknown `formulation`",
     ),
@@ -317,12 +317,12 @@ def test_bfgs_fit_on_unexplainable_data_says_the_coefficient_ran_away():
     the chi-squared test fails too."""
     system, M = _heat_system(forces=False)
     v = -np.ones(3)  # a positive load can never give negative deflections
-    res = fit_steady(system, M, v, [0.0], "standard", options={"maxiter": 200})
+    res = fit(SteadyProblem(system, M, v), [0.0], maxiter=200)
     assert np.all(np.isfinite(res.eps))
     assert res.verdict.consistent is None
     assert "coefficient of term 'linear' is extreme" in res.verdict.identifiability
     assert "coefficient of term 'linear' is extreme" in res.message
-    res = fit_steady(system, M, v, [0.0], "standard", options={"maxiter": 200}, sigma=0.1)
+    res = fit(SteadyProblem(system, M, v), [0.0], maxiter=200, sigma=0.1)
     assert res.verdict.consistent is False
 
 
@@ -338,7 +338,12 @@ def test_objective_overflow_is_a_convergence_error_not_overflow_error():
 def test_fit_from_an_overflowing_start_is_refused_clearly():
     system, M = _heat_system()
     with pytest.raises(ConvergenceError, match=r"cannot be solved at eps0=\[400\.\].*overflow"):
-        fit_steady(system, M, np.ones(3), [400.0])
+        fit(
+            SteadyProblem(system, M, np.ones(3)),
+            [400.0],
+            formulation="ecfm",
+            options={"forces": "exact"},
+        )
 
 
 def test_fit_treats_overflow_at_trial_points_as_failed_inner_solves():
@@ -355,14 +360,14 @@ def test_fit_treats_overflow_at_trial_points_as_failed_inner_solves():
         return orig(eps)
 
     system.terms[0].coef._value = value
-    res = fit_steady(system, M, v, [1.0])
+    res = fit(SteadyProblem(system, M, v), [1.0], formulation="ecfm", options={"forces": "exact"})
     assert "inner solves failed" in res.message and "overflow" in res.message
 
 
 def test_ecfm_on_unexplainable_data_says_forces_stayed_large():
     system, M = _heat_system(np.linspace(1.0, 2.0, 8))
     v = np.array([1.0, -2.0, 1.0])  # no diffusion coefficient gives this shape
-    res = fit_steady(system, M, v, [0.0])
+    res = fit(SteadyProblem(system, M, v), [0.0], formulation="ecfm", options={"forces": "exact"})
     verdict = res.extra["verdict"]
     assert verdict["consistent"] is False
     assert verdict["force_to_data"] > 0.1
@@ -372,7 +377,7 @@ def test_ecfm_on_unexplainable_data_says_forces_stayed_large():
 def test_ecfm_on_consistent_data_is_consistent():
     system, M = _heat_system(np.linspace(1.0, 2.0, 8))
     v = M @ solve_steady(system, [0.3]).Theta[:, 0]
-    res = fit_steady(system, M, v, [0.0])
+    res = fit(SteadyProblem(system, M, v), [0.0], formulation="ecfm", options={"forces": "exact"})
     assert res.success
     verdict = res.extra["verdict"]
     assert verdict["consistent"] is True, verdict["message"]
@@ -528,6 +533,7 @@ def test_malformed_input_gives_only_clear_errors(which, a, b):
 _GAMMA_SYSTEM = GalerkinSystem(
     [LinearTerm(K, Coefficient.power10(0)), LoadTerm.constant(F)], 1, Gamma=np.eye(N)[:, :2]
 )
+_GAMMA_PROBLEM = SteadyProblem(_GAMMA_SYSTEM, np.eye(N)[:2], [1.0, 1.0])
 _MASS_SYSTEM = GalerkinSystem([LinearTerm(K), LoadTerm.constant(F)], 1, M=np.eye(N))
 _CALLS = [
     lambda a, b: solve_steady(_GAMMA_SYSTEM, a),
@@ -536,13 +542,11 @@ _CALLS = [
     lambda a, b: solve_steady(_GAMMA_SYSTEM, [0.0], solver=a),
     lambda a, b: solve_steady(_GAMMA_SYSTEM, [0.0], constraint=(a, b)),
     lambda a, b: solve_steady(_GAMMA_SYSTEM, [0.0], Theta0=a),
-    lambda a, b: fit_steady(_GAMMA_SYSTEM, a, b, [0.0]),
-    lambda a, b: fit_steady(_GAMMA_SYSTEM, np.eye(N)[:2], [1.0, 1.0], a, b),
-    lambda a, b: fit_steady(_GAMMA_SYSTEM, np.eye(N)[:2], [1.0, 1.0], [0.0], method=a),
-    lambda a, b: fit_steady(
-        _GAMMA_SYSTEM, np.eye(N)[:2], [1.0, 1.0], [0.0], method="L-BFGS-B", bounds=a
-    ),
-    lambda a, b: fit_steady(_GAMMA_SYSTEM, np.eye(N)[:2], [1.0, 1.0], [0.0], gtol=a, maxiter=b),
+    lambda a, b: fit(SteadyProblem(_GAMMA_SYSTEM, a, b), [0.0], formulation="ecfm"),
+    lambda a, b: fit(_GAMMA_PROBLEM, a, formulation=b),
+    lambda a, b: fit(_GAMMA_PROBLEM, [0.0], formulation="ecfm", method=a),
+    lambda a, b: fit(_GAMMA_PROBLEM, [0.0], formulation="ecfm", method="L-BFGS-B", bounds=a),
+    lambda a, b: fit(_GAMMA_PROBLEM, [0.0], formulation="ecfm", tol=a, maxiter=b),
     lambda a, b: march(_MASS_SYSTEM, [0.0], a, 0.1, 2),
     lambda a, b: march(_MASS_SYSTEM, [0.0], np.zeros(N), a, b),
     lambda a, b: consistency_verdict(_GAMMA_SYSTEM, np.eye(N)[:2], [1.0, 1.0], [0.0], a, b),

@@ -7,12 +7,10 @@ import numpy as np
 import pytest
 
 from ecfm_uq.chaos import gauss_legendre
-from ecfm_uq.inverse.likelihood import (
-    PseudoLikelihood,
-    expected_relative_error,
-    fit_pseudo_likelihood,
-    optimal_forces,
-)
+from ecfm_uq.inverse import ReplicatedProblem, fit
+from ecfm_uq.inverse.diagnostics import expected_relative_error
+from ecfm_uq.inverse.forces import optimal_forces
+from ecfm_uq.inverse.pseudo_likelihood import PseudoLikelihood
 from ecfm_uq.problems.beam import BeamModel
 
 
@@ -85,8 +83,9 @@ def test_forces_are_weakly_identified_by_the_sensors(beam):
 def test_standard_estimate_is_close_and_inner_outer_near_the_truth(beam):
     model, v, _ = beam
     bounds = [(0.0, 0.99 * model.beta_min)]
-    std = fit_pseudo_likelihood(model.system, model.M_obs, v, [0.5], "standard", bounds=bounds)
-    io = fit_pseudo_likelihood(model.system, model.M_obs, v, [0.5], "inner-outer", bounds=bounds)
+    problem = ReplicatedProblem(model.system, model.M_obs, v)
+    std = fit(problem, [0.5], formulation="standard", bounds=bounds)
+    io = fit(problem, [0.5], formulation="inner-outer", bounds=bounds)
     assert std.success and io.success, (std.message, io.message)
     assert abs(std.eps[0] - 1.0) < 0.04  # ~3 sd of the standard estimate over seeds
     assert abs(io.eps[0] - 1.0) < 0.35  # ~2 sd of the inner-outer estimate over seeds
@@ -115,11 +114,10 @@ def test_penalty_form_stops_at_a_stationary_point_of_an_unbounded_objective(beam
     model, v, like = beam
     alpha = 100.0
     bounds = [(0.0, 0.99 * model.beta_min)]
-    pen = fit_pseudo_likelihood(
-        model.system, model.M_obs, v, [0.5], "penalty", penalty=alpha, bounds=bounds
-    )
-    io = fit_pseudo_likelihood(model.system, model.M_obs, v, [0.5], "inner-outer", bounds=bounds)
-    std = fit_pseudo_likelihood(model.system, model.M_obs, v, [0.5], "standard", bounds=bounds)
+    problem = ReplicatedProblem(model.system, model.M_obs, v)
+    pen = fit(problem, [0.5], formulation="penalty", bounds=bounds, options={"penalty": alpha})
+    io = fit(problem, [0.5], formulation="inner-outer", bounds=bounds)
+    std = fit(problem, [0.5], formulation="standard", bounds=bounds)
     lam = pen.extra["lam"]
     p = like.evaluate(pen.eps, lam)
     # first-order conditions of log(0.5|lam|^2) + alpha Lambda hold at SLSQP's answer ...

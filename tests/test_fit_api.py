@@ -1,8 +1,5 @@
 """One inverse API (issue 23): ``fit(problem, eps0, ...)`` for every problem kind, one
-result class with status and a Verdict, one verdict rule, options checked by name, and
-the v0.2 entry points as thin aliases that warn once and give the same answers."""
-
-import warnings
+result class with status and a Verdict, one verdict rule, options checked by name."""
 
 import numpy as np
 import pytest
@@ -18,7 +15,6 @@ from ecfm_uq.inverse import (
     Verdict,
     fit,
 )
-from ecfm_uq.inverse import fitting as fitting_module
 from ecfm_uq.spectral import SineBasis, hat_forces, load, sensor_matrix, stiffness
 from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm, solve_steady
 
@@ -116,23 +112,6 @@ def test_dynamic_verdict_flags_data_the_model_cannot_explain():
     wrong = DynamicInverseProblem(m.system, m.Theta0, m.dt, m.n_steps, m.M_obs, shifted)
     res = fit(wrong, [1.7, 0.9], sigma=1e-3)
     assert not res.verdict.consistent and res.verdict.p_value < 1e-6
-
-
-def test_aliases_warn_once_and_give_the_fit_answer():
-    from ecfm_uq.inverse import fit_steady
-
-    system, v = data(0.01)
-    fitting_module._WARNED.discard("fit_steady")
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        old = fit_steady(system, M_OBS, v, [1.0, 1.0], "standard", sigma=0.01)
-        fit_steady(system, M_OBS, v, [1.0, 1.0], "standard", sigma=0.01)
-    deprecations = [w for w in caught if issubclass(w.category, DeprecationWarning)]
-    assert len(deprecations) == 1 and "fit(SteadyProblem" in str(deprecations[0].message)
-    new = fit(SteadyProblem(system, M_OBS, v), [1.0, 1.0], sigma=0.01)
-    np.testing.assert_array_equal(old.eps, new.eps)
-    np.testing.assert_array_equal(old.eps_cov, new.eps_cov)
-    assert old.status == new.status and old.verdict == new.verdict
 
 
 def test_unknown_options_and_bad_arguments_are_named():

@@ -6,14 +6,15 @@ import pytest
 
 from ecfm_uq.chaos import ChaosBasis
 from ecfm_uq.errors import ConvergenceError
+from ecfm_uq.inverse import fit
 from ecfm_uq.inverse.diagnostics import (
     condition_number,
     fd_hessian,
     loss_surface,
     taylor_remainders,
 )
-from ecfm_uq.inverse.finite_differences import fd_gradient
 from ecfm_uq.inverse.dynamic import DynamicInverseProblem
+from ecfm_uq.inverse.finite_differences import fd_gradient
 from ecfm_uq.inverse.optimizers import adam
 from ecfm_uq.problems.burgers import BurgersModel
 from ecfm_uq.system import Coefficient, GalerkinSystem, LinearTerm, LoadTerm
@@ -124,7 +125,7 @@ def test_forward_failure_surfaces():
     with pytest.raises(ConvergenceError, match=r"eps=.*step 5 .*\|\|R\|\|="):
         prob.standard_objective((8.0, 1e3))
     with pytest.raises(ConvergenceError, match="starting point"):
-        prob.fit((8.0, 1e3), "standard", epochs=3)
+        fit(prob, (8.0, 1e3), formulation="standard", method="adam", maxiter=3)
     # ECFM: the augmented Newton system fails for absurd data at an absurd eps
     prob0 = DynamicInverseProblem(
         model.system, model.Theta0, 0.25, 1, model.M_obs, np.zeros((2, 4))

@@ -6,8 +6,9 @@ failure reports and bad input."""
 import numpy as np
 import pytest
 
+from ecfm_uq.inverse import SteadyProblem, fit
 from ecfm_uq.inverse.noise import consistency_test
-from ecfm_uq.inverse.noisy import ConstrainedInverse, fit_noisy_ecfm, fit_standard_slsqp
+from ecfm_uq.inverse.noisy import ConstrainedInverse
 from ecfm_uq.problems.fisher_kpp import build_kpp, make_data, sensor_grid
 from ecfm_uq.spectral import SineBasis, gaussian_forces, gram, sensor_matrix, stiffness
 from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm
@@ -90,16 +91,16 @@ def test_standard_matches_closed_form_least_squares():
     G = M_obs @ np.linalg.solve(K, F)
     eps_ls = np.linalg.lstsq(G, v, rcond=None)[0]
     f_ls = 0.5 * np.sum((G @ eps_ls - v) ** 2)
-    res = fit_standard_slsqp(system, M_obs, v)
+    res = fit(SteadyProblem(system, M_obs, v), np.zeros(3), method="all-at-once")
     assert res.success, res.message
     assert res.method == "standard-slsqp" and res.nit > 0
-    # SLSQP stops when the objective changes by less than ftol (1e-12 by default)
+    # SLSQP stops when the objective changes by less than tol (its ftol, 1e-12 by default)
     assert -1e-14 < res.loss - f_ls < 1e-12
-    # with a tighter ftol the parameters reach the closed form as closely as the loss can
+    # with a tighter tol the parameters reach the closed form as closely as the loss can
     # resolve them: f - f_ls = d'(G'G)d / 2 is below round-off of f once
     # |d| < sqrt(2 eps_mach f / lambda_min(G'G)) (7e-8 here), so no minimizer of f in
     # double precision can promise more (scipy >= 1.16's SLSQP stops at 2e-9)
-    tight = fit_standard_slsqp(system, M_obs, v, ftol=1e-16)
+    tight = fit(SteadyProblem(system, M_obs, v), np.zeros(3), method="all-at-once", tol=1e-16)
     assert tight.success, tight.message
     resolvable = np.sqrt(2 * np.finfo(float).eps * f_ls / np.linalg.eigvalsh(G.T @ G)[0])
     assert np.max(np.abs(tight.eps - eps_ls)) < resolvable
@@ -112,10 +113,10 @@ def test_consistent_model_needs_no_force():
     rng = np.random.default_rng(11)
     v = M_obs @ np.linalg.solve(K, F @ np.array([1.0, -0.5, 0.3]))
     v = v + SIGMA * rng.standard_normal(v.size)
-    std = fit_standard_slsqp(system, M_obs, v)
+    std = fit(SteadyProblem(system, M_obs, v), np.zeros(3), method="all-at-once")
     # precondition: the least-squares residual of a correct model passes both tests
     assert consistency_test(std.extra["discrepancy"], SIGMA).consistent
-    ec = fit_noisy_ecfm(system, M_obs, v, SIGMA)
+    ec = fit(SteadyProblem(system, M_obs, v), np.zeros(3), formulation="noisy-ecfm", sigma=SIGMA)
     assert ec.success, ec.message
     # lam = 0 is feasible, so the minimum force is zero (the misspecified case below
     # needs ||lam|| of order 1 on the same system)
@@ -130,9 +131,9 @@ def test_misspecified_model_gets_forces_and_feasible_moments():
     true_F = gram(basis, SineBasis(5)) @ np.array([1.0, -0.5, 0.3, 0.0, 30.0])
     rng = np.random.default_rng(5)
     v = M_obs @ np.linalg.solve(K, true_F) + SIGMA * rng.standard_normal(M_obs.shape[0])
-    std = fit_standard_slsqp(system, M_obs, v)
+    std = fit(SteadyProblem(system, M_obs, v), np.zeros(3), method="all-at-once")
     assert consistency_test(std.extra["discrepancy"], SIGMA).var_rejects
-    ec = fit_noisy_ecfm(system, M_obs, v, SIGMA)
+    ec = fit(SteadyProblem(system, M_obs, v), np.zeros(3), formulation="noisy-ecfm", sigma=SIGMA)
     assert ec.success, ec.message
     assert np.linalg.norm(ec.extra["lam"]) > 0.1
     test = consistency_test(ec.extra["discrepancy"], SIGMA, rtol=1e-9)
@@ -143,7 +144,8 @@ def test_misspecified_model_gets_forces_and_feasible_moments():
 
 def test_slsqp_failure_is_reported_not_hidden(small_kpp):
     p, d = small_kpp
-    res = fit_noisy_ecfm(p.system, p.M_obs, d.v, SIGMA, maxiter=2)
+    problem, eps0 = SteadyProblem(p.system, p.M_obs, d.v), np.zeros(p.system.n_eps)
+    res = fit(problem, eps0, formulation="noisy-ecfm", sigma=SIGMA, maxiter=2)
     assert not res.success
     assert "Iteration limit" in res.message
     assert res.nit == 2
@@ -151,8 +153,9 @@ def test_slsqp_failure_is_reported_not_hidden(small_kpp):
 
 def test_fd_gradients_option_runs(small_kpp):
     p, d = small_kpp
-    a = fit_standard_slsqp(p.system, p.M_obs, d.v)
-    b = fit_standard_slsqp(p.system, p.M_obs, d.v, gradients="fd")
+    problem, eps0 = SteadyProblem(p.system, p.M_obs, d.v), np.zeros(p.system.n_eps)
+    a = fit(problem, eps0, method="all-at-once")
+    b = fit(problem, eps0, method="all-at-once", options={"jac": "fd"})
     assert a.success and b.success
     assert np.allclose(a.eps, b.eps, rtol=1e-4, atol=1e-4 * np.abs(a.eps).max())
     assert b.extra["nfev"] > a.extra["nfev"]
@@ -161,28 +164,39 @@ def test_fd_gradients_option_runs(small_kpp):
 def test_bad_input(small_kpp):
     p, d = small_kpp
     system, _, _, M_obs = _linear_1d()
+    problem, eps0 = SteadyProblem(p.system, p.M_obs, d.v), np.zeros(p.system.n_eps)
     with pytest.raises(ValueError, match="sigma"):
-        fit_noisy_ecfm(p.system, p.M_obs, d.v, sigma=-1.0)
+        fit(problem, eps0, formulation="noisy-ecfm", sigma=-1.0)
     with pytest.raises(ValueError, match="sigma"):
-        fit_noisy_ecfm(p.system, p.M_obs, d.v, sigma=0.0)
+        fit(problem, eps0, formulation="noisy-ecfm", sigma=0.0)
     with pytest.raises(ValueError, match="alpha"):
-        fit_noisy_ecfm(p.system, p.M_obs, d.v, SIGMA, alpha=1.0)
+        fit(problem, eps0, formulation="noisy-ecfm", sigma=SIGMA, alpha=1.0)
     bad = d.v.copy()
     bad[0] = np.nan
     with pytest.raises(ValueError, match="`v`"):
-        fit_standard_slsqp(p.system, p.M_obs, bad)
+        SteadyProblem(p.system, p.M_obs, bad)
     with pytest.raises(ValueError, match="`v`"):
-        fit_noisy_ecfm(p.system, p.M_obs, d.v[:-1], SIGMA)
+        SteadyProblem(p.system, p.M_obs, d.v[:-1])
     with pytest.raises(ValueError, match="M_obs"):
-        fit_standard_slsqp(p.system, p.M_obs[:, :-1], d.v)
-    with pytest.raises(ValueError, match="gradients"):
-        fit_standard_slsqp(p.system, p.M_obs, d.v, gradients="exact")
+        SteadyProblem(p.system, p.M_obs[:, :-1], d.v)
+    with pytest.raises(ValueError, match=r"options\['jac'\]"):
+        fit(problem, eps0, method="all-at-once", options={"jac": "exact"})
     with pytest.raises(ValueError, match="maxiter"):
-        fit_standard_slsqp(p.system, p.M_obs, d.v, maxiter=0)
+        fit(problem, eps0, method="all-at-once", maxiter=0)
     no_forces = GalerkinSystem(system.terms, n_eps=3)
     with pytest.raises(ValueError, match="Gamma"):
-        fit_noisy_ecfm(no_forces, M_obs, np.zeros(30), SIGMA)
+        fit(
+            SteadyProblem(no_forces, M_obs, np.zeros(30)),
+            np.zeros(3),
+            formulation="noisy-ecfm",
+            sigma=SIGMA,
+        )
     with pytest.raises(ValueError, match="one constraint force per sensor"):
-        fit_noisy_ecfm(system, M_obs[:10], np.zeros(10), SIGMA)
+        fit(
+            SteadyProblem(system, M_obs[:10], np.zeros(10)),
+            np.zeros(3),
+            formulation="noisy-ecfm",
+            sigma=SIGMA,
+        )
     with pytest.raises(ValueError, match="eps"):
-        fit_standard_slsqp(p.system, p.M_obs, d.v, eps0=np.zeros(3))
+        fit(problem, np.zeros(3), method="all-at-once")

@@ -1,4 +1,4 @@
-"""Pseudo-likelihood constraint forces (ecfm_uq.inverse.likelihood, paper Section 3.3) on
+"""Pseudo-likelihood constraint forces (paper Section 3.3; ``fit`` of a ReplicatedProblem) on
 small synthetic stochastic systems: moments against quadrature, Lambda against
 scipy.stats, gradients and Hessians by Taylor tests, the inner and outer problems against
 independent scalar optimizers, and every documented error."""
@@ -10,15 +10,15 @@ from scipy.optimize import minimize, minimize_scalar
 
 from ecfm_uq.chaos import ChaosBasis, gauss_legendre, weighted_gram
 from ecfm_uq.errors import ConvergenceError
-from ecfm_uq.inverse.likelihood import (
+from ecfm_uq.inverse import ReplicatedProblem, fit
+from ecfm_uq.inverse.diagnostics import expected_relative_error
+from ecfm_uq.inverse.forces import optimal_forces
+from ecfm_uq.inverse.moments import (
     DegenerateVarianceError,
-    PseudoLikelihood,
-    expected_relative_error,
-    fit_pseudo_likelihood,
     negative_log_pseudo_likelihood,
-    optimal_forces,
     sensor_moments,
 )
+from ecfm_uq.inverse.pseudo_likelihood import PseudoLikelihood
 from ecfm_uq.spectral import BeamBasis
 from ecfm_uq.system import (
     Coefficient,
@@ -202,7 +202,9 @@ def test_standard_estimate_is_the_scalar_maximum_likelihood(linear):
     system, v = linear
     like = PseudoLikelihood(system, M_OBS, v)
     ref = minimize_scalar(lambda e: like.value([e]), bracket=(0.8, 1.0, 1.2), tol=1e-12)
-    res = fit_pseudo_likelihood(system, M_OBS, v, [0.5], "standard", bounds=[(0.0, 1.4)])
+    res = fit(
+        ReplicatedProblem(system, M_OBS, v), [0.5], formulation="standard", bounds=[(0.0, 1.4)]
+    )
     assert res.success, res.message
     assert res.method == "likelihood-standard"
     assert res.eps[0] == pytest.approx(ref.x, abs=1e-7)
@@ -218,7 +220,9 @@ def test_inner_outer_estimate_minimizes_the_optimal_force_norm(linear):
         return 0.5 * float(np.sum(optimal_forces(like, [e]).lam ** 2))
 
     ref = minimize_scalar(z, bracket=(0.85, 0.95, 1.05), tol=1e-10)
-    res = fit_pseudo_likelihood(system, M_OBS, v, [0.5], "inner-outer", bounds=[(0.0, 1.4)])
+    res = fit(
+        ReplicatedProblem(system, M_OBS, v), [0.5], formulation="inner-outer", bounds=[(0.0, 1.4)]
+    )
     assert res.success, res.message
     assert res.eps[0] == pytest.approx(ref.x, abs=1e-6)
     assert res.loss == pytest.approx(ref.fun, rel=1e-6)
@@ -243,11 +247,15 @@ def test_penalty_objective_is_unbounded_below_as_forces_vanish(linear):
 
 def test_penalty_form_runs_slsqp_and_reports(linear):
     system, v = linear
-    res = fit_pseudo_likelihood(system, M_OBS, v, [0.5], "penalty", bounds=[(0.0, 1.4)])
+    res = fit(
+        ReplicatedProblem(system, M_OBS, v), [0.5], formulation="penalty", bounds=[(0.0, 1.4)]
+    )
     assert res.method == "likelihood-penalty"
     assert isinstance(res.success, bool) and res.message
     assert res.extra["penalty"] == 100.0
-    std = fit_pseudo_likelihood(system, M_OBS, v, [0.5], "standard", bounds=[(0.0, 1.4)])
+    std = fit(
+        ReplicatedProblem(system, M_OBS, v), [0.5], formulation="standard", bounds=[(0.0, 1.4)]
+    )
     # on this problem SLSQP follows log(0.5|lam|^2) down to lam ~ 0, where the penalty
     # objective reduces to the standard one: same eps
     assert res.extra["force_norm"] < 1e-6
@@ -260,7 +268,9 @@ def test_penalty_form_runs_slsqp_and_reports(linear):
 
 def test_nonlinear_system_uses_finite_difference_hessian(nonlinear):
     system, v = nonlinear
-    res = fit_pseudo_likelihood(system, M_OBS, v, [0.9], "inner-outer", bounds=[(0.5, 1.2)])
+    res = fit(
+        ReplicatedProblem(system, M_OBS, v), [0.9], formulation="inner-outer", bounds=[(0.5, 1.2)]
+    )
     assert res.success, res.message
     assert PseudoLikelihood(system, M_OBS, v).hessian == "fd"
     assert abs(res.eps[0] - TRUE_EPS) < 0.1
@@ -281,7 +291,7 @@ def test_stall_at_the_edge_of_solvable_models_is_not_success(linear, formulation
         LoadTerm.constant(F),
     ]
     edged = GalerkinSystem(terms, 1, basis=basis, Gamma=GAMMA)
-    res = fit_pseudo_likelihood(edged, M_OBS, v, [0.5], formulation)
+    res = fit(ReplicatedProblem(edged, M_OBS, v), [0.5], formulation=formulation)
     assert res.eps[0] == pytest.approx(0.7, abs=1e-3)  # where it got stuck
     assert not res.success, res.message
     assert "evaluations failed" in res.message
@@ -318,7 +328,7 @@ def test_zero_variance_sensor_raises_instead_of_nan(linear):
         negative_log_pseudo_likelihood([1.0, 2.0], [0.0, 1.0], np.ones((2, 3)))
     res_err = None
     try:
-        fit_pseudo_likelihood(system, M, v, [1.0], "standard")
+        fit(ReplicatedProblem(system, M, v), [1.0], formulation="standard")
     except ConvergenceError as e:
         res_err = str(e)
     assert res_err is not None and "eps0" in res_err
@@ -327,7 +337,7 @@ def test_zero_variance_sensor_raises_instead_of_nan(linear):
 def test_bad_input(linear):
     system, v = linear
     with pytest.raises(ValueError, match="formulation"):
-        fit_pseudo_likelihood(system, M_OBS, v, [1.0], "bayes")
+        fit(ReplicatedProblem(system, M_OBS, v), [1.0], formulation="bayes")
     with pytest.raises(ValueError, match="shape"):
         PseudoLikelihood(system, M_OBS, v[:2])
     with pytest.raises(ValueError, match="2 replicates"):
@@ -339,11 +349,26 @@ def test_bad_input(linear):
     with pytest.raises(ValueError, match="hessian"):
         PseudoLikelihood(system, M_OBS, v, hessian="exact")
     with pytest.raises(ValueError, match="lam0"):
-        fit_pseudo_likelihood(system, M_OBS, v, [1.0], "penalty", lam0=np.zeros(3))
+        fit(
+            ReplicatedProblem(system, M_OBS, v),
+            [1.0],
+            formulation="penalty",
+            options={"lam0": np.zeros(3)},
+        )
     with pytest.raises(ValueError, match="penalty"):
-        fit_pseudo_likelihood(system, M_OBS, v, [1.0], "penalty", penalty=-1.0)
+        fit(
+            ReplicatedProblem(system, M_OBS, v),
+            [1.0],
+            formulation="penalty",
+            options={"penalty": -1.0},
+        )
     with pytest.raises(ValueError, match="bounds"):
-        fit_pseudo_likelihood(system, M_OBS, v, [1.0], bounds=[(0, 1), (0, 1)])
+        fit(
+            ReplicatedProblem(system, M_OBS, v),
+            [1.0],
+            formulation="inner-outer",
+            bounds=[(0, 1), (0, 1)],
+        )
     deterministic = GalerkinSystem([LinearTerm(K0), LoadTerm.constant(F)], 0, Gamma=GAMMA)
     with pytest.raises(ValueError, match="P >= 2"):
         PseudoLikelihood(deterministic, M_OBS, v)
@@ -353,4 +378,4 @@ def test_bad_input(linear):
         basis=ChaosBasis(2),
     )
     with pytest.raises(ValueError, match="Gamma"):
-        fit_pseudo_likelihood(no_forces, M_OBS, v, [1.0], "inner-outer")
+        fit(ReplicatedProblem(no_forces, M_OBS, v), [1.0], formulation="inner-outer")

@@ -5,7 +5,7 @@ import pytest
 
 pytest.importorskip("emcee")
 
-from ecfm_uq.inverse import fit_steady  # noqa: E402
+from ecfm_uq.inverse import SteadyProblem, fit  # noqa: E402
 from ecfm_uq.inverse.posterior import sample_posterior  # noqa: E402
 
 
@@ -25,7 +25,7 @@ def _case():
 @pytest.fixture(scope="module")
 def runs():
     system, M_obs, v = _case()
-    lap = fit_steady(system, M_obs, v, [1.0, 1.0], "standard", sigma=0.01)
+    lap = fit(SteadyProblem(system, M_obs, v), [1.0, 1.0], sigma=0.01)
     post = sample_posterior(
         system,
         M_obs,

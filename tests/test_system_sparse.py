@@ -299,14 +299,16 @@ def test_variance_equals_covariance_diagonal():
 
 
 def test_inverse_layer_takes_a_sparse_sensor_matrix():
-    from ecfm_uq.inverse import fit_standard_slsqp, fit_steady, sensor_moments
+    from ecfm_uq.inverse import SteadyProblem, fit, sensor_moments
 
     system, M_obs = diffusion(N=12, dim=1, order=0)  # P = 1: the noisy fits need it
     v = M_obs @ system.mean(solve_steady(system, [0.2, 1.1]).Theta)
-    for fit in (fit_steady, fit_standard_slsqp):
-        kw = {"eps0": [0.0, 1.0]} if fit is fit_steady else {}
-        dense = fit(system, M_obs, v, **kw)
-        sparse = fit(system, sp.csr_matrix(M_obs), v, **kw)
+    for kw in (
+        {"eps0": [0.0, 1.0], "formulation": "ecfm", "options": {"forces": "exact"}},
+        {"eps0": np.zeros(2), "method": "all-at-once"},
+    ):
+        dense = fit(SteadyProblem(system, M_obs, v), **kw)
+        sparse = fit(SteadyProblem(system, sp.csr_matrix(M_obs), v), **kw)
         assert dense.success and sparse.success
         np.testing.assert_allclose(sparse.eps, dense.eps, rtol=1e-12)
     system, M_obs = diffusion(N=12, dim=1, order=2)

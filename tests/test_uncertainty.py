@@ -76,28 +76,33 @@ def _heat_case():
     return system, M_obs, v0, true, J
 
 
-def test_fit_steady_standard_covariance_is_gauss_newton():
-    from ecfm_uq.inverse import fit_steady
+def test_steady_standard_covariance_is_gauss_newton():
+    from ecfm_uq.inverse import SteadyProblem, fit
 
     system, M_obs, v0, true, J = _heat_case()
     v = v0 + 0.01 * np.random.default_rng(0).normal(size=v0.size)
-    res = fit_steady(system, M_obs, v, [1.0, 1.0], "standard", sigma=0.01)
+    res = fit(SteadyProblem(system, M_obs, v), [1.0, 1.0], sigma=0.01)
     assert res.success and res.noise_model == "known"
     np.testing.assert_allclose(res.eps_cov, gauss_newton_covariance(J, 1e-4), rtol=1e-5)
 
 
 @pytest.mark.parametrize("formulation", ["standard", "ecfm"])
-def test_fit_steady_covariance_equals_refit_jacobian(formulation):
-    from ecfm_uq.inverse import fit_steady
+def test_steady_covariance_equals_refit_jacobian(formulation):
+    from ecfm_uq.inverse import SteadyProblem, fit
 
     system, M_obs, v0, true, _ = _heat_case()
     v = v0 + 0.01 * np.random.default_rng(1).normal(size=v0.size)
-    res = fit_steady(system, M_obs, v, [1.0, 1.0], formulation, sigma=0.01)
+    # the paper's ECFM (exact forces): with sigma, "random" forces would be another estimator
+    kw = {
+        "formulation": formulation,
+        "options": {"forces": "exact"} if formulation == "ecfm" else None,
+    }
+    res = fit(SteadyProblem(system, M_obs, v), [1.0, 1.0], sigma=0.01, **kw)
     h = 1e-3
     cols = []
     for e in np.eye(v.size):
-        ep = fit_steady(system, M_obs, v + h * e, res.eps, formulation).eps
-        em = fit_steady(system, M_obs, v - h * e, res.eps, formulation).eps
+        ep = fit(SteadyProblem(system, M_obs, v + h * e), res.eps, **kw).eps
+        em = fit(SteadyProblem(system, M_obs, v - h * e), res.eps, **kw).eps
         cols.append((ep - em) / (2 * h))
     D = np.column_stack(cols)
     np.testing.assert_allclose(res.eps_cov, 1e-4 * D @ D.T, rtol=1e-5)
@@ -146,37 +151,49 @@ def _misspecified_linear():
 
 
 def test_standard_slsqp_covariance_equals_refit_jacobian():
-    from ecfm_uq.inverse import fit_standard_slsqp
+    from ecfm_uq.inverse import SteadyProblem, fit
 
     system, M_obs, v, sigma = _misspecified_linear()
-    res = fit_standard_slsqp(system, M_obs, v, sigma=sigma)
+    res = fit(
+        SteadyProblem(system, M_obs, v), np.zeros(system.n_eps), method="all-at-once", sigma=sigma
+    )
     assert res.noise_model == "known" and "verdict" in res.extra
 
-    def fit(w):
-        return fit_standard_slsqp(system, M_obs, w, eps0=res.eps, ftol=1e-16).eps
+    def refit(w):
+        return fit(SteadyProblem(system, M_obs, w), res.eps, method="all-at-once", tol=1e-16).eps
 
     # the model is linear in eps, so eps_hat(v) is linear: a unit step has no truncation
-    D = np.column_stack([(fit(v + e) - fit(v - e)) / 2 for e in np.eye(v.size)])
+    D = np.column_stack([(refit(v + e) - refit(v - e)) / 2 for e in np.eye(v.size)])
     cov_fd = sigma**2 * D @ D.T
     assert np.abs(res.eps_cov - cov_fd).max() <= 1e-5 * np.abs(cov_fd).max()
 
 
 def test_noisy_ecfm_covariance_equals_refit_jacobian():
-    from ecfm_uq.inverse import fit_noisy_ecfm
+    from ecfm_uq.inverse import SteadyProblem, fit
 
     system, M_obs, v, sigma = _misspecified_linear()
-    res = fit_noisy_ecfm(system, M_obs, v, sigma)
+    res = fit(
+        SteadyProblem(system, M_obs, v),
+        np.zeros(system.n_eps),
+        formulation="noisy-ecfm",
+        sigma=sigma,
+    )
     assert res.success and res.eps_cov is not None, res.uncertainty_message
     # the data enter through the active moment bounds (here the lower mean bound and the
     # upper variance bound); the refits stay on the same active set
     assert np.sum(np.abs(res.extra["inequality"]) < 1e-8) == 2
 
-    def fit(w):
-        return fit_noisy_ecfm(
-            system, M_obs, w, sigma, eps0=res.eps, theta0=res.extra["theta"], ftol=1e-16
+    def refit(w):
+        return fit(
+            SteadyProblem(system, M_obs, w),
+            res.eps,
+            formulation="noisy-ecfm",
+            sigma=sigma,
+            tol=1e-16,
+            options={"theta0": res.extra["theta"]},
         ).eps
 
-    D = _fd4(fit, v, 3e-2)  # SLSQP resolves eps to ~1e-9: a large step, O(h^4) stencil
+    D = _fd4(refit, v, 3e-2)  # SLSQP resolves eps to ~1e-9: a large step, O(h^4) stencil
     cov_fd = sigma**2 * D @ D.T
     assert np.abs(res.eps_cov - cov_fd).max() <= 1e-5 * np.abs(cov_fd).max()
 
@@ -200,11 +217,13 @@ def _with_statistics(v, i, dmean, dm):
 
 @pytest.mark.parametrize("formulation", ["standard", "inner-outer"])
 def test_pseudo_likelihood_covariance_equals_refit_jacobian(formulation):
-    from ecfm_uq.inverse import fit_pseudo_likelihood
-    from ecfm_uq.inverse.likelihood import replicate_statistics
+    from ecfm_uq.inverse import ReplicatedProblem, fit
+    from ecfm_uq.inverse.replicated import replicate_statistics
 
     m, v, bounds = _beam_data()
-    res = fit_pseudo_likelihood(m.system, m.M_obs, v, [0.5], formulation, bounds=bounds)
+    res = fit(
+        ReplicatedProblem(m.system, m.M_obs, v), [0.5], formulation=formulation, bounds=bounds
+    )
     assert res.success and res.noise_model == "replicates", res.uncertainty_message
     w, Sigma_w = replicate_statistics(v)
     C = v.shape[0]
@@ -216,6 +235,8 @@ def test_pseudo_likelihood_covariance_equals_refit_jacobian(formulation):
     # statistics instead: its stencil error grows with the step (1e-6 at 2.5e-4, 3e-6 at
     # 5e-4, 3e-5 at 1e-3)
     step = {"standard": 2e-3, "inner-outer": 5e-4}[formulation]
+    # "standard" has no inner force solve, hence no inner_tol
+    inner = {"inner_tol": 1e-24} if formulation == "inner-outer" else None
     cols = []
     for k in range(2 * C):
         h = step * max(abs(w[k]), 1.0)
@@ -223,8 +244,12 @@ def test_pseudo_likelihood_covariance_equals_refit_jacobian(formulation):
         def f(t, k=k, h=h):
             a = (t * h, 0.0) if k < C else (0.0, t * h)
             data = _with_statistics(v, k % C, *a)
-            return fit_pseudo_likelihood(
-                m.system, m.M_obs, data, res.eps, formulation, gtol=1e-13, inner_tol=1e-24
+            return fit(
+                ReplicatedProblem(m.system, m.M_obs, data),
+                res.eps,
+                formulation=formulation,
+                tol=1e-13,
+                options=inner,
             ).eps
 
         cols.append((8 * (f(1) - f(-1)) - (f(2) - f(-2))) / (12 * h))
@@ -233,7 +258,7 @@ def test_pseudo_likelihood_covariance_equals_refit_jacobian(formulation):
 
 
 def test_replicate_statistics_covariance_is_the_sample_covariance():
-    from ecfm_uq.inverse.likelihood import replicate_statistics
+    from ecfm_uq.inverse.replicated import replicate_statistics
 
     rng = np.random.default_rng(4)
     v = rng.normal(size=(3, 400))
@@ -248,8 +273,9 @@ def test_replicate_statistics_covariance_is_the_sample_covariance():
 # bad input
 # --------------------------------------------------------------------------------------
 @pytest.mark.parametrize("sigma", [0.0, -0.01, float("nan")])
-def test_fit_steady_refuses_nonpositive_sigma_before_fitting(sigma, monkeypatch):
+def test_steady_fit_refuses_nonpositive_sigma_before_fitting(sigma, monkeypatch):
     import ecfm_uq.inverse.steady as steady
+    from ecfm_uq.inverse import SteadyProblem, fit
 
     system, M_obs, v0, _, _ = _heat_case()
 
@@ -258,15 +284,15 @@ def test_fit_steady_refuses_nonpositive_sigma_before_fitting(sigma, monkeypatch)
 
     monkeypatch.setattr(steady, "solve_steady", no_solve)
     with pytest.raises(ValueError, match="sigma"):
-        steady.fit_steady(system, M_obs, v0, [1.0, 1.0], "standard", sigma=sigma)
+        fit(SteadyProblem(system, M_obs, v0), [1.0, 1.0], sigma=sigma)
 
 
 def test_fewer_sensors_than_parameters_is_refused():
-    from ecfm_uq.inverse import fit_steady
+    from ecfm_uq.inverse import SteadyProblem, fit
 
     system, M_obs, v0, _, _ = _heat_case()
     with pytest.raises(ValueError, match="fewer sensors than parameters"):
-        fit_steady(system, M_obs[:1], v0[:1], [1.0, 1.0], "standard")
+        fit(SteadyProblem(system, M_obs[:1], v0[:1]), [1.0, 1.0])
 
 
 def _ratio_case():
@@ -293,11 +319,11 @@ def _ratio_case():
 
 def test_non_identifiable_combination_is_named_not_nan():
     from ecfm_uq.errors import NonIdentifiableError
-    from ecfm_uq.inverse import fit_steady
+    from ecfm_uq.inverse import SteadyProblem, fit
     from ecfm_uq.inverse.uncertainty import check_identifiable, gauss_newton_covariance
 
     system, M_obs, v = _ratio_case()
-    res = fit_steady(system, M_obs, v, [2.0, 1.0], "standard", sigma=0.01)
+    res = fit(SteadyProblem(system, M_obs, v), [2.0, 1.0], sigma=0.01)
     assert res.eps_cov is None and res.eps_ci95 is None
     # the null vector (2, 1)/sqrt(5) = (0.894, 0.447), named in the message
     assert "0.894*eps[0] + 0.447*eps[1]" in res.uncertainty_message, res.uncertainty_message

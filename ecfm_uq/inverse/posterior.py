@@ -13,7 +13,7 @@ The chain is declared converged only when it is at least 50 integrated autocorre
 times long (emcee's own rule of thumb); the effective sample size is
 ``n_walkers * n_kept / tau``. On a (nearly) linear model the posterior is the Laplace
 approximation :math:`N(\\hat\\epsilon, \\sigma^2 (J^TJ)^{-1})` of
-:func:`~ecfm_uq.inverse.fit_steady` with ``sigma``.
+:func:`~ecfm_uq.inverse.fit` of a :class:`~ecfm_uq.inverse.SteadyProblem` with ``sigma``.
 """
 
 from __future__ import annotations

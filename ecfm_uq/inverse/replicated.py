@@ -28,7 +28,8 @@ through :math:`\\partial\\Theta/\\partial\\lambda` (Eq. stochastic_sens) and
     \\min_{\\epsilon,\\lambda} \\tfrac12\\|\\lambda\\|^2 \\quad \\text{s.t.}\\quad
     \\partial\\Lambda/\\partial\\lambda = 0
 
-is solved three ways by :func:`fit_pseudo_likelihood`:
+is solved three ways by :func:`~ecfm_uq.inverse.fit` of a
+:class:`~ecfm_uq.inverse.ReplicatedProblem` (:func:`fit_replicated_problem`):
 
 ``"inner-outer"``
     the ECFM structure: for each :math:`\\epsilon` the forces
@@ -40,7 +41,7 @@ is solved three ways by :func:`fit_pseudo_likelihood`:
 ``"penalty"``
     the paper's unconstrained surrogate :math:`\\min_{\\epsilon,\\lambda}
     \\log(\\tfrac12\\|\\lambda\\|^2) + \\alpha\\Lambda` with SLSQP. Its first term is
-    unbounded below as :math:`\\lambda \\to 0`; see :func:`fit_pseudo_likelihood`;
+    unbounded below as :math:`\\lambda \\to 0`; see :func:`fit_replicated_problem`;
 ``"standard"``
     maximum pseudo-likelihood over :math:`\\epsilon` with :math:`\\lambda = 0`.
 
@@ -407,6 +408,22 @@ def fit_replicated_problem(problem, eps0, s):
     ``trust_radius`` (the longest first step, in eps units), ``lam0`` (starting forces),
     ``inner_tol`` (Newton-decrement tolerance of the inner force solve), ``penalty``
     (the penalty form's alpha, 100 in the paper).
+
+    Notes
+    -----
+    The penalty objective is unbounded below: as :math:`\\lambda\\to 0` the term
+    :math:`\\log(\\tfrac12\\|\\lambda\\|^2)\\to-\\infty` while :math:`\\alpha\\Lambda` stays
+    finite, so it has no minimizer. It can have local minima near the joint maximizer of
+    the pseudo-likelihood over :math:`(\\epsilon, \\lambda)`, where the log term's pull
+    toward zero forces balances :math:`\\alpha\\,\\partial\\Lambda/\\partial\\lambda`. What
+    SLSQP returns depends on the start: either such a local minimum (for the beam, close
+    to the inner-outer estimate) or a point on the way down the valley
+    :math:`\\lambda\\to 0`, where the :math:`\\epsilon`-part reduces to the standard
+    estimate :math:`\\arg\\min_\\epsilon\\Lambda(\\epsilon, 0)`. SLSQP's own success flag
+    certifies neither; the result's ``status`` tests :math:`\\epsilon` (Newton decrement) and
+    the forces (the objective's slope along :math:`\\lambda \\to t\\lambda`,
+    :math:`2 + \\alpha\\lambda^T\\partial_\\lambda\\Lambda`: zero at a local minimum, 2 on
+    the valley), so a stop on the valley is reported not converged.
     """
     formulation = _SYNONYMS.get(s.formulation, s.formulation)
     if formulation not in _FITTERS:

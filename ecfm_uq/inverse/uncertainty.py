@@ -17,11 +17,11 @@ the Gauss-Newton / Laplace covariance sigma^2 (J^T J)^{-1}; for a nonlinear mode
 two differ: dg/deps is then the full Hessian J^T J + sum_c r_c d2(M_obs theta)_c/deps2,
 while Gauss-Newton drops the residual-curvature term.
 
-The steady, noisy SLSQP and pseudo-likelihood fits (:func:`~ecfm_uq.inverse.fit_steady`,
-:func:`~ecfm_uq.inverse.fit_standard_slsqp`, :func:`~ecfm_uq.inverse.fit_noisy_ecfm`,
-:func:`~ecfm_uq.inverse.fit_pseudo_likelihood`) compute their ``eps_cov`` through
-:func:`implicit_covariance`; only the optimality condition and the data covariance
-differ. The dynamic (Adam) fits do not carry one yet.
+The steady, noisy SLSQP and pseudo-likelihood fits (:func:`~ecfm_uq.inverse.fit` of a
+:class:`~ecfm_uq.inverse.SteadyProblem`: standard, exact-force ECFM, ``"all-at-once"``
+and ``"noisy-ecfm"``; of a :class:`~ecfm_uq.inverse.ReplicatedProblem`) compute their
+``eps_cov`` through :func:`implicit_covariance`; only the optimality condition and the
+data covariance differ. The dynamic (Adam) fits do not carry one yet.
 """
 
 from __future__ import annotations

@@ -3,7 +3,8 @@ Section 4, "The cases of parametric boundary conditions and domain geometry").
 
 The paper only derives these two cases; here they are built as working systems
 :math:`R(\\theta; \\epsilon, \\lambda) = K(\\epsilon)\\theta - F(\\epsilon) - \\Gamma\\lambda`
-for the steady standard and ECFM inverse layer (:func:`ecfm_uq.inverse.fit_steady`).
+for the steady standard and ECFM inverse layer (:func:`ecfm_uq.inverse.fit` of a
+:class:`~ecfm_uq.inverse.SteadyProblem`).
 The model is :math:`\\nabla^2 w + s = 0` in every case.
 
 Boundary case (:func:`boundary_problem`)
@@ -104,7 +105,9 @@ __all__ = [
 # --------------------------------------------------------------------------------------
 @dataclass
 class HeatProblem:
-    """A discretized heat-conduction model ready for :func:`ecfm_uq.inverse.fit_steady`.
+    """A discretized heat-conduction model ready for :func:`ecfm_uq.inverse.fit`.
+
+    Fit it as ``fit(SteadyProblem(heat.system, heat.M_obs, v), eps0, formulation=...)``.
 
     Attributes
     ----------

@@ -17,8 +17,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ecfm_uq.chaos import ChaosBasis, coupling_tensor, lognormal_coefficients
-from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm
-from ecfm_uq.system.solvers import solve_steady
+from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm, solve_steady
 
 N = 31
 H = 1.0 / (N + 1)
