@@ -1,13 +1,14 @@
 """Inverse formulations: standard least squares, ECFM (equality constraint forces),
 noisy ECFM (z-score and chi-squared bounds), pseudo-likelihood constraint forces.
 
-One entry point, :func:`fit`, takes a problem (the model, its sensors and the data) and
-returns an :class:`InverseResult` (``success``/``status``, the estimate, its
-:class:`Uncertainty` and the :class:`Verdict` on whether the model explains the data):
+One entry point, :func:`fit`, takes a problem (the model and the data) and returns an
+:class:`InverseResult` (``success``/``status``, the estimate, its :class:`Uncertainty` and
+the :class:`Verdict` on whether the model explains the data):
 
 ==========================  =====================================================  ================
 problem                     formulations (``fit(problem, eps0, formulation=...)``)  paper
 ==========================  =====================================================  ================
+:class:`ModelProblem`       ``"standard"`` (a model that is a Python function)     --
 :class:`SteadyProblem`      ``"standard"``, ``"ecfm"``, ``"noisy-ecfm"``            Eqs. traditional,
                                                                                    ecfm, kpp_inv,
                                                                                    ecfm_noise; Sec. 4
@@ -16,34 +17,33 @@ Problem`                                                                        
 :class:`ReplicatedProblem`  ``"standard"``, ``"inner-outer"``, ``"penalty"``        Eq. stochastic_model
 ==========================  =====================================================  ================
 
-The v0.2 entry points (:func:`fit_steady`, :func:`fit_standard_slsqp`,
-:func:`fit_noisy_ecfm`, :func:`fit_pseudo_likelihood`, ``DynamicInverseProblem.fit``) are
-thin deprecated aliases of :func:`fit`.
+From a result: :func:`profile_likelihood` / :func:`profile_intervals` (profile-likelihood
+intervals and regions), :func:`likelihood_ratio_test`, ``result.summary()``.
 """
 
 from .coverage import likelihood_coverage, steady_coverage
-from .diagnostics import condition_number, fd_hessian, loss_surface, taylor_remainders
+from .diagnostics import (
+    condition_number,
+    expected_relative_error,
+    fd_hessian,
+    loss_surface,
+    taylor_remainders,
+)
 from .dynamic import DynamicInverseProblem
 from .fitting import fit
-from .likelihood import (
-    DegenerateVarianceError,
-    PseudoLikelihood,
-    expected_relative_error,
-    fit_pseudo_likelihood,
-    negative_log_pseudo_likelihood,
-    optimal_forces,
-    sensor_moments,
-)
+from .forces import optimal_forces
 from .loglik import LogLikelihood
 from .model_problem import ModelProblem
+from .moments import DegenerateVarianceError, negative_log_pseudo_likelihood, sensor_moments
 from .noise import ConsistencyTest, consistency_test, noise_bounds, sample_moments
-from .noisy import ConstrainedInverse, fit_noisy_ecfm, fit_standard_slsqp
+from .noisy import ConstrainedInverse
 from .optimizers import adam
 from .problems import ReplicatedProblem, SteadyProblem
 from .profile import likelihood_ratio_test, profile_intervals, profile_likelihood
+from .pseudo_likelihood import PseudoLikelihood
 from .result import InverseResult, Uncertainty, Verdict
 from .status import FitStatus
-from .steady import ecfm_objective, fit_steady, standard_objective
+from .steady import ecfm_objective, standard_objective
 
 __all__ = [
     "FitStatus",
@@ -69,10 +69,6 @@ __all__ = [
     "ecfm_objective",
     "expected_relative_error",
     "fd_hessian",
-    "fit_noisy_ecfm",
-    "fit_pseudo_likelihood",
-    "fit_standard_slsqp",
-    "fit_steady",
     "loss_surface",
     "negative_log_pseudo_likelihood",
     "noise_bounds",

@@ -330,36 +330,6 @@ class DynamicInverseProblem:
         )  # fmt: skip
 
     # -- optimization ----------------------------------------------------------------------
-    def fit(
-        self,
-        eps0,
-        formulation="ecfm",
-        *,
-        lr=1e-2,
-        epochs=250,
-        betas=(0.9, 0.999),
-        eps_hat=1e-8,
-        callback=None,
-        sigma=None,
-        uncertainty=True,
-    ):
-        """Deprecated: ``fit(problem, eps0, formulation=..., method="adam", ...)``.
-
-        The v0.2 call shape (Adam, the paper's optimizer for Section 3.1), a thin alias
-        of :func:`~ecfm_uq.inverse.fit`: ``epochs`` is ``maxiter``; ``lr``, ``betas``,
-        ``eps_hat`` and ``callback`` are Adam's ``options``
-        (:func:`ecfm_uq.inverse.optimizers.adam`).
-        """
-        from .fitting import fit, warn_deprecated
-
-        warn_deprecated(
-            "DynamicInverseProblem.fit", "fit(problem, eps0, formulation=..., method='adam')"
-        )
-        options = {"lr": lr, "betas": betas, "eps_hat": eps_hat, "callback": callback}
-        return fit(
-            self, eps0, formulation=formulation, method="adam", sigma=sigma, maxiter=epochs,
-            options=options, uncertainty=uncertainty,
-        )  # fmt: skip
 
     def uncertainty(self, eps, formulation="ecfm", sigma=None, covariance="implicit"):
         """Delta-method uncertainty of an estimate of ``eps`` from the data ``V``.

@@ -35,7 +35,6 @@ ReplicatedProblem      ``"standard"``,                  ``"trust-region"``;
 from __future__ import annotations
 
 import numbers
-import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -215,18 +214,3 @@ def fit(
         result.likelihood = problem.log_likelihood(settings.formulation, settings.sigma)
     result.bounds = settings.bounds
     return result
-
-
-_WARNED = set()
-
-
-def warn_deprecated(old, new):
-    """A DeprecationWarning, once per old name, pointing at its replacement."""
-    if old in _WARNED:
-        return
-    _WARNED.add(old)
-    warnings.warn(
-        f"{old} is deprecated and will be removed in a future release; use {new}",
-        DeprecationWarning,
-        stacklevel=3,
-    )

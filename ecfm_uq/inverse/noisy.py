@@ -37,7 +37,6 @@ ECFM problem needs its ``Gamma``.
 
 from __future__ import annotations
 
-import numbers
 import time
 
 import numpy as np
@@ -386,99 +385,6 @@ def fit_all_at_once(problem, eps0, s):
     return res
 
 
-def fit_standard_slsqp(
-    system,
-    M_obs,
-    v,
-    eps0=None,
-    theta0=None,
-    *,
-    gradients="analytic",
-    maxiter=500,
-    ftol=1e-12,
-    solve_options=None,
-    sigma=None,
-):
-    """Deprecated: ``fit(SteadyProblem(system, M_obs, v), eps0, method="all-at-once")``.
-
-    Standard inverse problem, Eq. (kpp_inv), all at once with SLSQP:
-
-    .. math::
-
-        \\min_{\\theta, \\epsilon} \\tfrac12\\|\\mathcal M\\theta - v\\|^2
-        \\quad\\text{s.t.}\\quad R(\\theta;\\epsilon) = 0
-
-    ``ftol`` is ``tol``; ``theta0`` and ``gradients`` (``"analytic"``/``"fd"``) are the
-    ``options`` ``theta0`` and ``jac``; ``eps0`` defaults to zero. Returns
-    ``method="standard-slsqp"`` with ``extra``: ``theta``, ``discrepancy``,
-    ``mean_discrepancy``, ``var_discrepancy``, ``residual_norm`` (:math:`\\|R\\|_2` at the
-    end), ``nfev``, ``njev``, ``start``.
-    """
-    from .fitting import fit, warn_deprecated
-    from .problems import SteadyProblem
-
-    warn_deprecated(
-        "fit_standard_slsqp", "fit(SteadyProblem(system, M_obs, v), eps0, method='all-at-once')"
-    )
-    _check_v02_names(gradients, ftol)
-    problem = SteadyProblem(system, M_obs, v, **dict(solve_options or {}))
-    eps0 = np.zeros(system.n_eps) if eps0 is None else eps0
-    return fit(
-        problem, eps0, formulation="standard", method="all-at-once", sigma=sigma, tol=ftol,
-        maxiter=maxiter, options={"theta0": theta0, "jac": gradients},
-    )  # fmt: skip
-
-
-def fit_noisy_ecfm(
-    system,
-    M_obs,
-    v,
-    sigma,
-    alpha=0.05,
-    eps0=None,
-    theta0=None,
-    lam0=None,
-    *,
-    gradients="analytic",
-    maxiter=500,
-    ftol=1e-12,
-    solve_options=None,
-):
-    """Deprecated: ``fit(SteadyProblem(system, M_obs, v), eps0, formulation="noisy-ecfm",
-    sigma=sigma, alpha=alpha)``.
-
-    Noise-aware ECFM, Eq. (ecfm_noise), all at once with SLSQP:
-
-    .. math::
-
-        \\min_{\\theta, \\epsilon, \\lambda} \\tfrac12\\|\\lambda\\|^2 \\quad\\text{s.t.}\\quad
-        R(\\theta;\\epsilon) - \\Gamma\\lambda = 0,\\ \\ell_1 \\le \\bar e \\le \\ell_2,\\
-        p_1 \\le s^2_e \\le p_2
-
-    ``alpha`` is the level of the bounds and of the verdict's test; ``eps0`` defaults to
-    zero; ``theta0``, ``lam0``, ``gradients`` are the ``options`` ``theta0``, ``lam0``,
-    ``jac``. Returns ``method="noisy-ecfm"`` with ``extra`` as
-    :func:`fit_standard_slsqp` plus ``lam`` (C,), ``inequality`` (the four scaled
-    constraint values, >= 0 when feasible) and ``bounds``.
-    """
-    from .fitting import fit, warn_deprecated
-    from .problems import SteadyProblem
-
-    warn_deprecated(
-        "fit_noisy_ecfm",
-        "fit(SteadyProblem(system, M_obs, v), eps0, formulation='noisy-ecfm', sigma=...)",
-    )
-    if isinstance(sigma, bool) or not isinstance(sigma, numbers.Real):
-        raise TypeError(f"`sigma` must be a positive real number, got {sigma!r}")
-    _check_v02_names(gradients, ftol)
-    problem = SteadyProblem(system, M_obs, v, **dict(solve_options or {}))
-    eps0 = np.zeros(system.n_eps) if eps0 is None else eps0
-    return fit(
-        problem, eps0, formulation="noisy-ecfm", sigma=sigma, alpha=alpha, tol=ftol,
-        maxiter=maxiter, options={"theta0": theta0, "lam0": lam0, "jac": gradients},
-    )  # fmt: skip
-
-
 #: a scaled moment inequality within this of zero is active at the optimum
 ACTIVE_TOL = 1e-6
 
@@ -534,4 +440,4 @@ def _kkt_uncertainty(problem, z, sigma):
     )  # fmt: skip
 
 
-__all__ = ["ConstrainedInverse", "fit_noisy_ecfm", "fit_standard_slsqp"]
+__all__ = ["ConstrainedInverse"]

@@ -73,7 +73,6 @@ from .result import InverseResult
 from .status import FitStatus
 
 __all__ = [
-    "fit_pseudo_likelihood",
     "fit_replicated_problem",
     "moment_verdict",
     "replicate_statistics",
@@ -514,121 +513,6 @@ def _status(ok, final_ok, res, maxiter):
     if not final_ok:
         return FitStatus.MODEL_FAILURE
     return FitStatus.MAX_ITERATIONS if int(res.nit) >= maxiter else FitStatus.STALLED
-
-
-def fit_pseudo_likelihood(
-    system,
-    M_obs,
-    v,
-    eps0,
-    formulation="inner-outer",
-    *,
-    lam0=None,
-    penalty=100.0,
-    bounds=None,
-    trust_radius=0.1,
-    gtol=1e-8,
-    maxiter=200,
-    likelihood_options=None,
-    inner_tol=1e-15,
-    uncertainty=True,
-):
-    """Deprecated: ``fit(ReplicatedProblem(system, M_obs, v), eps0, formulation=...)``.
-
-    Estimate :math:`\\epsilon` of a stochastic model from replicated data.
-
-    Parameters
-    ----------
-    system : GalerkinSystem
-        Stochastic system; ``Gamma`` (N, C) is required except for ``"standard"``.
-    M_obs : (C, N) array_like
-    v : (C, D) array_like
-        Replicated measurements, ``D >= 2``.
-    eps0 : (n_eps,) array_like
-        Start.
-    formulation : {"inner-outer", "penalty", "standard"}
-        ``"inner-outer"``: :math:`\\min_\\epsilon \\tfrac12\\|\\lambda^*(\\epsilon)\\|^2`
-        with :math:`\\lambda^* = \\arg\\min_\\lambda\\Lambda` (the faithful reading of Eq.
-        stochastic_model; a trust-region quasi-Newton method outside, globalized Newton
-        inside, gradient by the implicit function theorem). ``"penalty"``: the paper's
-        :math:`\\min_{\\epsilon,\\lambda}\\log(\\tfrac12\\|\\lambda\\|^2) + \\alpha\\Lambda`
-        by SLSQP. ``"standard"``: :math:`\\min_\\epsilon\\Lambda(\\epsilon, 0)` by the same
-        trust-region method.
-    lam0 : (C,) array_like, optional
-        Starting forces: zero for ``"inner-outer"``; for ``"penalty"`` it must be
-        nonzero (default ``1e-3`` on every force).
-    penalty : float
-        :math:`\\alpha` of the penalty form (the paper uses 100).
-    bounds : sequence of (lo, hi), optional
-        Bounds on :math:`\\epsilon` (keep trial loads below buckling).
-    trust_radius : float
-        Initial trust radius in :math:`\\epsilon` units (``"inner-outer"``, ``"standard"``):
-        the longest first step.
-    gtol : float
-        Outer gradient tolerance, relative to the gradient at ``eps0`` (``ftol`` of
-        SLSQP for ``"penalty"``).
-    maxiter : int
-        Outer iterations.
-    likelihood_options : dict, optional
-        Passed to :class:`PseudoLikelihood` (``var_rtol``, ``hessian``, ``fd_step``,
-        ``solve_options``).
-    inner_tol : float
-        Newton-decrement tolerance of the inner force solve (``"inner-outer"``).
-    uncertainty : bool
-        Attach the delta-method uncertainty from the replicates (about ``8 C`` extra
-        gradient evaluations; ``False`` for loops that do not use it).
-
-    Returns
-    -------
-    InverseResult
-        With ``eps_cov``, ``eps_stderr``, ``eps_ci95`` (``noise_model="replicates"``):
-        the implicit derivative of the estimate's optimality condition in the replicate
-        statistics (:func:`replicate_statistics`) propagated through their sample
-        covariance, Student-t intervals with D - 1 dof (not for ``"penalty"``, which no
-        optimality condition defines); ``extra["verdict"]`` (:func:`moment_verdict`).
-        ``method`` is ``"likelihood-<formulation>"``; ``loss`` is the objective
-        minimized; ``extra`` holds ``lam``, ``force_norm`` :math:`\\|\\lambda\\|_2`,
-        ``neg_log_likelihood`` :math:`\\Lambda`, ``mu``, ``var``, ``Theta``,
-        ``n_solves`` and formulation diagnostics (inner Hessian eigenvalue, SLSQP status).
-
-    Notes
-    -----
-    The penalty objective is unbounded below: as :math:`\\lambda\\to 0` the term
-    :math:`\\log(\\tfrac12\\|\\lambda\\|^2)\\to-\\infty` while :math:`\\alpha\\Lambda` stays
-    finite, so it has no minimizer. It can have local minima near the joint maximizer of
-    the pseudo-likelihood over :math:`(\\epsilon, \\lambda)`, where the log term's pull
-    toward zero forces balances :math:`\\alpha\\,\\partial\\Lambda/\\partial\\lambda`. What
-    SLSQP returns depends on the start: either such a local minimum (for the beam, close
-    to the inner-outer estimate) or a point on the way down the valley
-    :math:`\\lambda\\to 0`, where the :math:`\\epsilon`-part reduces to the standard
-    estimate :math:`\\arg\\min_\\epsilon\\Lambda(\\epsilon, 0)`. SLSQP's own success flag
-    certifies neither; the result's ``status`` tests :math:`\\epsilon` (Newton decrement) and
-    the forces (the objective's slope along :math:`\\lambda \\to t\\lambda`,
-    :math:`2 + \\alpha\\lambda^T\\partial_\\lambda\\Lambda`: zero at a local minimum, 2 on
-    the valley), so a stop on the valley is reported not converged.
-    """
-    from .fitting import fit, warn_deprecated
-    from .problems import ReplicatedProblem
-
-    warn_deprecated(
-        "fit_pseudo_likelihood", "fit(ReplicatedProblem(system, M_obs, v), eps0, formulation=...)"
-    )
-    if formulation not in _FITTERS:
-        raise ValueError(
-            f"unknown `formulation` {formulation!r}; choose one of {list(FORMULATIONS)}"
-        )
-    if isinstance(penalty, bool) or not isinstance(penalty, numbers.Real):
-        raise TypeError(f"`penalty` must be a positive number, got {penalty!r}")
-    check_positive("gtol", gtol)
-    lopts = dict(likelihood_options or {})
-    lopts.update(lopts.pop("solve_options", None) or {})
-    problem = ReplicatedProblem(system, M_obs, v, **lopts)
-    every = {"lam0": lam0, "penalty": penalty, "trust_radius": trust_radius, "inner_tol": inner_tol}
-    options = {k: every[k] for k in _OPTIONS[formulation]}
-    return fit(
-        problem, eps0, formulation=formulation, bounds=bounds, tol=gtol, maxiter=maxiter,
-        options=options, uncertainty=uncertainty,
-    )  # fmt: skip
 
 
 # --------------------------------------------------------------------------------------

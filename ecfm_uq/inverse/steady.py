@@ -205,7 +205,7 @@ def fit_steady_problem(problem, eps0, s):
                 out, residual, bounds, out.status is FitStatus.MAX_ITERATIONS, polish=polish
             )
     except ConvergenceError as e:
-        raise ConvergenceError(f"fit_steady: {e}") from e
+        raise ConvergenceError(f"fit: {e}") from e
     if out.payload is None:  # the optimizer stopped where the model fails
         return InverseResult(
             eps=out.x, loss=np.inf, message=out.message, nit=out.nit, nfev=out.nfev,
@@ -248,45 +248,6 @@ def fit_steady_problem(problem, eps0, s):
         extra={"Theta": sol.Theta, "lam": lam},
         verdict=verdict,
     )
-
-
-def fit_steady(
-    system,
-    M_obs,
-    v,
-    eps0,
-    formulation="ecfm",
-    *,
-    method="auto",
-    gtol=None,
-    maxiter=500,
-    bounds=None,
-    solve_options=None,
-    options=None,
-    gradient="auto",
-    sigma=None,
-):
-    """Deprecated: ``fit(SteadyProblem(system, M_obs, v, ...), eps0, formulation=...)``.
-
-    The v0.2 call shape, kept as a thin alias of :func:`~ecfm_uq.inverse.fit`:
-    ``gtol`` is ``tol``, ``solve_options`` (``tol``, ``maxiter``, ``solver``) and
-    ``gradient`` go to :class:`~ecfm_uq.inverse.SteadyProblem`; the default
-    ``formulation`` is ``"ecfm"`` here (``"standard"`` in ``fit``). The default method
-    follows ``fit`` (``"auto"``: least squares; v0.2 ran BFGS, still ``method="BFGS"``).
-    """
-    from .fitting import fit, warn_deprecated
-    from .problems import SteadyProblem
-
-    warn_deprecated("fit_steady", "fit(SteadyProblem(system, M_obs, v), eps0, formulation=...)")
-    if not isinstance(solve_options, dict | type(None)):
-        raise TypeError(f"`solve_options` must be a dict, got {solve_options!r}")
-    problem = SteadyProblem(system, M_obs, v, gradient=gradient, **dict(solve_options or {}))
-    if isinstance(formulation, str) and formulation == "ecfm":  # v0.2: exact-match forces
-        options = {"forces": "exact", **dict(options or {})}
-    return fit(
-        problem, eps0, formulation=formulation, method=method, sigma=sigma, bounds=bounds,
-        tol=gtol, maxiter=maxiter, options=options,
-    )  # fmt: skip
 
 
 def _uncertainty(

@@ -293,10 +293,13 @@ def test_an_unknown_option_of_a_galerkin_fit_is_refused_before_a_solve():
     assert calls == []
 
 
-def mirror(e, x=np.linspace(0.1, 3.0, 7)):
+XM = np.linspace(0.1, 3.0, 7)
+
+
+def mirror(e):
     """A two-parameter model with two basins: the rate enters squared, so b and -b
     predict the same data."""
-    return e[0] * np.exp(-(e[1] ** 2) * x)
+    return e[0] * np.exp(-(e[1] ** 2) * XM)
 
 
 def test_profile_regions_report_a_second_basin_inside_the_bounds():
@@ -323,3 +326,18 @@ def test_profile_regions_report_a_second_basin_inside_the_bounds():
     assert len(summary.regions[0]) == 1  # the amplitude has one region
     # without the scan only the piece around the estimate
     assert len(profile_likelihood(res, scan=0).regions[1]) == 1
+
+
+def test_the_v02_names_are_gone():
+    """One entry point: the unreleased v0.2 aliases and shim modules are not importable."""
+    import importlib
+
+    import ecfm_uq.inverse as inverse
+    from ecfm_uq.inverse import DynamicInverseProblem
+
+    for name in ("fit_steady", "fit_standard_slsqp", "fit_noisy_ecfm", "fit_pseudo_likelihood"):
+        assert not hasattr(inverse, name), name
+    assert not hasattr(DynamicInverseProblem, "fit")
+    for module in ("ecfm_uq.inverse.likelihood", "ecfm_uq.system.solvers"):
+        with pytest.raises(ModuleNotFoundError):
+            importlib.import_module(module)
