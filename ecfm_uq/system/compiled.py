@@ -12,9 +12,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from . import plan as _plan
-from .plan import SolveStatus
 from .terms import LoadTerm
+from .thresholds import SolveStatus, failure_message
 from .trajectory import Trajectory
 
 # the compiled kernels: loaded once, given up once if numba cannot run them
@@ -100,7 +99,7 @@ def _failed_trajectory(system, times, failed, status, rnorm, maxiter, Theta, lam
     """The trajectory up to a compiled march's failed step, with its status and reason."""
     status = SolveStatus(status)
     k = failed + 1
-    reason = _plan.failure_message(status, maxiter)
+    reason = failure_message(status, maxiter)
     msg = f"{system.name}: Newton failed at step {k} (t={times[k]:.6g}) with ||R||={rnorm:.3e}: {reason}"
     return Trajectory(
         times[:k], Theta[:k], lam[:k], None, None, False, msg, k, nits[:k], label, list(its[:k]),

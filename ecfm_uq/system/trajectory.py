@@ -8,7 +8,7 @@ import numpy as np
 
 from .._validation import as_finite_array
 from ..errors import ConvergenceError
-from .plan import SolveStatus
+from .thresholds import SolveStatus
 
 
 @dataclass
