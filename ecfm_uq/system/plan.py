@@ -241,12 +241,17 @@ class SolvePlan:
         ``preconditioner="none"``.
     options : SolverOptions
         The options the plan was made from (tolerances, limits, ``chord_rate``).
+    reason : str
+        Why the path runs: for a march, what keeps it off the compiled kernels (e.g.
+        ``"the compiled kernels march backward Euler only (scheme='bdf2')"``) or that one
+        takes it; empty for a steady solve.
     """
 
     path: str
     solver: str
     preconditioner: str | None
     options: object
+    reason: str = ""
 
     @property
     def iterative(self):
@@ -263,7 +268,9 @@ class SolvePlan:
         return f"{name} (compiled)" if self.path != "generic" else name
 
 
-def plan_solve(system, options, *, constrained=False, steady=True, keep_factors=False):
+def plan_solve(
+    system, options, *, constrained=False, steady=True, keep_factors=False, scheme="euler"
+):
     """The :class:`SolvePlan` of a solve of ``system`` with ``options``.
 
     Parameters
@@ -276,6 +283,9 @@ def plan_solve(system, options, *, constrained=False, steady=True, keep_factors=
         A steady solve (``False``: a backward-Euler march).
     keep_factors : bool
         The caller keeps every step's factors (a march for an adjoint).
+    scheme : str
+        The march's time scheme (:mod:`.schemes`); the compiled kernels march backward
+        Euler (``"euler"``) only.
 
     Raises
     ------
@@ -288,10 +298,12 @@ def plan_solve(system, options, *, constrained=False, steady=True, keep_factors=
         system, options, constrained=constrained, steady=steady, keep_factors=keep_factors
     )
     precond = _preconditioner(system, options) if solver in KRYLOV else None
-    path = "generic"
+    path, reason = "generic", ""
     if not steady:
-        path = _march_path(system, options, solver, precond, constrained, keep_factors)
-    return SolvePlan(path, solver, precond, options)
+        path, reason = _march_path(
+            system, options, solver, precond, constrained, keep_factors, scheme
+        )
+    return SolvePlan(path, solver, precond, options, reason)
 
 
 def choose_solver(system, options, *, constrained=False, steady=True, keep_factors=False):
@@ -383,9 +395,11 @@ def _nodal_march_refusal(system):
     return None
 
 
-def _march_refusal(system, solver, precond, constrained, keep_factors):
+def _march_refusal(system, solver, precond, constrained, keep_factors, scheme="euler"):
     """Why no compiled march takes this solve (``None``: one can)."""
     N, P = system.shape
+    if scheme != "euler":
+        return f"the compiled kernels march backward Euler only (scheme={scheme!r})"
     if P == 1:
         if solver != "dense":
             return f"the P = 1 kernel factorizes densely, but the solver is {solver!r}"
@@ -405,12 +419,13 @@ def _march_refusal(system, solver, precond, constrained, keep_factors):
     return _nodal_march_refusal(system)
 
 
-def _march_path(system, options, solver, precond, constrained, keep_factors):
+def _march_path(system, options, solver, precond, constrained, keep_factors, scheme):
+    """``(path, reason)`` of a march: a compiled kernel's path, or ``"generic"`` and why."""
     if options.compiled is False:
-        return "generic"
+        return "generic", "compiled=False asks for the generic march"
     from .compiled import compiled_kernels  # the kernels' loader (numba, on first use)
 
-    refusal = _march_refusal(system, solver, precond, constrained, keep_factors)
+    refusal = _march_refusal(system, solver, precond, constrained, keep_factors, scheme)
     if refusal is None and compiled_kernels() is None:
         refusal = "the compiled kernels do not load with this numba"
     if refusal is not None:
@@ -419,8 +434,8 @@ def _march_path(system, options, solver, precond, constrained, keep_factors):
                 f"`compiled`=True but no compiled march takes this solve: {refusal}; "
                 "pass compiled='auto' (or False) for the generic march"
             )
-        return "generic"
-    return "compiled-p1" if system.P == 1 else "compiled-sg"
+        return "generic", refusal
+    return ("compiled-p1" if system.P == 1 else "compiled-sg"), "a compiled kernel takes it"
 
 
 def dense_unknowns(system, *args, **kwargs):

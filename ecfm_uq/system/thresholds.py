@@ -41,6 +41,7 @@ class SolveStatus(enum.IntEnum):
     KRYLOV_FAILED = 3
     NON_FINITE = 4
     MODEL_FAILURE = 5
+    STEP_SIZE = 6  # an error-controlled integration's step fell below round-off of t
 
 
 def failure_message(status, maxiter):
@@ -56,4 +57,5 @@ def failure_message(status, maxiter):
         ),
         SolveStatus.NON_FINITE: "residual became non-finite",
         SolveStatus.MODEL_FAILURE: "model evaluation failed",
+        SolveStatus.STEP_SIZE: "the step size fell below round-off without meeting rtol",
     }[status]
