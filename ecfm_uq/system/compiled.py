@@ -85,10 +85,13 @@ def compiled_march(linear, system, eps, Theta0, dt, n_steps, t0, M_obs, V, sens,
         with np.errstate(all="ignore"):
             if P == 1:
                 F1, dF1 = np.ascontiguousarray(F[:, :, 0]), np.ascontiguousarray(dF[:, :, 0])
-                return _march_p1(
+                traj = _march_p1(
                     _kernels, linear, *args, M_obs, V, keep, lin, Ks, quad, F1, dF1, Mdt
                 )
-            return _march_sg(_kernels, linear, *args, lin, Ks, quad, F, dF, Mdt)
+            else:
+                traj = _march_sg(_kernels, linear, *args, lin, Ks, quad, F, dF, Mdt)
+            traj.plan = linear.plan  # the path that ran, and why
+            return traj
     except NumbaError:  # the kernel does not compile with this numba: use the generic march
         kernels_failed()
         return None

@@ -1,0 +1,185 @@
+"""Fixed-step schemes of ``march``: observed order against a tight reference of the same
+Galerkin system (scipy's Radau), and the discrete adjoint of BDF2 against central finite
+differences of what the march computes."""
+
+import numpy as np
+import pytest
+from _models import diffusion
+from scipy.integrate import solve_ivp
+
+from ecfm_uq.chaos import ChaosBasis, weighted_gram
+from ecfm_uq.problems.pendulum import build_pendulum
+from ecfm_uq.system import (
+    Coefficient,
+    GalerkinSystem,
+    LinearTerm,
+    LoadTerm,
+    NonlinearTerm,
+    QuadraticTerm,
+    march,
+)
+
+
+def _reference(system, eps, Theta0, T, n_out=None, mass=1.0):
+    """The same Galerkin ODE (M = mass * I, orthonormal basis) by Radau at rtol 1e-13."""
+
+    def f(t, y):
+        return -system.residual(y.reshape(system.shape), eps, None, t).ravel() / mass
+
+    t_eval = None if n_out is None else np.linspace(0, T, n_out)
+    sol = solve_ivp(f, (0, T), Theta0.ravel(), method="Radau", rtol=1e-13, atol=1e-14,
+                    t_eval=t_eval)  # fmt: skip
+    return sol.y.T.reshape(-1, *system.shape)
+
+
+def _orders(system, eps, Theta0, T, scheme, ns, ref, **kw):
+    errs = []
+    for n in ns:
+        tr = march(system, eps, Theta0, T / n, n, scheme=scheme, tol=1e-13, **kw)
+        assert tr.success and tr.scheme == scheme
+        errs.append(np.abs(tr.Theta[-1] - ref).max())
+    return np.log2(np.array(errs[:-1]) / errs[1:]), errs
+
+
+def _burgers_like(order, N=8):
+    """Viscous Burgers-like model: a quadratic convection term, a viscosity spread by a
+    uniform germ (order > 0) and a load scaled by eps0."""
+    A = np.zeros((N, N, N))
+    for i in range(N - 1):
+        A[i, i, i + 1] = 0.5
+        A[i + 1, i, i + 1] = -0.5
+    K = (2 * np.eye(N) - np.eye(N, k=1) - np.eye(N, k=-1)) * 4.0
+    basis = ChaosBasis(order, 1) if order else None
+    G = None if not order else weighted_gram(basis, lambda w: 1.0 + 0.4 * (w[:, 0] - 0.5))
+    terms = [
+        LinearTerm(K) if G is None else LinearTerm(K, G=G),
+        QuadraticTerm(A),
+        LoadTerm.scaled(np.sin(np.linspace(0.3, 2.8, N)), Coefficient.parameter(0)),
+    ]
+    return GalerkinSystem(terms, 1, basis=basis, M=np.eye(N))
+
+
+@pytest.mark.parametrize("order", [0, 3])
+def test_bdf2_is_second_order_on_a_nonlinear_pendulum(order):
+    system, Theta0 = build_pendulum(order=order)
+    eps, T = [4.0], 2.0
+    ref = _reference(system, eps, Theta0, T)[-1]
+    ns = (20, 40, 80, 160)
+    p2, e2 = _orders(system, eps, Theta0, T, "bdf2", ns, ref)
+    p1, e1 = _orders(system, eps, Theta0, T, "euler", ns, ref)
+    assert p2[-1] >= 1.9 and p2.min() >= 1.8
+    assert 0.9 <= p1[-1] <= 1.1
+    assert e2[-1] < e1[-1] / 20
+
+
+@pytest.mark.parametrize("order", [0, 2])
+def test_bdf2_is_second_order_with_a_quadratic_term(order):
+    system = _burgers_like(order)
+    eps, T = [1.0], 0.5
+    Theta0 = np.zeros(system.shape)
+    ref = _reference(system, eps, Theta0, T)[-1]
+    p2, _ = _orders(system, eps, Theta0, T, "bdf2", (10, 20, 40, 80), ref)
+    assert p2[-1] >= 1.9
+
+
+def test_bdf2_is_second_order_on_sparse_diffusion_with_krylov_solves():
+    system, _ = diffusion(N=30, dim=2, order=2, sparse=True)
+    eps, T = [0.0, 1.0], 0.02
+    Theta0 = np.zeros(system.shape)
+    ref = _reference(system, eps, Theta0, T, mass=1.0 / 31)[-1]
+    p2, _ = _orders(system, eps, Theta0, T, "bdf2", (10, 20, 40), ref, solver="cg")
+    assert p2[-1] >= 1.9
+
+
+def test_the_plan_says_why_bdf2_is_not_compiled():
+    system = _burgers_like(0)
+    tr = march(system, [1.0], np.zeros(system.N), 0.1, 3)
+    assert tr.plan.path == "compiled-p1"
+    tr = march(system, [1.0], np.zeros(system.N), 0.1, 3, scheme="bdf2")
+    assert tr.plan.path == "generic" and "backward Euler only" in tr.plan.reason
+    with pytest.raises(ValueError, match="backward Euler only"):
+        march(system, [1.0], np.zeros(system.N), 0.1, 3, scheme="bdf2", solver={"compiled": True})
+
+
+def _fd_check(objective, eps, h):
+    """Central differences of ``objective`` (returns (z, trajectory)) per parameter."""
+    out = []
+    for m in range(len(eps)):
+        e = np.zeros(len(eps))
+        e[m] = h
+        out.append((objective(eps + e)[0] - objective(eps - e)[0]) / (2 * h))
+    return np.array(out)
+
+
+def test_bdf2_adjoint_equals_sensitivities_and_central_differences_on_the_pendulum():
+    system, Theta0 = build_pendulum(order=3)
+
+    def objective(eps):
+        tr = march(system, eps, Theta0, 0.05, 40, scheme="bdf2", tol=1e-13,
+                   sensitivities=True, keep_factors=True)  # fmt: skip
+        return 0.5 * np.sum(tr.Theta**2), tr
+
+    eps = np.array([4.0])
+    _, tr = objective(eps)
+    g = tr.adjoint_gradient(tr.Theta)
+    forward = np.einsum("tnp,tnpe->e", tr.Theta, tr.dTheta)
+    np.testing.assert_allclose(g, forward, rtol=1e-10)
+    np.testing.assert_allclose(g, _fd_check(objective, eps, 1e-5), rtol=1e-6)
+
+
+@pytest.mark.parametrize("solver", ["dense", "auto"])
+def test_bdf2_adjoint_of_the_ecfm_constraint_equals_central_differences(solver):
+    system, M_obs = diffusion(N=20, dim=2, order=2, sparse=True)
+    n, dt = 12, 0.01
+    V = 0.05 * np.outer(np.sin(np.linspace(0, 2, n + 1)), [1.0, 0.8, 0.6])
+
+    def objective(eps):
+        tr = march(system, eps, np.zeros(20), dt, n, scheme="bdf2", constraint=(M_obs, V),
+                   keep_factors=True, sensitivities=True, tol=1e-13, solver=solver)  # fmt: skip
+        return float(np.sum(tr.lam**2) + np.sum(tr.Theta**2)), tr
+
+    eps = np.array([0.1, 1.3])
+    _, tr = objective(eps)
+    g = tr.adjoint_gradient(2 * tr.Theta, 2 * tr.lam)
+    forward = np.einsum("tnp,tnpe->e", 2 * tr.Theta, tr.dTheta) + np.einsum(
+        "tc,tce->e", 2 * tr.lam, tr.dlam
+    )
+    np.testing.assert_allclose(g, forward, rtol=1e-8)
+    np.testing.assert_allclose(g, _fd_check(objective, eps, 1e-4), rtol=1e-6)
+
+
+def test_bdf2_adjoint_with_a_quadratic_term_and_P_above_one():
+    system = _burgers_like(2)
+    Theta0 = np.zeros(system.shape)
+
+    def objective(eps):
+        tr = march(system, eps, Theta0, 0.05, 12, scheme="bdf2", keep_factors=True, tol=1e-13)
+        return float(np.sum(tr.Theta[:, :, 0] ** 3)), tr
+
+    eps = np.array([1.5])
+    _, tr = objective(eps)
+    g_theta = np.zeros_like(tr.Theta)
+    g_theta[:, :, 0] = 3 * tr.Theta[:, :, 0] ** 2
+    np.testing.assert_allclose(
+        tr.adjoint_gradient(g_theta), _fd_check(objective, eps, 1e-5), rtol=1e-6
+    )
+
+
+def test_an_unknown_scheme_is_refused_with_the_choices():
+    system = _burgers_like(0)
+    with pytest.raises(ValueError, match="`scheme` must be one of \\('euler', 'bdf2'\\)"):
+        march(system, [1.0], np.zeros(system.N), 0.1, 3, scheme="rk4")
+
+
+def test_a_failing_bdf2_step_returns_the_steps_before_it():
+    # u' = u^2 from u(0) = 1 blows up at t = 1: Newton cannot solve a step past it
+    blowup = NonlinearTerm(lambda u, w, e: -(u**2), lambda u, w, e: np.diag(-2 * u),
+                           eps_jacobian=lambda u, w, e: np.zeros((1, 1)), size=1)  # fmt: skip
+    system = GalerkinSystem([blowup], 1, M=np.eye(1))
+    tr = march(system, [0.0], np.ones(1), 0.05, 40, scheme="bdf2", maxiter=8)
+    assert not tr.success and "Newton failed at step" in tr.message
+    # the implicit step u - (2/3) dt u^2 = psi has no real root once psi > 3 / (8 dt)
+    k = tr.failed_step
+    assert 0.5 <= tr.times[-1] < 1.0 and len(tr.Theta) == len(tr.times) == k
+    assert np.all(np.isfinite(tr.Theta)) and np.all(np.diff(tr.Theta[:, 0, 0]) > 0)
+    assert f"t={k * 0.05:.6g}" in tr.message
