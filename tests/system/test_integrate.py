@@ -7,7 +7,7 @@ from _models import diffusion
 from scipy import stats
 from scipy.integrate import solve_ivp
 
-from ecfm_uq.chaos import ChaosBasis, Inputs, project, weighted_gram
+from ecfm_uq.chaos import Inputs, input_basis, input_coefficients, input_gram
 from ecfm_uq.problems.pendulum import build_pendulum
 from ecfm_uq.system import GalerkinSystem, LinearTerm, NonlinearTerm, integrate
 from ecfm_uq.system.thresholds import SolveStatus
@@ -31,11 +31,11 @@ def _decay_moments(t):
 
 
 def test_exponential_decay_tutorial_at_order_5_within_1e_8_of_the_closed_form():
+    # the recipe of docs/time.md, no germ coordinate by hand
     inputs = Inputs([stats.norm(1.5, 0.2), stats.uniform(0.1, 0.1)], names=["alpha", "beta"])
-    basis = ChaosBasis(5, 2, germ=inputs.germs)
-    G = weighted_gram(basis, lambda w: inputs.from_germ(w)[:, 1])
-    nodes, weights = basis.quadrature()
-    c0 = project(basis, nodes, weights, inputs.from_germ(nodes)[:, 0])
+    basis = input_basis(inputs, 5)
+    G = input_gram(basis, inputs, lambda x: x[:, 1])
+    c0 = input_coefficients(basis, inputs, lambda x: x[:, 0])
     system = GalerkinSystem([LinearTerm(np.eye(1), G=G)], 0, basis=basis, M=np.eye(1))
     tr = integrate(system, [], c0[None, :], T_GRID, rtol=1e-10)
     assert tr.success and tr.Theta.shape == (1000, 1, basis.size)
