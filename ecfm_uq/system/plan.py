@@ -284,8 +284,9 @@ def plan_solve(
     keep_factors : bool
         The caller keeps every step's factors (a march for an adjoint).
     scheme : str
-        The march's time scheme (:mod:`.schemes`); the compiled kernels march backward
-        Euler (``"euler"``) only.
+        The march's time scheme (:mod:`.schemes`): the compiled kernels march the
+        fixed-step schemes (``"euler"``, ``"bdf2"``); ``integrate``'s variable steps
+        (``"bdf"``) run on the generic path.
 
     Raises
     ------
@@ -398,8 +399,8 @@ def _nodal_march_refusal(system):
 def _march_refusal(system, solver, precond, constrained, keep_factors, scheme="euler"):
     """Why no compiled march takes this solve (``None``: one can)."""
     N, P = system.shape
-    if scheme != "euler":
-        return f"the compiled kernels march backward Euler only (scheme={scheme!r})"
+    if scheme not in ("euler", "bdf2"):
+        return f"the compiled kernels march fixed-step schemes only (scheme={scheme!r})"
     if P == 1:
         if solver != "dense":
             return f"the P = 1 kernel factorizes densely, but the solver is {solver!r}"

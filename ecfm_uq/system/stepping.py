@@ -160,7 +160,7 @@ def march(
             raise ValueError("`guess` must come from a march under the same data constraint")
     args = (system, eps, Theta0, dt, n_steps, t0, M_obs, V, sensitivities, tol, maxiter)
     if linear.plan.path != "generic":
-        traj = compiled_march(linear, *args, keep_factors, guess)
+        traj = compiled_march(linear, *args, keep_factors, guess, scheme)
         if traj is not None:
             if strict and not traj.success:
                 raise ConvergenceError(traj.message)

@@ -16,6 +16,7 @@ from ecfm_uq.system import (
     LoadTerm,
     NonlinearTerm,
     QuadraticTerm,
+    integrate,
     march,
 )
 
@@ -91,14 +92,30 @@ def test_bdf2_is_second_order_on_sparse_diffusion_with_krylov_solves():
     assert p2[-1] >= 1.9
 
 
-def test_the_plan_says_why_bdf2_is_not_compiled():
+@pytest.mark.parametrize("order", [0, 2])
+def test_the_compiled_bdf2_march_equals_the_generic_one(order):
+    system = _burgers_like(order)
+    args = (system, [1.2], np.zeros(system.shape), 0.05, 12)
+    kw = dict(scheme="bdf2", sensitivities=True, tol=1e-12)
+    fast = march(*args, **kw)
+    slow = march(*args, solver={"compiled": False}, **kw)
+    assert fast.plan.path == ("compiled-p1" if order == 0 else "compiled-sg")
+    assert slow.plan.path == "generic" and "compiled=False" in slow.plan.reason
+    np.testing.assert_allclose(fast.Theta, slow.Theta, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(fast.dTheta, slow.dTheta, rtol=0, atol=1e-9)
+    if order == 0:  # the P = 1 kernel keeps its factors: its adjoint is BDF2's too
+        fast = march(*args, keep_factors=True, **kw)
+        slow = march(*args, keep_factors=True, solver={"compiled": False}, **kw)
+        g = fast.Theta**2
+        np.testing.assert_allclose(fast.adjoint_gradient(g), slow.adjoint_gradient(g), rtol=1e-12)
+
+
+def test_integrate_says_why_it_runs_on_the_generic_path():
     system = _burgers_like(0)
-    tr = march(system, [1.0], np.zeros(system.N), 0.1, 3)
-    assert tr.plan.path == "compiled-p1"
-    tr = march(system, [1.0], np.zeros(system.N), 0.1, 3, scheme="bdf2")
-    assert tr.plan.path == "generic" and "backward Euler only" in tr.plan.reason
-    with pytest.raises(ValueError, match="backward Euler only"):
-        march(system, [1.0], np.zeros(system.N), 0.1, 3, scheme="bdf2", solver={"compiled": True})
+    tr = integrate(system, [1.0], np.zeros(system.N), [0.0, 0.5])
+    assert tr.plan.path == "generic" and "fixed-step schemes only" in tr.plan.reason
+    with pytest.raises(ValueError, match="fixed-step schemes only"):
+        integrate(system, [1.0], np.zeros(system.N), [0.0, 0.5], solver={"compiled": True})
 
 
 def _fd_check(objective, eps, h):
