@@ -3,7 +3,7 @@ honest failure and clear errors."""
 
 import numpy as np
 import pytest
-from _models import diffusion
+from _models import burgers_like, diffusion
 from scipy import stats
 from scipy.integrate import solve_ivp
 
@@ -135,3 +135,18 @@ def test_a_system_without_mass_matrix_is_refused():
     system = GalerkinSystem([LinearTerm(np.eye(2))], 0)
     with pytest.raises(ValueError, match="no mass matrix"):
         integrate(system, [], np.ones(2), [0.0, 1.0])
+
+
+def test_a_quadratic_term_with_a_random_viscosity_and_a_load():
+    system = burgers_like(2)
+    t_eval = np.linspace(0.0, 0.5, 11)
+
+    def f(t, y):
+        return -system.residual(y.reshape(system.shape), [1.2]).ravel()
+
+    sol = solve_ivp(f, (0.0, 0.5), np.zeros(system.N * system.P), method="Radau", rtol=1e-13,
+                    atol=1e-15, t_eval=t_eval)  # fmt: skip
+    ref = sol.y.T.reshape(11, *system.shape)
+    tr = integrate(system, [1.2], np.zeros(system.shape), t_eval, rtol=1e-9, atol=1e-12)
+    assert tr.success and tr.stats["n_jacobians"] < tr.stats["n_steps"]  # Jacobians reused
+    assert np.abs(tr.Theta - ref).max() < 1e-6 * np.abs(ref).max()

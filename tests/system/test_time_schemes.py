@@ -4,18 +4,13 @@ differences of what the march computes."""
 
 import numpy as np
 import pytest
-from _models import diffusion
+from _models import burgers_like, diffusion
 from scipy.integrate import solve_ivp
 
-from ecfm_uq.chaos import ChaosBasis, weighted_gram
 from ecfm_uq.problems.pendulum import build_pendulum
 from ecfm_uq.system import (
-    Coefficient,
     GalerkinSystem,
-    LinearTerm,
-    LoadTerm,
     NonlinearTerm,
-    QuadraticTerm,
     integrate,
     march,
 )
@@ -42,24 +37,6 @@ def _orders(system, eps, Theta0, T, scheme, ns, ref, **kw):
     return np.log2(np.array(errs[:-1]) / errs[1:]), errs
 
 
-def _burgers_like(order, N=8):
-    """Viscous Burgers-like model: a quadratic convection term, a viscosity spread by a
-    uniform germ (order > 0) and a load scaled by eps0."""
-    A = np.zeros((N, N, N))
-    for i in range(N - 1):
-        A[i, i, i + 1] = 0.5
-        A[i + 1, i, i + 1] = -0.5
-    K = (2 * np.eye(N) - np.eye(N, k=1) - np.eye(N, k=-1)) * 4.0
-    basis = ChaosBasis(order, 1) if order else None
-    G = None if not order else weighted_gram(basis, lambda w: 1.0 + 0.4 * (w[:, 0] - 0.5))
-    terms = [
-        LinearTerm(K) if G is None else LinearTerm(K, G=G),
-        QuadraticTerm(A),
-        LoadTerm.scaled(np.sin(np.linspace(0.3, 2.8, N)), Coefficient.parameter(0)),
-    ]
-    return GalerkinSystem(terms, 1, basis=basis, M=np.eye(N))
-
-
 @pytest.mark.parametrize("order", [0, 3])
 def test_bdf2_is_second_order_on_a_nonlinear_pendulum(order):
     system, Theta0 = build_pendulum(order=order)
@@ -75,7 +52,7 @@ def test_bdf2_is_second_order_on_a_nonlinear_pendulum(order):
 
 @pytest.mark.parametrize("order", [0, 2])
 def test_bdf2_is_second_order_with_a_quadratic_term(order):
-    system = _burgers_like(order)
+    system = burgers_like(order)
     eps, T = [1.0], 0.5
     Theta0 = np.zeros(system.shape)
     ref = _reference(system, eps, Theta0, T)[-1]
@@ -94,7 +71,7 @@ def test_bdf2_is_second_order_on_sparse_diffusion_with_krylov_solves():
 
 @pytest.mark.parametrize("order", [0, 2])
 def test_the_compiled_bdf2_march_equals_the_generic_one(order):
-    system = _burgers_like(order)
+    system = burgers_like(order)
     args = (system, [1.2], np.zeros(system.shape), 0.05, 12)
     kw = dict(scheme="bdf2", sensitivities=True, tol=1e-12)
     fast = march(*args, **kw)
@@ -111,7 +88,7 @@ def test_the_compiled_bdf2_march_equals_the_generic_one(order):
 
 
 def test_integrate_says_why_it_runs_on_the_generic_path():
-    system = _burgers_like(0)
+    system = burgers_like(0)
     tr = integrate(system, [1.0], np.zeros(system.N), [0.0, 0.5])
     assert tr.plan.path == "generic" and "fixed-step schemes only" in tr.plan.reason
     with pytest.raises(ValueError, match="fixed-step schemes only"):
@@ -166,7 +143,7 @@ def test_bdf2_adjoint_of_the_ecfm_constraint_equals_central_differences(solver):
 
 
 def test_bdf2_adjoint_with_a_quadratic_term_and_P_above_one():
-    system = _burgers_like(2)
+    system = burgers_like(2)
     Theta0 = np.zeros(system.shape)
 
     def objective(eps):
@@ -183,7 +160,7 @@ def test_bdf2_adjoint_with_a_quadratic_term_and_P_above_one():
 
 
 def test_an_unknown_scheme_is_refused_with_the_choices():
-    system = _burgers_like(0)
+    system = burgers_like(0)
     with pytest.raises(ValueError, match="`scheme` must be one of \\('euler', 'bdf2'\\)"):
         march(system, [1.0], np.zeros(system.N), 0.1, 3, scheme="rk4")
 
