@@ -315,13 +315,18 @@ class _BDF:
         try:
             f0 = -self.mass_solve(self.residual(self.y, self.t))
         except ModelEvaluationError as e:
-            return self.result(out, n_out, False, f"model evaluation failed at t0: {e}", [])
+            return self.result(out, n_out, False, f"model evaluation failed at t0: {e}", [],
+                               SolveStatus.MODEL_FAILURE)  # fmt: skip
         h = self.first_step if self.first_step is not None else self.initial_step(f0)
         h = min(float(h), self.max_step, t_end - self.t)
         D = np.zeros((MAX_ORDER + 3, N, P))
         D[0], D[1] = self.y, f0 * h
         order, n_equal = 1, 0
-        parts = None if system.is_linear else self.jacobian_parts(self.y, self.t)
+        try:
+            parts = None if system.is_linear else self.jacobian_parts(self.y, self.t)
+        except ModelEvaluationError as e:
+            return self.result(out, n_out, False, f"model evaluation failed at t0: {e}", [],
+                               SolveStatus.MODEL_FAILURE)  # fmt: skip
         factor, current_jac = None, True
         nits = []
         while self.t < t_end:
@@ -369,7 +374,10 @@ class _BDF:
                     if not converged:
                         if current_jac or system.is_linear:
                             break
-                        parts = self.jacobian_parts(y_pred, t_new)
+                        try:
+                            parts = self.jacobian_parts(y_pred, t_new)
+                        except ModelEvaluationError:  # a smaller step may evaluate
+                            break
                         factor, current_jac = None, True
                 if not converged:
                     h *= 0.5

@@ -159,3 +159,16 @@ def test_a_quadratic_term_with_a_random_viscosity_and_a_load():
     tr = integrate(system, [1.2], np.zeros(system.shape), t_eval, rtol=1e-9, atol=1e-12)
     assert tr.success and tr.stats["n_jacobians"] < tr.stats["n_steps"]  # Jacobians reused
     assert np.abs(tr.Theta - ref).max() < 1e-6 * np.abs(ref).max()
+
+
+def test_a_model_that_cannot_be_evaluated_past_some_state_fails_honestly():
+    # u' = u from 1, but the model returns NaN once u > 2 (at t = ln 2)
+    def residual(u, w, e):
+        return np.where(u > 2.0, np.nan, -u)
+
+    term = NonlinearTerm(residual, lambda u, w, e: -np.eye(1), size=1)
+    system = GalerkinSystem([term], 0, M=np.eye(1))
+    tr = integrate(system, [], np.ones(1), np.linspace(0.0, 1.0, 11), rtol=1e-8)
+    assert not tr.success and "t=0.69" in tr.message
+    assert np.all(tr.times < np.log(2.0)) and len(tr.times) == 7
+    np.testing.assert_allclose(tr.Theta[:, 0, 0], np.exp(tr.times), rtol=1e-6)
