@@ -170,33 +170,8 @@ def _p1_scale(th, prev, lam, Mdt, Klin, cq, S, F, Gam, Cobs, V):
 
 
 @numba.njit(cache=True)
-def march_p1(
-    Mdt,
-    Klin,
-    Ks,
-    gK,
-    rows,
-    ptr,
-    idx,
-    val,
-    cq,
-    gq,
-    F,
-    dF,
-    Cobs,
-    Gam,
-    V,
-    theta0,
-    guess,
-    use_guess,
-    tol,
-    maxiter,
-    sens,
-    keep,
-    Mdt2,
-    hsel,
-    wts,
-):
+def march_p1(Mdt, Klin, Ks, gK, rows, ptr, idx, val, cq, gq, F, dF, Cobs, Gam, V, theta0,
+        guess, use_guess, tol, maxiter, sens, keep, Mdt2, hsel, wts):  # fmt: skip
     """March ``Mdt (th_t - th_{t-1}) + Klin th_t + cq A:th_t th_t - F_t - Gam lam_t = 0``.
 
     Two-step schemes (:mod:`.schemes`): step ``s`` uses the mass term ``Mdt2`` where
@@ -545,41 +520,9 @@ def _sg_gmres(
 
 
 @numba.njit(cache=True)
-def march_sg(
-    Mdt,
-    E2,
-    Ks,
-    cs,
-    Gs,
-    gK,
-    rows,
-    ptr,
-    idx,
-    val,
-    cq,
-    gq,
-    E3m,
-    F,
-    dF,
-    PhiT,
-    Tn,
-    Tb,
-    mnode,
-    gnode,
-    theta0,
-    guess,
-    use_guess,
-    tol,
-    maxiter,
-    sens,
-    sens_rtol,
-    restart,
-    lin_maxiter,
-    chord_rate,
-    Mdt2,
-    hsel,
-    wts,
-):
+def march_sg(Mdt, E2, Ks, cs, Gs, gK, rows, ptr, idx, val, cq, gq, E3m, F, dF, PhiT, Tn, Tb,
+        mnode, gnode, theta0, guess, use_guess, tol, maxiter, sens, sens_rtol, restart,
+        lin_maxiter, chord_rate, Mdt2, hsel, wts):  # fmt: skip
     """March the ``P > 1`` Galerkin system (no data constraint), preconditioned node-wise.
 
     Two-step schemes as in :func:`march_p1` (``Mdt2``, ``hsel``, ``wts``).
