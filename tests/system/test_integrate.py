@@ -10,7 +10,7 @@ from scipy.linalg import expm
 
 from ecfm_uq.chaos import Inputs, input_basis, input_coefficients, input_gram
 from ecfm_uq.problems.pendulum import build_pendulum
-from ecfm_uq.system import GalerkinSystem, LinearTerm, NonlinearTerm, integrate
+from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm, NonlinearTerm, integrate
 from ecfm_uq.system.thresholds import SolveStatus
 
 T_GRID = np.linspace(0.0, 10.0, 1000)
@@ -169,3 +169,13 @@ def test_a_model_that_cannot_be_evaluated_past_some_state_fails_honestly():
     assert not tr.success and "t=0.69" in tr.message
     assert np.all(tr.times < np.log(2.0)) and len(tr.times) == 7
     np.testing.assert_allclose(tr.Theta[:, 0, 0], np.exp(tr.times), rtol=1e-6)
+
+
+def test_a_zero_start_with_a_load_that_ramps_up_from_zero():
+    # u' = t from u(0) = 0: zero state and zero slope at t0; u = t^2 / 2
+    ramp = LoadTerm(lambda e, t: np.array([t]))
+    system = GalerkinSystem([LinearTerm(np.zeros((1, 1))), ramp], 0, M=np.eye(1))
+    t_eval = np.linspace(0.0, 2.0, 5)
+    tr = integrate(system, [], np.zeros(1), t_eval, rtol=1e-8)
+    assert tr.success
+    np.testing.assert_allclose(tr.Theta[:, 0, 0], t_eval**2 / 2, rtol=1e-7, atol=1e-15)
