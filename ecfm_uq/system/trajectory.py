@@ -13,7 +13,7 @@ from .thresholds import SolveStatus
 
 @dataclass
 class Trajectory:
-    """Result of :func:`march`.
+    """Result of :func:`march` (or of :func:`.integrate`, at its ``t_eval``).
 
     Attributes
     ----------
