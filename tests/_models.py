@@ -4,7 +4,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ecfm_uq.chaos import ChaosBasis, weighted_gram
-from ecfm_uq.system import Coefficient, GalerkinSystem, LinearTerm, LoadTerm
+from ecfm_uq.system import Coefficient, GalerkinSystem, LinearTerm, LoadTerm, QuadraticTerm
 
 
 def fd_stiffness(N, weight=np.ones_like):
@@ -39,3 +39,21 @@ def diffusion(N=20, dim=2, order=2, sparse=True, sigma=0.3, n_forces=3):
         ),
         np.eye(N)[idx],
     )
+
+
+def burgers_like(order, N=8):
+    """Viscous Burgers-like model: a quadratic convection term, a viscosity spread by a
+    uniform germ (order > 0) and a load scaled by eps0."""
+    A = np.zeros((N, N, N))
+    for i in range(N - 1):
+        A[i, i, i + 1] = 0.5
+        A[i + 1, i, i + 1] = -0.5
+    K = (2 * np.eye(N) - np.eye(N, k=1) - np.eye(N, k=-1)) * 4.0
+    basis = ChaosBasis(order, 1) if order else None
+    G = None if not order else weighted_gram(basis, lambda w: 1.0 + 0.4 * (w[:, 0] - 0.5))
+    terms = [
+        LinearTerm(K) if G is None else LinearTerm(K, G=G),
+        QuadraticTerm(A),
+        LoadTerm.scaled(np.sin(np.linspace(0.3, 2.8, N)), Coefficient.parameter(0)),
+    ]
+    return GalerkinSystem(terms, 1, basis=basis, M=np.eye(N))

@@ -22,11 +22,14 @@ PolynomialChaosExpansion  a PCE as an object: moments, Sobol indices, sampling, 
 Inputs               any continuous marginals, independent or joined by a Gaussian copula
 UniformInputs        independent uniform inputs on their own ranges, mapped to the germ
 project              pseudo-spectral projection of node values onto the basis
+input_basis, input_coefficients, input_gram
+                     a Galerkin model's coefficients and states as functions of the inputs
 fit_pce              non-intrusive PCE of a black-box model (quadrature, Smolyak, OLS, LARS)
 """
 
 from .basis import ChaosBasis
 from .germs import Germ
+from .input_projection import input_basis, input_coefficients, input_gram
 from .inputs import Inputs, UniformInputs
 from .nonintrusive import fit_pce, sample_design, smolyak_rule
 from .pce import PolynomialChaosExpansion
@@ -50,6 +53,9 @@ __all__ = [
     "Inputs",
     "UniformInputs",
     "fit_pce",
+    "input_basis",
+    "input_coefficients",
+    "input_gram",
     "project",
     "sample_design",
     "smolyak_rule",

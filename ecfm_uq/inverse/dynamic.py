@@ -43,6 +43,7 @@ import numpy as np
 from .._validation import as_dense_rows, as_finite_array, check_choice, check_int, check_positive
 from ..errors import ConvergenceError
 from ..system import march
+from ..system.schemes import check_scheme
 from .convergence import least_squares_optimality
 from .drivers import (
     check_minimize_method,
@@ -94,6 +95,10 @@ class DynamicInverseProblem:
         Start each step's Newton iteration from the last trajectory of the same
         formulation (the previous optimizer iterate's) instead of the previous step: fewer
         Newton iterations, the same solution to ``tol``.
+    scheme : {"euler", "bdf2"}
+        Time scheme of the march (:mod:`ecfm_uq.system.schemes`): backward Euler (the
+        paper's, the default) or the second-order BDF2; sensitivities and adjoint
+        gradients are exact for the scheme that runs.
 
     Raises
     ------
@@ -117,6 +122,7 @@ class DynamicInverseProblem:
         gradient="auto",
         solver="auto",
         warm_start=True,
+        scheme="euler",
     ):
         if getattr(system, "M", None) is None:
             raise ValueError("`system` needs a mass matrix M for time stepping (build it with M=)")
@@ -129,6 +135,7 @@ class DynamicInverseProblem:
         self.gradient = choose_gradient(gradient, system.n_eps)
         self.solver = solver
         self.warm_start = bool(warm_start)
+        self.scheme = check_scheme(scheme)
         self._last = {}  # formulation -> last trajectory (the warm start)
         N, P = system.shape
         Theta0 = as_finite_array("Theta0", Theta0)
@@ -188,6 +195,7 @@ class DynamicInverseProblem:
                 solver=self.solver,
                 keep_factors=keep_factors,
                 guess=self._last.get(formulation) if self.warm_start else None,
+                scheme=self.scheme,
             )
         except ConvergenceError as e:
             if self.warm_start and formulation in self._last:

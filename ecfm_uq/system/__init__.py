@@ -1,18 +1,24 @@
 """The stochastic Galerkin system R(Theta; eps, lam) and its solvers (paper Eqs.
-backward_euler, ecfm_solve, discrete_sens, discrete_sens_ecfm, pce, stochastic_sens)."""
+backward_euler, ecfm_solve, discrete_sens, discrete_sens_ecfm, pce, stochastic_sens).
 
+Transients: ``march`` (fixed steps, ``scheme="euler"`` or ``"bdf2"``, sensitivities and the
+exact discrete adjoint) and ``integrate`` (variable-order BDF with error control)."""
+
+from .adaptive import integrate
 from .galerkin import GalerkinSystem
 from .linear import LinearSolver
 from .nonlinear import NewtonInfo, newton
 from .nonlinear_term import NonlinearTerm
 from .operator import AugmentedOperator, GalerkinOperator
 from .options import SOLVERS, SolverOptions, solver_options
+from .schemes import SCHEMES
 from .steady import SteadySolution, solve_continuation, solve_steady
 from .stepping import march
 from .terms import Coefficient, DenseQuadraticForm, LinearTerm, LoadTerm, QuadraticTerm
 from .trajectory import Trajectory
 
 __all__ = [
+    "SCHEMES",
     "SOLVERS",
     "AugmentedOperator",
     "Coefficient",
@@ -28,6 +34,7 @@ __all__ = [
     "SolverOptions",
     "SteadySolution",
     "Trajectory",
+    "integrate",
     "march",
     "newton",
     "solve_continuation",

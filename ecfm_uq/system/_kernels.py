@@ -26,7 +26,7 @@ import numpy as np
 from numba import types
 from numba.np.linalg import ensure_lapack
 
-from .plan import (
+from .thresholds import (
     KRYLOV_ACCEPT,
     NEWTON_ETA_FACTOR,
     NEWTON_ETA_MAX,
@@ -170,31 +170,13 @@ def _p1_scale(th, prev, lam, Mdt, Klin, cq, S, F, Gam, Cobs, V):
 
 
 @numba.njit(cache=True)
-def march_p1(
-    Mdt,
-    Klin,
-    Ks,
-    gK,
-    rows,
-    ptr,
-    idx,
-    val,
-    cq,
-    gq,
-    F,
-    dF,
-    Cobs,
-    Gam,
-    V,
-    theta0,
-    guess,
-    use_guess,
-    tol,
-    maxiter,
-    sens,
-    keep,
-):
+def march_p1(Mdt, Klin, Ks, gK, rows, ptr, idx, val, cq, gq, F, dF, Cobs, Gam, V, theta0,
+        guess, use_guess, tol, maxiter, sens, keep, Mdt2, hsel, wts):  # fmt: skip
     """March ``Mdt (th_t - th_{t-1}) + Klin th_t + cq A:th_t th_t - F_t - Gam lam_t = 0``.
+
+    Two-step schemes (:mod:`.schemes`): step ``s`` uses the mass term ``Mdt2`` where
+    ``hsel[s] == 1`` and starts from ``wts[s, 0] th_s + wts[s, 1] th_{s-1}``
+    (backward Euler: ``hsel = 0``, ``wts = (1, 0)``, the same arithmetic as before).
 
     Parameters (shapes)
     -------------------
@@ -238,9 +220,18 @@ def march_p1(
     lu = np.empty((n, n))
     piv = np.empty(n, dtype=np.int32)
     base = Mdt + Klin
+    base2 = Mdt2 + Klin
     Kflat = Ks.reshape(Ks.shape[0] * N, N)
+    prevb = np.empty(N)
     for s in range(n_t - 1):
         t1 = s + 1
+        two = hsel[s] == 1
+        Mh = Mdt2 if two else Mdt
+        bh = base2 if two else base
+        if wts[s, 1] != 0.0:
+            prevb[:] = wts[s, 0] * Th[s] + wts[s, 1] * Th[s - 1]
+        else:
+            prevb[:] = Th[s]
         if use_guess:
             z[:] = guess[t1]
         else:
@@ -253,20 +244,20 @@ def march_p1(
         for k in range(maxiter + 1):
             th = z[:N]
             _quadratic(th, rows, ptr, idx, val, q, S)
-            r[:N] = Mdt @ (th - Th[s]) + Klin @ th + cq * q - F[t1]
+            r[:N] = Mh @ (th - prevb) + Klin @ th + cq * q - F[t1]
             if C > 0:
                 r[:N] -= Gam @ z[N:]
                 r[N:] = Cobs @ th - V[t1]
             rnorm = np.sqrt(np.sum(r * r))
             if not np.isfinite(rnorm):
                 break
-            J[:N, :N] = base + cq * S
+            J[:N, :N] = bh + cq * S
             nits[s] = k
             if not _lu_factor(J, lu, piv):
                 return Th, lam, dTh, dlam, nits, s, _SINGULAR_JACOBIAN, rnorm, LUs, pivs
             floor = 0.0
             if k == 0 or rnorm >= tol_s:  # plan.scaled_tol and plan.residual_floor
-                sc = _p1_scale(th, Th[s], z[N:], Mdt, Klin, cq, S, F[t1], Gam, Cobs, V[t1])
+                sc = _p1_scale(th, prevb, z[N:], Mh, Klin, cq, S, F[t1], Gam, Cobs, V[t1])
                 tol_s, floor = _termination(k, rnorm, sc, tol, tol_s)
             if rnorm < tol_s or (floor > 0.0 and rnorm <= floor):
                 # the last Newton correction is taken with the converged Jacobian, whose
@@ -277,7 +268,10 @@ def march_p1(
                     if Ks.shape[0] > 0:  # sum_j (K_j th) gK_j^T as one product
                         KTh = (Kflat @ th).reshape(Ks.shape[0], N)
                         D += KTh.T @ gK
-                    rhs = Mdt @ dTh[s] - D
+                    if wts[s, 1] != 0.0:
+                        rhs = Mh @ (wts[s, 0] * dTh[s] + wts[s, 1] * dTh[s - 1]) - D
+                    else:
+                        rhs = Mh @ dTh[s] - D
             x[:] = r
             _lu_solve(lu, piv, x)
             z -= x
@@ -302,7 +296,7 @@ def march_p1(
 
 
 @numba.njit(cache=True)
-def adjoint_p1(LUs, pivs, Th, Mdt, Ks, gK, rows, ptr, idx, val, gq, dF, g):
+def adjoint_p1(LUs, pivs, Th, Mdt, Ks, gK, rows, ptr, idx, val, gq, dF, g, Mdt2, hsel, wts):
     """Discrete adjoint of :func:`march_p1`: the gradient of ``z = sum_t z_t``.
 
     Backward in time, ``J_t^T mu_t = g_t + [Mdt^T mu_{t+1, theta}; 0]`` and
@@ -314,13 +308,14 @@ def adjoint_p1(LUs, pivs, Th, Mdt, Ks, gK, rows, ptr, idx, val, gq, dF, g):
     LUs, pivs : (n_t - 1, n, n), (n_t - 1, n)   the march's kept factors (n = N + C)
     Th : (n_t, N)          states
     g : (n_t, n)           dz/d(theta_t, lam_t) (row 0 unused)
-    others as in :func:`march_p1`.
+    others as in :func:`march_p1` (a two-step step carries ``wts[s, j] Mh^T mu`` back to
+    the state ``s - j``).
     """
     n_t, N = Th.shape
     n = LUs.shape[1]
     n_eps = gK.shape[1]
     grad = np.zeros(n_eps)
-    carry = np.zeros(N)
+    carry = np.zeros((n_t, N))
     q = np.empty(N)
     S = np.empty((N, N))
     x = np.empty(n)
@@ -331,7 +326,7 @@ def adjoint_p1(LUs, pivs, Th, Mdt, Ks, gK, rows, ptr, idx, val, gq, dF, g):
     glive = np.ascontiguousarray(gK[live])
     for t in range(n_t - 1, 0, -1):
         x[:] = g[t]
-        x[:N] += carry
+        x[:N] += carry[t]
         _lu_solve_transpose(LUs[t - 1], pivs[t - 1], x)
         mu = x[:N]
         th = Th[t]
@@ -342,7 +337,10 @@ def adjoint_p1(LUs, pivs, Th, Mdt, Ks, gK, rows, ptr, idx, val, gq, dF, g):
         if live.shape[0] > 0:
             KTh = (Klive @ th).reshape(live.shape[0], N)
             grad -= glive.T @ (KTh @ mu)
-        carry = Mdt.T @ mu
+        c = (Mdt2 if hsel[t - 1] == 1 else Mdt).T @ mu
+        carry[t - 1] += wts[t - 1, 0] * c
+        if wts[t - 1, 1] != 0.0 and t >= 3:
+            carry[t - 2] += wts[t - 1, 1] * c
     return grad
 
 
@@ -522,39 +520,12 @@ def _sg_gmres(
 
 
 @numba.njit(cache=True)
-def march_sg(
-    Mdt,
-    E2,
-    Ks,
-    cs,
-    Gs,
-    gK,
-    rows,
-    ptr,
-    idx,
-    val,
-    cq,
-    gq,
-    E3m,
-    F,
-    dF,
-    PhiT,
-    Tn,
-    Tb,
-    mnode,
-    gnode,
-    theta0,
-    guess,
-    use_guess,
-    tol,
-    maxiter,
-    sens,
-    sens_rtol,
-    restart,
-    lin_maxiter,
-    chord_rate,
-):
+def march_sg(Mdt, E2, Ks, cs, Gs, gK, rows, ptr, idx, val, cq, gq, E3m, F, dF, PhiT, Tn, Tb,
+        mnode, gnode, theta0, guess, use_guess, tol, maxiter, sens, sens_rtol, restart,
+        lin_maxiter, chord_rate, Mdt2, hsel, wts):  # fmt: skip
     """March the ``P > 1`` Galerkin system (no data constraint), preconditioned node-wise.
+
+    Two-step schemes as in :func:`march_p1` (``Mdt2``, ``hsel``, ``wts``).
 
     Step residual (Eq. backward_euler projected on the chaos basis)
     ``R = Mdt (Z - Th_{t-1}) E2 + sum_q c_q K_q Z G_q + cq/2 sum_{b,c} E3[b,c,:] S_b Z_c - F_t``.
@@ -624,13 +595,19 @@ def march_sg(
         krylov = False
         rnorm = np.inf
         prev = np.inf
-        _sg_mass(Th[s], Mdt, E2, e2_eye, X)
+        two = hsel[s] == 1
+        Mh = Mdt2 if two else Mdt
+        if wts[s, 1] != 0.0:
+            Pv = wts[s, 0] * Th[s] + wts[s, 1] * Th[s - 1]
+        else:
+            Pv = Th[s].copy()
+        _sg_mass(Pv, Mh, E2, e2_eye, X)
         Fs = F[t1] + X  # the step's fixed part: load and previous state
         tol_s = tol
         for k in range(maxiter + 1):
             if has_quad:
                 _linearize(Z, rows, ptr, idx, val, Sf)
-            _sg_linear(Z, Mdt, E2, e2_eye, Kc, Gs, R)
+            _sg_linear(Z, Mh, E2, e2_eye, Kc, Gs, R)
             if has_quad:
                 R += (0.5 * cq) * _sg_quadratic(Z, Sf, E3m)
             R -= Fs
@@ -640,7 +617,7 @@ def march_sg(
                 break
             floor = 0.0
             if k == 0 or rnorm >= tol_s:  # plan.scaled_tol and plan.residual_floor
-                sc = _sg_scale(Z, Th[s], Mdt, E2, Kc, Gs, cq_eff, rows, ptr, idx, val, E3m,
+                sc = _sg_scale(Z, Pv, Mh, E2, Kc, Gs, cq_eff, rows, ptr, idx, val, E3m,
                                F[t1])  # fmt: skip
                 tol_s, floor = _termination(k, rnorm, sc, tol, tol_s)
             if rnorm < tol_s or (floor > 0.0 and rnorm <= floor):
@@ -651,14 +628,14 @@ def march_sg(
             if not krylov and (chord_rate <= 0.0 or (k > 0 and rnorm > chord_rate * prev)):
                 krylov = True
             if krylov or not factored:
-                if not _sg_factor_nodes(Mdt, Kc, cq_eff, Sf, PhiT, mnode, gnode, LUs, pivs):
+                if not _sg_factor_nodes(Mh, Kc, cq_eff, Sf, PhiT, mnode, gnode, LUs, pivs):
                     return Th, dTh, nits, kits, s, _SINGULAR_JACOBIAN, rnorm
                 factored = True
             if krylov:
                 eta = max(NEWTON_ETA_FACTOR * tol_s / rnorm, NEWTON_ETA_MIN, floor / rnorm)
                 eta = min(NEWTON_ETA_MAX, eta)
                 its, rel = _sg_gmres(
-                    R, Mdt, E2, e2_eye, Kc, Gs, cq_eff, Sf, E3m, Tn, Tb, LUs, pivs, eta,
+                    R, Mh, E2, e2_eye, Kc, Gs, cq_eff, Sf, E3m, Tn, Tb, LUs, pivs, eta,
                     restart, lin_maxiter, X,
                 )  # fmt: skip
                 kits[s] += its
@@ -677,12 +654,16 @@ def march_sg(
         # dTh_t solves J dTh_t = Mdt dTh_{t-1} E2 - dR/deps (Eq. discrete_sens), J at the
         # converged state (Sf is), preconditioned by this step's node factors
         if not factored:
-            if not _sg_factor_nodes(Mdt, Kc, cq_eff, Sf, PhiT, mnode, gnode, LUs, pivs):
+            if not _sg_factor_nodes(Mh, Kc, cq_eff, Sf, PhiT, mnode, gnode, LUs, pivs):
                 return Th, dTh, nits, kits, s, _SINGULAR_JACOBIAN, rnorm
         Wq = 0.5 * _sg_quadratic(Z, Sf, E3m) if has_quad else np.zeros((N, P))
         rhs = np.empty((N, P))
         for e in range(n_eps):
-            _sg_mass(np.ascontiguousarray(dTh[s, :, :, e]), Mdt, E2, e2_eye, rhs)
+            if wts[s, 1] != 0.0:
+                dP = wts[s, 0] * dTh[s, :, :, e] + wts[s, 1] * dTh[s - 1, :, :, e]
+            else:
+                dP = np.ascontiguousarray(dTh[s, :, :, e])
+            _sg_mass(dP, Mh, E2, e2_eye, rhs)
             rhs += dF[t1, :, :, e]
             for j in range(nq):
                 if gK[j, e] != 0.0:
@@ -690,7 +671,7 @@ def march_sg(
             if has_quad and gq[e] != 0.0:
                 rhs -= gq[e] * Wq
             its, rel = _sg_gmres(
-                rhs, Mdt, E2, e2_eye, Kc, Gs, cq_eff, Sf, E3m, Tn, Tb, LUs, pivs, sens_rtol,
+                rhs, Mh, E2, e2_eye, Kc, Gs, cq_eff, Sf, E3m, Tn, Tb, LUs, pivs, sens_rtol,
                 restart, lin_maxiter, X,
             )  # fmt: skip
             kits[s] += its

@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from . import plan as _plan
-from .plan import SolveStatus
+from .schemes import step_rule
 from .terms import LoadTerm
+from .thresholds import SolveStatus, failure_message
 from .trajectory import Trajectory
 
 # the compiled kernels: loaded once, given up once if numba cannot run them
@@ -46,8 +46,12 @@ def kernels_failed():
 
 
 def compiled_march(linear, system, eps, Theta0, dt, n_steps, t0, M_obs, V, sens, tol, maxiter,
-                   keep, guess):  # fmt: skip
+                   keep, guess, scheme="euler"):  # fmt: skip
     """March on the plan's compiled path; ``None`` if the kernel does not compile.
+
+    ``scheme`` (:mod:`.schemes`) reaches the kernels as the mass term of the two-step
+    steps, ``Mdt2``, which steps use it (``hsel``) and the weights of the states each
+    step starts from (``wts``).
 
     ``linear.plan.path`` is ``"compiled-p1"`` (:func:`._kernels.march_p1`: ``P = 1``,
     dense, data constraint, sensitivities and kept factors allowed) or ``"compiled-sg"``
@@ -78,6 +82,14 @@ def compiled_march(linear, system, eps, Theta0, dt, n_steps, t0, M_obs, V, sens,
         if dFt is not None:
             dF += dFt
     Mdt = system.mass_matrix() / dt if P == 1 else system.M / dt
+    rules = [step_rule(scheme, s, dt) for s in range(n_steps)]
+    h2 = next((h for h, _ in rules if h != dt), dt)
+    Mdt2 = system.mass_matrix() / h2 if P == 1 else system.M / h2
+    hsel = np.array([0 if h == dt else 1 for h, _ in rules], dtype=np.int64)
+    wts = np.zeros((n_steps, 2))
+    for s, (_, w) in enumerate(rules):
+        wts[s, : len(w)] = w
+    steps = (np.ascontiguousarray(Mdt2), hsel, wts)
     quad = (rows, ptr, idx, val, float(cq), gq)
     args = (system, eps, Theta0, times, sens, tol, maxiter, guess)
     from numba.core.errors import NumbaError
@@ -86,10 +98,13 @@ def compiled_march(linear, system, eps, Theta0, dt, n_steps, t0, M_obs, V, sens,
         with np.errstate(all="ignore"):
             if P == 1:
                 F1, dF1 = np.ascontiguousarray(F[:, :, 0]), np.ascontiguousarray(dF[:, :, 0])
-                return _march_p1(
-                    _kernels, linear, *args, M_obs, V, keep, lin, Ks, quad, F1, dF1, Mdt
+                traj = _march_p1(
+                    _kernels, linear, *args, M_obs, V, keep, lin, Ks, quad, F1, dF1, Mdt, steps
                 )
-            return _march_sg(_kernels, linear, *args, lin, Ks, quad, F, dF, Mdt)
+            else:
+                traj = _march_sg(_kernels, linear, *args, lin, Ks, quad, F, dF, Mdt, steps)
+            traj.plan, traj.scheme = linear.plan, scheme  # the path that ran, and why
+            return traj
     except NumbaError:  # the kernel does not compile with this numba: use the generic march
         kernels_failed()
         return None
@@ -100,7 +115,7 @@ def _failed_trajectory(system, times, failed, status, rnorm, maxiter, Theta, lam
     """The trajectory up to a compiled march's failed step, with its status and reason."""
     status = SolveStatus(status)
     k = failed + 1
-    reason = _plan.failure_message(status, maxiter)
+    reason = failure_message(status, maxiter)
     msg = f"{system.name}: Newton failed at step {k} (t={times[k]:.6g}) with ||R||={rnorm:.3e}: {reason}"
     return Trajectory(
         times[:k], Theta[:k], lam[:k], None, None, False, msg, k, nits[:k], label, list(its[:k]),
@@ -109,7 +124,7 @@ def _failed_trajectory(system, times, failed, status, rnorm, maxiter, Theta, lam
 
 
 def _march_sg(_kernels, linear, system, eps, Theta0, times, sens, tol, maxiter, guess, lin, Ks,
-              quad, F, dF, Mdt):  # fmt: skip
+              quad, F, dF, Mdt, steps):  # fmt: skip
     """The ``P > 1`` compiled march (:func:`_kernels.march_sg`)."""
     N, P = system.shape
     n_eps = system.n_eps
@@ -125,7 +140,7 @@ def _march_sg(_kernels, linear, system, eps, Theta0, times, sens, tol, maxiter, 
         rows, ptr, idx, val, cq, gq, E3m, F, dF,
         np.ascontiguousarray(nodes.Phi.T), nodes.to_nodes, nodes.from_nodes, mnode, gnode,
         np.ascontiguousarray(Theta0), start, guess is not None, tol, maxiter, bool(sens),
-        opts.rtol, opts.restart, opts.maxiter, opts.chord_rate,
+        opts.rtol, opts.restart, opts.maxiter, opts.chord_rate, *steps,
     )  # fmt: skip
     label = linear.plan.label
     lam = np.zeros((len(times), 0))
@@ -140,7 +155,7 @@ def _march_sg(_kernels, linear, system, eps, Theta0, times, sens, tol, maxiter, 
 
 
 def _march_p1(_kernels, linear, system, eps, Theta0, times, sens, tol, maxiter, guess, M_obs, V,
-              keep, lin, Ks, quad, F, dF, Mdt):  # fmt: skip
+              keep, lin, Ks, quad, F, dF, Mdt, steps):  # fmt: skip
     """The ``P = 1`` compiled march (:func:`_kernels.march_p1`) and its adjoint."""
     N = system.N
     n_eps = system.n_eps
@@ -166,7 +181,7 @@ def _march_p1(_kernels, linear, system, eps, Theta0, times, sens, tol, maxiter, 
     Th, lam, dTh, dlam, nits, failed, status, rnorm, LUs, pivs = _kernels.march_p1(
         Mdt, Klin, Ks, gK, rows, ptr, idx, val, cq, gq, F, dF, Cobs, Gam, Vd,
         np.ascontiguousarray(Theta0[:, 0]), start, guess is not None,
-        tol, maxiter, bool(sens), bool(keep),
+        tol, maxiter, bool(sens), bool(keep), *steps,
     )  # fmt: skip
     label = linear.plan.label
     if failed != -1:
@@ -192,6 +207,7 @@ def _march_p1(_kernels, linear, system, eps, Theta0, times, sens, tol, maxiter, 
                     gq,
                     dF,
                     np.ascontiguousarray(g),
+                    *steps,
                 )
 
     return Trajectory(

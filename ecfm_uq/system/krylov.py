@@ -73,7 +73,14 @@ class KrylovFactor:
         return self.precond.apply_transpose(R) if self.transposed else self.precond.apply(R)
 
     def solve_transpose(self, rhs, rtol=None):
-        """Solve with :math:`J^T` (adjoint equations), same preconditioner transposed."""
+        """Solve with :math:`J^T` (adjoint equations), same preconditioner transposed.
+
+        CG runs only on a symmetric Jacobian with a symmetric preconditioner (the plan's
+        rule), so its adjoint solve is the forward solve itself: the same operator and
+        preconditioner, no transposed products.
+        """
+        if self.method == "cg" and not self.transposed:
+            return self.solve(rhs, rtol)
         if self._T is None:
             self._T = KrylovFactor(
                 self.op.transpose(), self.method, self.precond, self.options, self.record, True

@@ -88,6 +88,8 @@ class LinearSolver:
         Steady solve (``False``: backward-Euler steps with a mass term).
     keep_factors : bool
         The caller keeps every factorization (a march for an adjoint).
+    scheme : str
+        The march's time scheme (:mod:`.schemes`).
 
     Attributes
     ----------
@@ -95,11 +97,15 @@ class LinearSolver:
         Path, linear solver and preconditioner (:func:`.plan.plan_solve`).
     """
 
-    def __init__(self, system, options, *, constrained=False, steady=True, keep_factors=False):
+    def __init__(
+        self, system, options, *, constrained=False, steady=True, keep_factors=False,
+        scheme="euler",
+    ):  # fmt: skip
         self.system, self.options = system, options
         self.plan = _plan.plan_solve(
-            system, options, constrained=constrained, steady=steady, keep_factors=keep_factors
-        )
+            system, options, constrained=constrained, steady=steady,
+            keep_factors=keep_factors, scheme=scheme,
+        )  # fmt: skip
         self.name = self.plan.solver
         self.record = LinearSolveRecord(self.plan.label)
         self._cache = None

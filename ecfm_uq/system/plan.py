@@ -105,12 +105,25 @@ Newton iteration and (as an ``int``) by the compiled kernels.
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..memory import check_allocation, memory_budget
+from .thresholds import (  # the shared thresholds and status codes, re-exported here
+    CHORD_RATE,
+    KRYLOV_ACCEPT,
+    NEWTON_ETA_FACTOR,
+    NEWTON_ETA_MAX,
+    NEWTON_ETA_MIN,
+    ROUNDOFF_FACTOR,
+    SINGULAR_PIVOT,
+    UNIT_ROUNDOFF,
+    VANISHING_BLOCK,
+    WARM_START_STATES,
+    SolveStatus,
+    failure_message,
+)
 
 __all__ = [
     "CHORD_RATE",
@@ -119,6 +132,7 @@ __all__ = [
     "KRYLOV_ACCEPT",
     "PATHS",
     "SINGULAR_PIVOT",
+    "VANISHING_BLOCK",
     "SolvePlan",
     "SolveStatus",
     "choose_solver",
@@ -130,26 +144,6 @@ __all__ = [
     "newton_rtol",
     "plan_solve",
 ]
-
-# -- thresholds shared by the Python solvers and the compiled kernels ------------------
-# (the kernels freeze them when numba compiles; its cache is keyed on _kernels.py, so
-# after changing one, touch _kernels.py or clear its __pycache__)
-SINGULAR_PIVOT = 1e-14
-NEWTON_ETA_MAX = 1e-4
-NEWTON_ETA_FACTOR = 0.05
-NEWTON_ETA_MIN = 1e-13
-KRYLOV_ACCEPT = 10.0
-# round-off floors: ROUNDOFF_FACTOR unit round-offs of the magnitude of what is summed
-UNIT_ROUNDOFF = float(np.finfo(float).eps)
-ROUNDOFF_FACTOR = 10.0
-CHORD_RATE = 0.25
-# a linear march step's Krylov solve starts from the last state plus the best combination
-# of the differences of this many previous states (stepping._warm_start; on
-# benchmarks/transient.py 2 states took 20 % more Krylov iterations, 4 or 5 no fewer)
-WARM_START_STATES = 3
-# a chaos block (mean block, decoupled mode) below this fraction of the operator's scale
-# vanishes: the Galerkin operator is singular whatever the spatial operators are
-VANISHING_BLOCK = 1e-12
 
 # -- sizes of the "auto" rules ---------------------------------------------------------
 # a dense Jacobian only below this size (LU copy included): above it a structured solver
@@ -164,33 +158,6 @@ COMPILED_MARCH_MAX_N = 128
 
 PATHS = ("generic", "compiled-p1", "compiled-sg")
 KRYLOV = ("cg", "gmres")
-
-
-class SolveStatus(enum.IntEnum):
-    """Why a nonlinear solve (a steady solve or one march step) stopped."""
-
-    CONVERGED = 0
-    MAX_ITERATIONS = 1
-    SINGULAR_JACOBIAN = 2
-    KRYLOV_FAILED = 3
-    NON_FINITE = 4
-    MODEL_FAILURE = 5
-
-
-def failure_message(status, maxiter):
-    """The reason a solve stopped with ``status`` (one wording for every path)."""
-    status = SolveStatus(status)
-    if status == SolveStatus.MAX_ITERATIONS:
-        return f"no convergence in {maxiter} iterations"
-    return {
-        SolveStatus.CONVERGED: "converged",
-        SolveStatus.SINGULAR_JACOBIAN: "Jacobian is singular or not finite",
-        SolveStatus.KRYLOV_FAILED: (
-            "GMRES did not reach its tolerance (see SolverOptions.maxiter)"
-        ),
-        SolveStatus.NON_FINITE: "residual became non-finite",
-        SolveStatus.MODEL_FAILURE: "model evaluation failed",
-    }[status]
 
 
 def residual_floor(scale, tol):
@@ -274,12 +241,17 @@ class SolvePlan:
         ``preconditioner="none"``.
     options : SolverOptions
         The options the plan was made from (tolerances, limits, ``chord_rate``).
+    reason : str
+        Why the path runs: for a march, what keeps it off the compiled kernels (e.g.
+        ``"the compiled kernels march backward Euler only (scheme='bdf2')"``) or that one
+        takes it; empty for a steady solve.
     """
 
     path: str
     solver: str
     preconditioner: str | None
     options: object
+    reason: str = ""
 
     @property
     def iterative(self):
@@ -296,7 +268,9 @@ class SolvePlan:
         return f"{name} (compiled)" if self.path != "generic" else name
 
 
-def plan_solve(system, options, *, constrained=False, steady=True, keep_factors=False):
+def plan_solve(
+    system, options, *, constrained=False, steady=True, keep_factors=False, scheme="euler"
+):
     """The :class:`SolvePlan` of a solve of ``system`` with ``options``.
 
     Parameters
@@ -309,6 +283,10 @@ def plan_solve(system, options, *, constrained=False, steady=True, keep_factors=
         A steady solve (``False``: a backward-Euler march).
     keep_factors : bool
         The caller keeps every step's factors (a march for an adjoint).
+    scheme : str
+        The march's time scheme (:mod:`.schemes`): the compiled kernels march the
+        fixed-step schemes (``"euler"``, ``"bdf2"``); ``integrate``'s variable steps
+        (``"bdf"``) run on the generic path.
 
     Raises
     ------
@@ -321,10 +299,12 @@ def plan_solve(system, options, *, constrained=False, steady=True, keep_factors=
         system, options, constrained=constrained, steady=steady, keep_factors=keep_factors
     )
     precond = _preconditioner(system, options) if solver in KRYLOV else None
-    path = "generic"
+    path, reason = "generic", ""
     if not steady:
-        path = _march_path(system, options, solver, precond, constrained, keep_factors)
-    return SolvePlan(path, solver, precond, options)
+        path, reason = _march_path(
+            system, options, solver, precond, constrained, keep_factors, scheme
+        )
+    return SolvePlan(path, solver, precond, options, reason)
 
 
 def choose_solver(system, options, *, constrained=False, steady=True, keep_factors=False):
@@ -416,9 +396,11 @@ def _nodal_march_refusal(system):
     return None
 
 
-def _march_refusal(system, solver, precond, constrained, keep_factors):
+def _march_refusal(system, solver, precond, constrained, keep_factors, scheme="euler"):
     """Why no compiled march takes this solve (``None``: one can)."""
     N, P = system.shape
+    if scheme not in ("euler", "bdf2"):
+        return f"the compiled kernels march fixed-step schemes only (scheme={scheme!r})"
     if P == 1:
         if solver != "dense":
             return f"the P = 1 kernel factorizes densely, but the solver is {solver!r}"
@@ -438,12 +420,13 @@ def _march_refusal(system, solver, precond, constrained, keep_factors):
     return _nodal_march_refusal(system)
 
 
-def _march_path(system, options, solver, precond, constrained, keep_factors):
+def _march_path(system, options, solver, precond, constrained, keep_factors, scheme):
+    """``(path, reason)`` of a march: a compiled kernel's path, or ``"generic"`` and why."""
     if options.compiled is False:
-        return "generic"
+        return "generic", "compiled=False asks for the generic march"
     from .compiled import compiled_kernels  # the kernels' loader (numba, on first use)
 
-    refusal = _march_refusal(system, solver, precond, constrained, keep_factors)
+    refusal = _march_refusal(system, solver, precond, constrained, keep_factors, scheme)
     if refusal is None and compiled_kernels() is None:
         refusal = "the compiled kernels do not load with this numba"
     if refusal is not None:
@@ -452,8 +435,8 @@ def _march_path(system, options, solver, precond, constrained, keep_factors):
                 f"`compiled`=True but no compiled march takes this solve: {refusal}; "
                 "pass compiled='auto' (or False) for the generic march"
             )
-        return "generic"
-    return "compiled-p1" if system.P == 1 else "compiled-sg"
+        return "generic", refusal
+    return ("compiled-p1" if system.P == 1 else "compiled-sg"), "a compiled kernel takes it"
 
 
 def dense_unknowns(system, *args, **kwargs):

@@ -1,4 +1,4 @@
-"""Backward-Euler marches with forward sensitivities and kept factors for the adjoint.
+"""Fixed-step marches with forward sensitivities and kept factors for the adjoint.
 
 Steady problems solve :math:`R(\\Theta;\\epsilon,\\lambda) = 0`, optionally augmented with
 the data constraint :math:`\\mathcal M\\,\\mathbb E[\\theta] - v = 0` for the unknowns
@@ -10,7 +10,9 @@ Dynamic problems march
     \\frac{M}{\\Delta t}(\\Theta_{t+1} - \\Theta_t) + R(\\Theta_{t+1}; \\epsilon,
     \\lambda_{t+1}, t_{t+1}) = 0
 
-(Eq. backward_euler), with the same optional constraint at every step. Forward
+(Eq. backward_euler), with the same optional constraint at every step, or by the
+second-order BDF2 (``scheme="bdf2"``, :mod:`.schemes`: each step the same solve from a
+combination of the last two states). Forward
 sensitivities (Eqs. discrete_sens, discrete_sens_ecfm, stochastic_sens) reuse the
 factorized Jacobian at the converged state: after convergence the Jacobian is evaluated
 and factorized once more, used for one last Newton correction and for all
@@ -29,6 +31,7 @@ from .linear import LinearSolver
 from .nonlinear import Bordered, _check_constraint, _constraint_scale, newton
 from .options import solver_options
 from .plan import WARM_START_STATES, dense_unknowns
+from .schemes import check_scheme, step_rule
 from .trajectory import Trajectory, _generic_adjoint
 
 
@@ -72,8 +75,9 @@ def march(
     solver="auto",
     keep_factors=False,
     guess=None,
+    scheme="euler",
 ):
-    """Integrate :math:`M\\dot\\Theta + R(\\Theta; \\epsilon, \\lambda, t) = 0` by backward Euler.
+    """Integrate :math:`M\\dot\\Theta + R(\\Theta; \\epsilon, \\lambda, t) = 0` with fixed steps.
 
     Parameters
     ----------
@@ -105,6 +109,11 @@ def march(
         optimizer) whose states start each step's Newton iteration instead of the
         previous step's state (a warm start: fewer Newton iterations, same solution to
         ``tol``).
+    scheme : {"euler", "bdf2"}
+        The time scheme (:mod:`.schemes`): backward Euler (first order, the default and
+        the paper's) or BDF2 (second order, L-stable, started by one backward-Euler
+        step). Sensitivities, the data constraint and the adjoint
+        (:meth:`Trajectory.adjoint_gradient`) are those of the scheme that ran.
 
     Notes
     -----
@@ -113,7 +122,8 @@ def march(
     ``P = 1`` with the dense solver (``Trajectory.solver`` then reads
     ``"dense (compiled)"``), or a nonlinear one-germ ``P > 1`` system with GMRES and the
     nodal preconditioner (``"gmres+nodal (compiled)"``). ``solver={"compiled": False}``
-    takes the generic path, ``True`` demands a kernel.
+    takes the generic path, ``True`` demands a kernel. The kernels march backward Euler
+    only; ``Trajectory.plan.reason`` says why a march took the generic path.
 
     Returns
     -------
@@ -124,6 +134,7 @@ def march(
     n_steps = check_int("n_steps", n_steps, minimum=1)
     tol = check_positive("tol", tol)
     maxiter = check_int("maxiter", maxiter, minimum=1)
+    scheme = check_scheme(scheme)
     N, P = system.shape
     n = N * P
     Theta0 = as_finite_array("Theta0", Theta0)
@@ -137,7 +148,7 @@ def march(
     if system.M is None:
         system.mass_matrix()  # raises the "no mass matrix" error
     opts = solver_options(solver)
-    plan = dict(constrained=constrained, steady=False, keep_factors=keep_factors)
+    plan = dict(constrained=constrained, steady=False, keep_factors=keep_factors, scheme=scheme)
     linear = LinearSolver(system, opts, **plan)
     if guess is not None:
         if not isinstance(guess, Trajectory) or guess.Theta.shape != (n_steps + 1, N, P):
@@ -149,30 +160,32 @@ def march(
             raise ValueError("`guess` must come from a march under the same data constraint")
     args = (system, eps, Theta0, dt, n_steps, t0, M_obs, V, sensitivities, tol, maxiter)
     if linear.plan.path != "generic":
-        traj = compiled_march(linear, *args, keep_factors, guess)
+        traj = compiled_march(linear, *args, keep_factors, guess, scheme)
         if traj is not None:
             if strict and not traj.success:
                 raise ConvergenceError(traj.message)
             return traj
         # the kernel did not compile with this numba: the same solve on the generic path
         linear = LinearSolver(system, solver_options(opts, compiled=False), **plan)
+    # every step of every scheme is a backward-Euler-like solve of effective length h
+    rules = [step_rule(scheme, s, dt) for s in range(n_steps)]
     if linear.name == "dense":
-        Mdt = system.mass_matrix() / dt
+        Mh = {h: system.mass_matrix() / h for h in {h for h, _ in rules}}
 
-        def mass(X):  # (NP,) or (NP, m)
-            return Mdt @ X
+        def mass(X, h):  # (NP,) or (NP, m)
+            return Mh[h] @ X
 
-        def mass_T(x):
-            return Mdt.T @ x
+        def mass_T(x, h):
+            return Mh[h].T @ x
     else:
 
-        def mass(X):
+        def mass(X, h):
             Xr = X.reshape(N, P, -1)
             out = np.stack([system.apply_mass(Xr[:, :, j]) for j in range(Xr.shape[2])], -1)
-            return out.reshape(X.shape) / dt
+            return out.reshape(X.shape) / h
 
-        def mass_T(x):
-            return system.apply_mass(x.reshape(N, P), transpose=True).ravel() / dt
+        def mass_T(x, h):
+            return system.apply_mass(x.reshape(N, P), transpose=True).ravel() / h
 
     if constrained:
         Cth = system.constraint_jacobian(M_obs)
@@ -192,37 +205,40 @@ def march(
 
     for s in range(n_steps):
         t1 = times[s + 1]
-        prev = Th[s].ravel()
+        h, w = rules[s]
+        last = Th[s].ravel()
+        # the combination of earlier states the step starts from (backward Euler: the last)
+        prev = last if len(w) == 1 else sum(wj * Th[s - j].ravel() for j, wj in enumerate(w))
         first = None
 
         if constrained:
             v1 = V[s + 1]
 
-            def fun(z, prev=prev, t1=t1, v1=v1):
+            def fun(z, prev=prev, t1=t1, v1=v1, h=h):
                 T1, l1 = z[:n].reshape(N, P), z[n:]
-                r1 = mass(z[:n] - prev) + system.residual(T1, eps, l1, t1).ravel()
-                J = bordered(system.jacobian_operator(T1, eps, t1, dt=dt))
+                r1 = mass(z[:n] - prev, h) + system.residual(T1, eps, l1, t1).ravel()
+                J = bordered(system.jacobian_operator(T1, eps, t1, dt=h))
                 return np.concatenate([r1, Cth @ z[:n] - v1]), J
 
-            z0 = np.concatenate([prev, lam[s]])
+            z0 = np.concatenate([last, lam[s]])
             if guess is not None:
                 z0 = np.concatenate([guess.Theta[s + 1].ravel(), guess.lam[s + 1]])
         else:
 
-            def fun(z, prev=prev, t1=t1):
+            def fun(z, prev=prev, t1=t1, h=h):
                 T1 = z.reshape(N, P)
-                r1 = mass(z - prev) + system.residual(T1, eps, None, t1).ravel()
-                return r1, system.jacobian_operator(T1, eps, t1, dt=dt)
+                r1 = mass(z - prev, h) + system.residual(T1, eps, None, t1).ravel()
+                return r1, system.jacobian_operator(T1, eps, t1, dt=h)
 
-            z0 = prev if guess is None else guess.Theta[s + 1].ravel()
+            z0 = last if guess is None else guess.Theta[s + 1].ravel()
             if warm and guess is None and s > 0:
                 z0, first = _warm_start(fun, Th[max(0, s + 1 - WARM_START_STATES) : s + 1])
 
-        def scale(z, prev=prev, t1=t1, v1=V[s + 1] if constrained else None):
+        def scale(z, prev=prev, t1=t1, v1=V[s + 1] if constrained else None, h=h):
             T1 = z[:n].reshape(N, P)
             mag = np.abs(T1) + np.abs(prev.reshape(N, P))
             sc = system.residual_scale(T1, eps, z[n:] if constrained else None, t1)
-            sc += system.mass_scale(mag) / dt
+            sc += system.mass_scale(mag) / h
             return sc + (_constraint_scale(Cth, z[:n], v1) if constrained else 0.0)
 
         z, lu, info = newton(
@@ -256,6 +272,8 @@ def march(
                 linear.record.solver,
                 list(linear.record.iterations),
                 status=info.status,
+                plan=linear.plan,
+                scheme=scheme,
             )
         Th[s + 1] = z[:n].reshape(N, P)
         if keep_factors:
@@ -264,7 +282,8 @@ def march(
             lam[s + 1] = z[n:]
         if sensitivities:
             T1 = Th[s + 1]
-            rhs = mass(dTh[s]) - system.eps_jacobian(T1, eps, t1)
+            dprev = dTh[s] if len(w) == 1 else sum(wj * dTh[s - j] for j, wj in enumerate(w))
+            rhs = mass(dprev, h) - system.eps_jacobian(T1, eps, t1)
             if constrained:
                 rhs = np.vstack([rhs, np.zeros((C, system.n_eps))])
             S = lu.solve(rhs)
@@ -284,5 +303,7 @@ def march(
         nits,
         linear.record.solver,
         list(linear.record.iterations),
-        _generic_adjoint(system, eps, Th, times, factors, mass_T) if keep_factors else None,
+        _generic_adjoint(system, eps, Th, times, factors, mass_T, rules) if keep_factors else None,
+        plan=linear.plan,
+        scheme=scheme,
     )

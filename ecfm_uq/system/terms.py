@@ -234,6 +234,7 @@ class LinearTerm:
         bound._G_sparse = _sparse_coupling(bound.G)
         bound._kron = {}
         bound._abs = None
+        bound._transposed = None  # (K^T, G_sparse^T) built once, for adjoint solves
         bound.__dict__.pop("_symmetric", None)
         return bound
 
@@ -251,8 +252,12 @@ class LinearTerm:
 
     def action_transpose(self, Y):
         """:math:`K^T Y G^T` for ``Y`` of shape (N, P): the transposed Jacobian's action."""
-        GT = None if self._G_sparse is None else self._G_sparse.T.tocsr()
-        return right_multiply(np.asarray(self.K.T @ Y), self.G.T, GT)
+        if getattr(self, "_transposed", None) is None:  # one transpose, not one per product
+            KT = self.K.T.tocsr() if is_sparse(self.K) else self.K.T
+            GT = None if self._G_sparse is None else self._G_sparse.T.tocsr()
+            self._transposed = (KT, GT)
+        KT, GT = self._transposed
+        return right_multiply(np.asarray(KT @ Y), self.G.T, GT)
 
     def kron(self, kind):
         """:math:`K \\otimes G^T` as a dense (``kind="dense"``) or CSR (``"sparse"``) matrix.

@@ -1,4 +1,4 @@
-"""The result of a backward-Euler march and its discrete adjoint (paper Eq. discrete_sens)."""
+"""The result of a march and the discrete adjoint of its scheme (paper Eq. discrete_sens)."""
 
 from __future__ import annotations
 
@@ -8,12 +8,12 @@ import numpy as np
 
 from .._validation import as_finite_array
 from ..errors import ConvergenceError
-from .plan import SolveStatus
+from .thresholds import SolveStatus
 
 
 @dataclass
 class Trajectory:
-    """Result of :func:`march`.
+    """Result of :func:`march` (or of :func:`.integrate`, at its ``t_eval``).
 
     Attributes
     ----------
@@ -39,6 +39,16 @@ class Trajectory:
     status : SolveStatus
         ``CONVERGED``, or why the failed step stopped (:class:`.plan.SolveStatus`; the
         same codes whichever path marched).
+    plan : SolvePlan or None
+        The solve plan that ran: ``plan.path`` (``"generic"``, ``"compiled-p1"``,
+        ``"compiled-sg"``) and ``plan.reason``, why (e.g. what kept the march off the
+        compiled kernels).
+    scheme : str
+        The time scheme: ``"euler"``, ``"bdf2"`` (:mod:`.schemes`) or, for
+        :func:`.integrate`, ``"bdf"`` (variable order).
+    stats : dict or None
+        :func:`.integrate` only: steps, rejected steps, residual and Jacobian
+        evaluations, factorizations, and ``t_reached``.
     """
 
     times: np.ndarray
@@ -54,17 +64,23 @@ class Trajectory:
     linear_iterations: list = field(default_factory=list)
     _adjoint: object = field(default=None, repr=False)
     status: SolveStatus = SolveStatus.CONVERGED
+    plan: object = field(default=None, repr=False)
+    scheme: str = "euler"
+    stats: dict | None = field(default=None, repr=False)
 
     def adjoint_gradient(self, g_theta, g_lam=None):
         """Gradient in :math:`\\epsilon` of :math:`z = \\sum_t z_t(\\Theta_t, \\lambda_t)` by the
-        discrete adjoint of backward Euler (needs ``march(..., keep_factors=True)``).
+        discrete adjoint of the march's scheme (needs ``march(..., keep_factors=True)``).
 
-        Backward in time, with :math:`A_t` the (augmented) step Jacobian,
+        Backward in time, with :math:`A_t` the (augmented) step Jacobian and the step
+        rules :math:`(h_s, w_s)` of :mod:`.schemes` (backward Euler: :math:`h = \\Delta t`,
+        :math:`w = (1)`),
 
         .. math::
 
             A_t^T\\mu_t = \\frac{\\partial z}{\\partial(\\Theta_t, \\lambda_t)}
-                + \\begin{bmatrix}(M/\\Delta t)^T\\mu_{t+1,\\Theta}\\\\0\\end{bmatrix},
+                + \\sum_{j} w_{t+j,j}\\begin{bmatrix}(M/h_{t+j})^T\\mu_{t+j+1,\\Theta}
+                \\\\0\\end{bmatrix},
             \\qquad
             \\frac{dz}{d\\epsilon} = -\\sum_t
                 \\Bigl(\\frac{\\partial R_t}{\\partial\\epsilon}\\Bigr)^T\\mu_{t,\\Theta},
@@ -101,9 +117,12 @@ class Trajectory:
         return self._adjoint(g_theta)
 
 
-def _generic_adjoint(system, eps, Theta, times, factors, mass_T):
+def _generic_adjoint(system, eps, Theta, times, factors, mass_T, rules):
     """The backward pass of :meth:`Trajectory.adjoint_gradient` with kept factors.
 
+    ``rules[s] = (h_s, w_s)``: step ``s`` solves
+    :math:`(M/h_s)(\\Theta_{s+1} - \\sum_j w_{s,j}\\Theta_{s-j}) + R(\\Theta_{s+1}) = 0`
+    (:mod:`.schemes`), so its multiplier reaches back to every state it combines.
     Returns ``adjoint(g)``, ``g`` of shape (n_t, NP + C) holding
     :math:`\\partial z/\\partial(\\Theta_t, \\lambda_t)`.
     """
@@ -111,13 +130,16 @@ def _generic_adjoint(system, eps, Theta, times, factors, mass_T):
 
     def adjoint(g):
         grad = np.zeros(system.n_eps)
-        carry = np.zeros(n)
+        carry = np.zeros((len(times), n))
         for t in range(len(times) - 1, 0, -1):
             rhs = g[t].copy()
-            rhs[:n] += carry
+            rhs[:n] += carry[t]
             mu = factors[t - 1].solve_transpose(rhs)[:n]
             grad -= system.eps_vjp(Theta[t], eps, mu, times[t])
-            carry = mass_T(mu)
+            h, w = rules[t - 1]  # the step that produced state t
+            for j, wj in enumerate(w):
+                if t - 1 - j >= 1:  # the initial state does not depend on eps
+                    carry[t - 1 - j] += mass_T(mu, h) if wj == 1.0 else wj * mass_T(mu, h)
         return grad
 
     return adjoint
