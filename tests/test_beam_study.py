@@ -9,6 +9,8 @@ import pytest
 from ecfm_uq.cli import main
 from ecfm_uq.studies import beam as study
 
+pytestmark = pytest.mark.slow  # runs the study: CI runs these in their own step
+
 PAPER_EPS, PAPER_E, PAPER_BETA = 0.987, 7e-3, 2.24
 
 

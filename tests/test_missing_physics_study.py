@@ -10,6 +10,8 @@ pytest.importorskip("skfem")
 from ecfm_uq.cli import main  # noqa: E402
 from ecfm_uq.studies import missing_physics as study  # noqa: E402
 
+pytestmark = pytest.mark.slow  # runs the study: CI runs these in their own step
+
 
 @pytest.fixture(scope="module")
 def result(tmp_path_factory):

@@ -77,6 +77,7 @@ def test_exact_forces_stay_available_and_bad_options_are_named():
         fit(problem, [1.0, 10.0], formulation="ecfm", sigma=sigma, options={"lr": 1})
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("prior", ["shared", "sparse"])
 @pytest.mark.parametrize("scale", [1e9, 1e-9])
 def test_equations_in_other_units_give_the_same_fits_intervals_and_force_map(scale, prior):

@@ -96,6 +96,7 @@ class _BruteForce:
         return res.fun
 
 
+@pytest.mark.slow
 def test_profile_re_estimates_tau_and_matches_a_brute_force_computation():
     rod, v, sigma, res = _missing_source_fit()
     assert res.success and res.extra["tau"] > 0, "the source must give tau-hat > 0"

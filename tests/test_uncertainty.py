@@ -215,6 +215,7 @@ def _with_statistics(v, i, dmean, dm):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("formulation", ["standard", "inner-outer"])
 def test_pseudo_likelihood_covariance_equals_refit_jacobian(formulation):
     from ecfm_uq.inverse import ReplicatedProblem, fit
