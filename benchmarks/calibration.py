@@ -1,13 +1,13 @@
 """A model that is a Python function, calibrated by ecfm_uq and by scipy alone (issue 28).
 
-The model: a decay to an offset, ``a exp(-b x) + c`` on 22 points (a black-box function,
-no Jacobian given), fitted from the same start
+The model: an exponential decay ``a exp(-b x)`` on 22 points (a black-box function, no
+Jacobian given: issue 28's size, two parameters), fitted from the same start
 
 * ``fit``: ``ecfm_uq.inverse.fit(ModelProblem(model, y), eps0)`` (trust-region least
   squares with one-sided differences, then the optimality test, Gauss-Newton standard
   errors and the verdict) against ``scipy.optimize.least_squares(model - y, eps0)`` (the
   same Jacobian mode, its default) followed by the same covariance by hand;
-* ``profile``: ``profile_likelihood(result)`` (95 % profile-t intervals of the three
+* ``profile``: ``profile_likelihood(result)`` (95 % profile-t intervals of both
   parameters) against a profile computed with scipy alone: each parameter fixed, the
   others refitted by warm-started ``least_squares``, the threshold crossing by Brent.
 
@@ -31,12 +31,12 @@ from scipy import optimize, stats
 from ecfm_uq.inverse import ModelProblem, fit, profile_likelihood
 
 X = np.linspace(0.0, 5.0, 22)
-TRUTH = np.array([2.0, 0.7, 0.3])
-START = np.array([1.0, 1.0, 0.0])
+TRUTH = np.array([2.0, 0.7])
+START = np.array([1.0, 1.0])
 
 
 def model(e):
-    return e[0] * np.exp(-e[1] * X) + e[2]
+    return e[0] * np.exp(-e[1] * X)
 
 
 def scipy_fit(y):
