@@ -64,7 +64,7 @@ class Coefficient:
         """:math:`c(\\epsilon)` as a finite float (ModelEvaluationError otherwise)."""
         try:
             with np.errstate(over="raise", invalid="raise"):
-                c = self._value(eps)
+                c = call_user(self._value, f"coefficient {self.label}", "value(eps)", eps)
         except (OverflowError, FloatingPointError, ZeroDivisionError) as e:
             raise _evaluation_error(self.label, eps, e) from e
         try:
@@ -79,7 +79,7 @@ class Coefficient:
         """:math:`\\nabla_\\epsilon c`, shape ``(n_eps,)``, finite (ModelEvaluationError otherwise)."""
         try:
             with np.errstate(over="raise", invalid="raise"):
-                g = self._grad(eps)
+                g = call_user(self._grad, f"coefficient {self.label}", "grad(eps)", eps)
         except (OverflowError, FloatingPointError, ZeroDivisionError) as e:
             raise _evaluation_error(self.label, eps, e) from e
         if not np.all(np.isfinite(g)):
@@ -123,6 +123,24 @@ class Coefficient:
             return g
 
         return cls(value, grad, indices=(m,), label=f"{scale:g}*10**({sign:g}*eps[{m}])")
+
+
+def call_user(fn, what, signature, *args):
+    """``fn(*args)``, a user's callback, with a signature mistake named: a TypeError or
+    IndexError raised by the call (a callback taking other arguments, or reading more
+    parameters than the model has) comes back as the same type naming the callback
+    (``what``), the signature it must have and the arguments it was called with."""
+    try:
+        return fn(*args)
+    except (TypeError, IndexError) as e:
+        shown = ", ".join(
+            f"eps={np.asarray(a).tolist()}" if k == 0 else f"{a!r}" for k, a in enumerate(args)
+        )
+        raise type(e)(
+            f"{what} raised {type(e).__name__} when called as {signature} with {shown}: "
+            f"{e}; it must take exactly those arguments and use only the "
+            f"{np.size(args[0])} parameters eps[0..{np.size(args[0]) - 1}]"
+        ) from e
 
 
 def _evaluation_error(label, eps, cause):
@@ -596,13 +614,15 @@ class LoadTerm:
         return np.outer(v, self._E1) if v.ndim == 1 else v
 
     def apply(self, Theta, eps, t=None):
-        return -self._chaos(self.F(eps, t))
+        return -self._chaos(call_user(self.F, f"load term {self.name!r}", "F(eps, t)", eps, t))
 
     def eps_jacobian(self, Theta, eps, t=None):
         N, P = Theta.shape
         if self.dF is None:
             return np.zeros((N * P, len(eps)))
-        d = np.asarray(self.dF(eps, t), dtype=float)
+        d = np.asarray(
+            call_user(self.dF, f"load term {self.name!r}", "dF(eps, t)", eps, t), dtype=float
+        )
         n_eps = len(eps)
         if d.shape not in {(N, n_eps), (N, P, n_eps)}:
             raise ValueError(
@@ -647,7 +667,9 @@ class LoadTerm:
         """:math:`(\\partial R/\\partial\\epsilon)^T\\mu` without the (NP, n_eps) matrix."""
         if self.dF is None:
             return np.zeros(len(eps))
-        d = np.asarray(self.dF(eps, t), dtype=float)
+        d = np.asarray(
+            call_user(self.dF, f"load term {self.name!r}", "dF(eps, t)", eps, t), dtype=float
+        )
         mu = np.reshape(mu, Theta.shape)
         if d.ndim == 2:  # deterministic load: only the E[Psi] projection sees it
             return -(d.T @ (mu @ self._E1))
