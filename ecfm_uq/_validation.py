@@ -72,6 +72,15 @@ def check_positive(name, value):
     return value
 
 
+def check_fraction(name, value, hint=""):
+    """A real number strictly between 0 and 1 (a test's size, a level), as float: a
+    TypeError for a non-number, a ValueError outside (0, 1), both naming it."""
+    value = check_real(name, value)
+    if not 0.0 < value < 1.0:
+        raise ValueError(f"`{name}` must lie in (0, 1){hint}, got {value}")
+    return value
+
+
 def check_choice(name, value, choices):
     """Raise ValueError unless ``value`` is one of ``choices``."""
     # only strings and numbers compare: an array's == is element-wise, a list never matches

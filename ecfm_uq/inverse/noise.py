@@ -31,16 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from .._validation import as_finite_array, check_int, check_positive
-
-
-def _check_alpha(alpha):
-    if isinstance(alpha, bool) or not isinstance(alpha, numbers.Real):
-        raise TypeError(f"`alpha` must be a real number in (0, 1), got {alpha!r}")
-    alpha = float(alpha)
-    if not (0.0 < alpha < 1.0):
-        raise ValueError(f"`alpha` must lie in (0, 1) (e.g. 0.05 for 95 % bounds), got {alpha}")
-    return alpha
+from .._validation import as_finite_array, check_fraction, check_int, check_positive
 
 
 def _check_sigma(sigma):
@@ -76,7 +67,7 @@ def noise_bounds(sigma, n_sensors, alpha=0.05):
             f"`n_sensors` must be >= 2 for a sample-variance bound (C - 1 degrees of "
             f"freedom), got {C}"
         )
-    alpha = _check_alpha(alpha)
+    alpha = check_fraction("alpha", alpha, " (e.g. 0.05 for 95 % bounds)")
     z = float(stats.norm.ppf(alpha / 2))
     chi2_lo = float(stats.chi2.ppf(alpha / 2, C - 1))
     chi2_hi = float(stats.chi2.ppf(1 - alpha / 2, C - 1))

@@ -32,7 +32,7 @@ import numbers
 
 import numpy as np
 
-from .._validation import as_finite_array, as_operator, check_positive
+from .._validation import as_finite_array, as_operator, check_fraction, check_positive
 from ..errors import ModelEvaluationError
 from .result import Verdict
 
@@ -49,12 +49,8 @@ AT_BOUND_RTOL = 1e-8
 
 
 def check_alpha(alpha):
-    """``alpha`` as a float in (0, 1), or a ValueError naming it."""
-    if isinstance(alpha, bool) or not isinstance(alpha, numbers.Real) or not 0 < alpha < 1:
-        raise ValueError(
-            f"`alpha` (the size of the consistency test) must lie in (0, 1), got {alpha!r}"
-        )
-    return float(alpha)
+    """``alpha`` as a float in (0, 1): TypeError for a non-number, ValueError outside."""
+    return check_fraction("alpha", alpha, " (the size of the consistency test, e.g. 0.05)")
 
 
 def decide(test, p_value, alpha, parts, *, statistic=None, explained=None, at_bound=(),
