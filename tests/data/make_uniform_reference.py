@@ -5,7 +5,7 @@ Run from the main checkout *before* a change to the chaos layer, e.g.
     PYTHONPATH=/work/main python tests/data/make_uniform_reference.py
 
 ``tests/chaos/test_uniform_reference.py`` then checks that the changed code reproduces
-every array bit for bit (uniform inputs must not move by one ulp).
+every array to round-off (see that test for the tolerances and why).
 """
 
 from __future__ import annotations
