@@ -396,7 +396,7 @@ def fit_pce(
     index_set=None,
     n_points=None,
     rule="gauss",
-    q_norm=1.0,
+    q_norm=None,
     early_stop=2,
     compress=None,
     compress_tol=1e-6,
@@ -545,8 +545,8 @@ def fit_pce(
     elif method == "lstsq":
         pce, n_eval = _fit_lstsq(model, inputs, order, index_set, data, ev)
     else:
-        if isinstance(q_norm, bool) or not 0 < float(q_norm) <= 1:
-            raise ValueError(f"`q_norm` must lie in (0, 1], got {q_norm!r}")
+        if q_norm is not None and (isinstance(q_norm, bool) or not 0 < float(q_norm) <= 1):
+            raise ValueError(f"`q_norm` must be None (adaptive) or lie in (0, 1], got {q_norm!r}")
         early_stop = check_int("early_stop", early_stop, minimum=1)
         if isinstance(compress, np.bool_):
             compress = bool(compress)
@@ -566,7 +566,7 @@ def fit_pce(
             index_set,
             data,
             ev,
-            float(q_norm),
+            None if q_norm is None else float(q_norm),
             early_stop,
             method,
             compress,
