@@ -21,7 +21,6 @@ import scipy.linalg as sla
 
 from ..memory import check_allocation, memory_budget
 from ._paths import (
-    _CANDIDATES_PER_RUN,
     _SELECTION_SHARE,
     _lar_order_gram,
     _loo_nested,
@@ -35,9 +34,12 @@ __all__ = ["hyperbolic_indices"]
 # interactions, the full total-degree set where it is affordable.
 _ADAPTIVE_Q = (0.5, 0.75, 1.0)
 # A candidate set is affordable when its selection's work n P min(n, P) stays below this
-# (a tenth of a second of LARS path on one core) and it has at most _CANDIDATES_PER_RUN * n
+# (about a second of LAR path on one core) and it has at most _ADAPTIVE_PER_RUN * n
 # columns; the degree loop stops when no q-norm is affordable.
 _ADAPTIVE_WORK = 1e9
+# At most this many candidates per run in one set: beyond, the LAR path (n / 2 steps at
+# most) rarely finds better sets, and each selection's Gram block grows as P^2.
+_ADAPTIVE_PER_RUN = 2
 
 
 def hyperbolic_indices(dim, p, q, cap=None):
@@ -83,7 +85,7 @@ def _affordable(n, P, K=0):
     """A candidate set of P columns, with K columns held already, within the limits."""
     held = K + P + 1  # at most: the design's columns, the Gram's rows
     return (
-        P <= _CANDIDATES_PER_RUN * n
+        P <= _ADAPTIVE_PER_RUN * n
         and n * P * min(n, P) <= _ADAPTIVE_WORK
         and 8.0 * (2 * n * held + 3 * held * held) <= _SELECTION_SHARE * memory_budget()
     )
@@ -198,7 +200,7 @@ def _select_adaptive_column(design, j, solver, early_stop, max_degree):
     """
     n, dim = design.n, len(design.germs)
     best, trace = None, []
-    cap = _CANDIDATES_PER_RUN * n
+    cap = _ADAPTIVE_PER_RUN * n
     # one chain of degrees per q, each with its own early stop: the cheap q = 0.5 chain
     # may still improve at high degree after the dearer ones stopped (the LOO error of a
     # chain may stall for a degree or two, e.g. odd degrees of an even function)
