@@ -151,36 +151,40 @@ def _lar_order_gram(G, c, max_steps):
     j = int(np.argmax(np.abs(c)))
     C = abs(c[j])
     floor = 1e3 * np.finfo(float).eps * max(C, np.finfo(float).tiny)
-    for k in range(max_steps):
-        if C <= floor:
-            break
-        GA[k] = G[j]
-        l = Linv[:k, :k] @ GA[:k, j]
-        d2 = G[j, j] - l @ l
-        if not d2 > _CHOLESKY_RTOL**2 * G[j, j]:
-            break  # dependent on the active columns
-        d = math.sqrt(d2)
-        Linv[k, :k] = -(l @ Linv[:k, :k]) / d
-        Linv[k, k] = 1.0 / d
-        z[k] = (math.copysign(1.0, c[j]) - l @ z[:k]) / d
-        v[:k] += z[k] * Linv[k, :k]
-        v[k] = z[k] / d
-        active.append(j)
-        inactive[j] = False
-        if k + 1 == max_steps:
-            break
-        AA = 1.0 / math.sqrt(z[: k + 1] @ z[: k + 1])
-        a = AA * (v[: k + 1] @ GA[: k + 1])
-        idx = np.flatnonzero(inactive)
-        ci, ai = c[idx], a[idx]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            g = np.concatenate([(C - ci) / (AA - ai), (C + ci) / (AA + ai)])
-        g[~(g > 1e-14 * C)] = np.inf
-        m = int(np.argmin(g))
-        gamma = min(g[m], C / AA)
-        if not np.isfinite(gamma):
-            break
-        c -= gamma * a
-        C -= gamma * AA
-        j = int(idx[m % len(idx)])
+    with np.errstate(divide="ignore", invalid="ignore"):  # once: a step costs ~50 us
+        for k in range(max_steps):
+            if C <= floor:
+                break
+            GA[k] = G[j]
+            l = Linv[:k, :k] @ GA[:k, j]
+            d2 = G[j, j] - l @ l
+            if not d2 > _CHOLESKY_RTOL**2 * G[j, j]:
+                break  # dependent on the active columns
+            d = math.sqrt(d2)
+            Linv[k, :k] = -(l @ Linv[:k, :k]) / d
+            Linv[k, k] = 1.0 / d
+            z[k] = (math.copysign(1.0, c[j]) - l @ z[:k]) / d
+            v[:k] += z[k] * Linv[k, :k]
+            v[k] = z[k] / d
+            active.append(j)
+            inactive[j] = False
+            if k + 1 == max_steps:
+                break
+            AA = 1.0 / math.sqrt(z[: k + 1] @ z[: k + 1])
+            a = AA * (v[: k + 1] @ GA[: k + 1])
+            # the step to the next column's entry: the smallest positive of the two
+            # candidate steps of each inactive column
+            g1 = (C - c) / (AA - a)
+            g2 = (C + c) / (AA + a)
+            g1[~(g1 > 1e-14 * C)] = np.inf
+            g2[~(g2 > 1e-14 * C)] = np.inf
+            g = np.minimum(g1, g2)
+            g[~inactive] = np.inf
+            m = int(np.argmin(g))
+            gamma = min(g[m], C / AA)
+            if not np.isfinite(gamma):
+                break
+            c -= gamma * a
+            C -= gamma * AA
+            j = m
     return active

@@ -182,7 +182,7 @@ def _select_adaptive_column(design, j, solver, early_stop, max_degree):
 
     For p = 1, 2, ...: the candidate sets :math:`\\{\\alpha: \\|\\alpha\\|_q \\le p\\}` for
     q in ``_ADAPTIVE_Q`` that are affordable, each selected by the hybrid LAR path (run in
-    pieces: twice the best set's size so far, grown while the best set is among the last
+    pieces: the best set's size so far and 16 more, grown while the best set is among the last
     steps run) and scored by the corrected LOO error (Blatman & Sudret 2011). Each q is a
     chain of degrees with its own early stop (``early_stop`` degrees without improving
     that chain's error) and ends when its set is no longer affordable; the best set of
@@ -219,7 +219,7 @@ def _select_adaptive_column(design, j, solver, early_stop, max_degree):
                 err = previous[1]  # the same set as at the smaller q
             else:
                 pos = design.extend(alpha)
-                first = 32 if best is None else 2 * len(best[1]) + 16
+                first = 32 if best is None else len(best[1]) + 16
                 if solver == "lars":
                     cols, coef, err = design.select(j, pos, first)
                 else:

@@ -138,3 +138,40 @@ def test_hyperbolic_sets_are_the_total_degree_set_at_q_1_and_nested_in_q():
         assert {tuple(a) for a in half} <= {tuple(a) for a in full}
         q = np.sum(half.astype(float) ** 0.5, axis=1) ** 2
         assert np.all(q <= p + 1e-9)
+
+
+def test_a_poor_fit_warns_and_points_at_the_sampling_estimator():
+    # a discontinuous model from 40 runs: no expansion explains it
+    def step(x):
+        return float(x[0] > 0.3) + float(x[1] > 0.6)
+
+    with pytest.warns(RuntimeWarning, match="sobol_indices"):
+        pce = fit_pce(step, [(0, 1), (0, 1)], "lars", n_samples=40, seed=0)
+    assert pce.diagnostics["poor_fit"]
+    good = fit_pce(lambda x: x[0] + x[1] ** 2, [(0, 1), (0, 1)], "lars", n_samples=40, seed=0)
+    assert not good.diagnostics["poor_fit"]
+
+
+def test_adaptive_fit_reports_its_choice_and_keeps_only_the_selected_terms():
+    laws = [stats.triang(0.3), stats.uniform(-1, 2), stats.uniform(0, 1)]
+    pce = fit_pce(lambda x: np.exp(x[0]) * x[1] + x[2] ** 3, laws, n_samples=200, seed=1)
+    d = pce.diagnostics
+    assert d["selection"] == "adaptive" and pce.basis.index_set == "custom"
+    assert pce.basis.size == d["n_terms"]
+    assert d["q_norm"] in (0.5, 0.75, 1.0) and d["adaptive_trace"]
+    p, q, P, err = min(d["adaptive_trace"], key=lambda t: t[3])
+    assert err == pytest.approx(float(d["corrected_loo_error"]))
+
+
+def test_inputs_page_own_law_example_runs_and_is_exact():
+    import pathlib
+    import re
+
+    text = (pathlib.Path(__file__).parents[2] / "docs" / "inputs.md").read_text()
+    code = re.findall(r"```python\n(.*?)```", text, re.S)[1]
+    ns = {}
+    exec(compile(code, "inputs.md", "exec"), ns)
+    L, U = ns["L"], ns["U"]
+    v = np.array([9 * L.var(), 4 * U.var()])
+    np.testing.assert_allclose(ns["pce"].first_order(), v / v.sum(), rtol=0, atol=1e-12)
+    assert float(ns["pce2"].mean) == pytest.approx(ns["below"].moment(2), rel=1e-12)
