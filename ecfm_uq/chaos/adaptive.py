@@ -34,12 +34,18 @@ __all__ = ["hyperbolic_indices"]
 # interactions, the full total-degree set where it is affordable.
 _ADAPTIVE_Q = (0.5, 0.75, 1.0)
 # A candidate set is affordable when its selection's work n P min(n, P) stays below this
-# (about a second of LAR path on one core) and it has at most _ADAPTIVE_PER_RUN * n
+# (about a second of LAR path on one core) and it has at most _candidate_cap(n)
 # columns; the degree loop stops when no q-norm is affordable.
 _ADAPTIVE_WORK = 1e9
-# At most this many candidates per run in one set: beyond, the LAR path (n / 2 steps at
-# most) rarely finds better sets, and each selection's Gram block grows as P^2.
+# At most max(_ADAPTIVE_PER_RUN * n, _ADAPTIVE_MIN_CAP) candidates in one set: beyond, the
+# LAR path (n / 2 steps at most) rarely finds better sets and each selection's Gram block
+# grows as P^2; small designs still see OpenTURNS' few hundred (q = 0.5, degree 10).
 _ADAPTIVE_PER_RUN = 2
+_ADAPTIVE_MIN_CAP = 500
+
+
+def _candidate_cap(n):
+    return max(_ADAPTIVE_PER_RUN * n, _ADAPTIVE_MIN_CAP)
 
 
 def hyperbolic_indices(dim, p, q, cap=None):
@@ -85,7 +91,7 @@ def _affordable(n, P, K=0):
     """A candidate set of P columns, with K columns held already, within the limits."""
     held = K + P + 1  # at most: the design's columns, the Gram's rows
     return (
-        P <= _ADAPTIVE_PER_RUN * n
+        P <= _candidate_cap(n)
         and n * P * min(n, P) <= _ADAPTIVE_WORK
         and 8.0 * (2 * n * held + 3 * held * held) <= _SELECTION_SHARE * memory_budget()
     )
@@ -200,7 +206,7 @@ def _select_adaptive_column(design, j, solver, early_stop, max_degree):
     """
     n, dim = design.n, len(design.germs)
     best, trace = None, []
-    cap = _ADAPTIVE_PER_RUN * n
+    cap = _candidate_cap(n)
     # one chain of degrees per q, each with its own early stop: the cheap q = 0.5 chain
     # may still improve at high degree after the dearer ones stopped (the LOO error of a
     # chain may stall for a degree or two, e.g. odd degrees of an even function)
