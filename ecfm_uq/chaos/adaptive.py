@@ -42,9 +42,14 @@ _ADAPTIVE_WORK = 1e9
 # grows as P^2; small designs still see OpenTURNS' few hundred (q = 0.5, degree 10).
 _ADAPTIVE_PER_RUN = 2
 _ADAPTIVE_MIN_CAP = 500
+# OMP is the method for exactly sparse models from few runs (P >> n, compressed sensing):
+# it keeps v0.3's ten candidates per run.
+_OMP_PER_RUN = 10
 
 
-def _candidate_cap(n):
+def _candidate_cap(n, solver="lars"):
+    if solver == "omp":
+        return _OMP_PER_RUN * n
     return max(_ADAPTIVE_PER_RUN * n, _ADAPTIVE_MIN_CAP)
 
 
@@ -87,11 +92,11 @@ def hyperbolic_indices(dim, p, q, cap=None):
     return rows[np.lexsort(keys)]
 
 
-def _affordable(n, P, K=0):
+def _affordable(n, P, K=0, solver="lars"):
     """A candidate set of P columns, with K columns held already, within the limits."""
     held = K + P + 1  # at most: the design's columns, the Gram's rows
     return (
-        P <= _candidate_cap(n)
+        P <= _candidate_cap(n, solver)
         and n * P * min(n, P) <= _ADAPTIVE_WORK
         and 8.0 * (2 * n * held + 3 * held * held) <= _SELECTION_SHARE * memory_budget()
     )
@@ -206,7 +211,7 @@ def _select_adaptive_column(design, j, solver, early_stop, max_degree):
     """
     n, dim = design.n, len(design.germs)
     best, trace = None, []
-    cap = _candidate_cap(n)
+    cap = _candidate_cap(n, solver)
     # one chain of degrees per q, each with its own early stop: the cheap q = 0.5 chain
     # may still improve at high degree after the dearer ones stopped (the LOO error of a
     # chain may stall for a degree or two, e.g. odd degrees of an even function)
@@ -217,7 +222,7 @@ def _select_adaptive_column(design, j, solver, early_stop, max_degree):
         previous = None
         for q in list(live):
             alpha = hyperbolic_indices(dim, p, q, cap)
-            if alpha is None or not _affordable(n, len(alpha), design.B.shape[1]):
+            if alpha is None or not _affordable(n, len(alpha), design.B.shape[1], solver):
                 # nested in q and p: every larger q, at every higher degree, is dearer
                 live = [r for r in live if r < q]
                 break
