@@ -149,7 +149,8 @@ class OwnGerm(Germ):
 
     A :class:`~ecfm_uq.chaos.germs.Germ` of family ``"own"`` (``recurrence``, ``table``,
     ``gauss``, ``triple``, ``ppf``, ``support``) for the basis, designs and quadrature;
-    two own-law germs are equal only if they are the same object.
+    two own-law germs are equal when built from the same law (same label, moments and
+    recurrence).
 
     Parameters
     ----------
@@ -190,10 +191,19 @@ class OwnGerm(Germ):
         return f"OwnGerm({self.label})"
 
     def __eq__(self, other):
-        return self is other
+        # the same law gives the same (deterministic) measure and recurrence
+        if not isinstance(other, OwnGerm):
+            return NotImplemented
+        n = min(self._n, other._n)
+        return (
+            self is other
+            or (self.label, self.mean, self.std) == (other.label, other.mean, other.std)
+            and np.array_equal(self._a[:n], other._a[:n])
+            and np.array_equal(self._b[:n], other._b[:n])
+        )
 
     def __hash__(self):
-        return id(self)
+        return hash(("own", self.label, self.mean, self.std))
 
     def recurrence(self, n):
         """Monic recurrence coefficients of the standardised law (``b_0 = 1``)."""

@@ -175,3 +175,12 @@ def test_inputs_page_own_law_example_runs_and_is_exact():
     v = np.array([9 * L.var(), 4 * U.var()])
     np.testing.assert_allclose(ns["pce"].first_order(), v / v.sum(), rtol=0, atol=1e-12)
     assert float(ns["pce2"].mean) == pytest.approx(ns["below"].moment(2), rel=1e-12)
+
+
+def test_an_expansion_rebuilt_with_the_same_laws_keeps_its_own_germs():
+    from ecfm_uq.chaos import PolynomialChaosExpansion
+
+    laws = [stats.triang(0.3), stats.uniform()]
+    pce = fit_pce(lambda x: x[0] ** 2 + x[1], laws, "lstsq", order=2, n_samples=20, seed=0)
+    again = PolynomialChaosExpansion(pce.basis, pce.coefficients, inputs=laws)
+    np.testing.assert_allclose(again.total(), pce.total(), rtol=1e-14)
