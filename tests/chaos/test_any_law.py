@@ -184,3 +184,12 @@ def test_an_expansion_rebuilt_with_the_same_laws_keeps_its_own_germs():
     pce = fit_pce(lambda x: x[0] ** 2 + x[1], laws, "lstsq", order=2, n_samples=20, seed=0)
     again = PolynomialChaosExpansion(pce.basis, pce.coefficients, inputs=laws)
     np.testing.assert_allclose(again.total(), pce.total(), rtol=1e-14)
+
+
+def test_make_distribution_law_is_accepted_and_exact_on_its_own_polynomials():
+    law = stats.make_distribution(stats.lognorm)(s=0.25)
+    inputs = Inputs([law], germ="own")
+    pce = fit_pce(lambda x: x[0] ** 2, inputs, "lstsq", order=2, n_samples=30, seed=0)
+    m2, m4 = law.moment(2, kind="raw"), law.moment(4, kind="raw")
+    assert float(pce.mean) == pytest.approx(m2, rel=1e-8)
+    assert float(pce.variance) == pytest.approx(m4 - m2**2, rel=1e-8)
