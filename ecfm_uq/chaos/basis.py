@@ -175,7 +175,12 @@ class ChaosBasis:
         self.norms2 = norms2
 
     def _check_indices(self, index_set):
-        alpha = np.array(index_set) if isinstance(index_set, list | tuple | np.ndarray) else None
+        alpha = None
+        if isinstance(index_set, list | tuple | np.ndarray):
+            try:
+                alpha = np.array(index_set)
+            except ValueError:  # ragged rows
+                alpha = None
         if alpha is None or alpha.dtype == object:
             raise TypeError(
                 f"`index_set` must be one of {list(_INDEX_SETS)} or a (P, dim) int array of "
