@@ -123,3 +123,20 @@ def test_pce_page_verification_recipe_runs_and_the_surrogate_lies_in_the_interva
     assert np.all((lo <= T) & (T <= hi))
     _, T0 = ishigami_reference()
     np.testing.assert_allclose(ns["mc"].total, T0, atol=0.02)
+
+
+def test_a_dask_client_gives_identical_indices():
+    distributed = pytest.importorskip("distributed")
+    bounds = [(-np.pi, np.pi)] * 3
+    serial = sobol_indices(ishigami, bounds, 512, seed=0, vectorized=True)
+    with (
+        distributed.LocalCluster(
+            n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
+        ) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        out = sobol_indices(
+            ishigami, bounds, 512, seed=0, executor=client, vectorized=True, chunksize=200
+        )
+    np.testing.assert_array_equal(out.total, serial.total)
+    np.testing.assert_array_equal(out.first_order_interval, serial.first_order_interval)
