@@ -328,8 +328,8 @@ class SobolResult(NamedTuple):
     first_order, total : (d, *output_shape) ndarray
         Saltelli (2010) first-order and Jansen (1999) total indices.
     first_order_interval, total_interval : (2, d, *output_shape) ndarray
-        Lower and upper bounds of the ``level`` confidence intervals (asymptotic normal,
-        delta method).
+        Lower and upper bounds of the ``level`` confidence intervals (asymptotic normal by
+        the delta method, or bootstrap percentiles).
     first_order_se, total_se : (d, *output_shape) ndarray
         Their standard errors.
     variance : (*output_shape) ndarray
@@ -371,6 +371,31 @@ def _delta_se(num, s, r):
     return np.sqrt(np.sum(lin**2, axis=0) / (n * (n - 1)))
 
 
+def _bootstrap(num_S, num_T, s, r, level, n_boot, rng):
+    """Percentile intervals and standard deviations of the estimators over row resamples.
+
+    A resample's row means are multinomial counts times the rows, (B, n) @ (n, k), in
+    blocks of resamples so that no (B, n, d, m) array is formed.
+    """
+    n, d, m = num_S.shape
+    rows = np.concatenate([num_S.reshape(n, -1), num_T.reshape(n, -1), s, r], axis=1)
+    block = max(1, int(2**22 // max(n, 1)))
+    stats_ = []
+    for start in range(0, n_boot, block):
+        b = min(block, n_boot - start)
+        counts = rng.multinomial(n, np.full(n, 1.0 / n), size=b).astype(float)
+        M = counts @ rows / n
+        NS, NT = M[:, : d * m].reshape(b, d, m), M[:, d * m : 2 * d * m].reshape(b, d, m)
+        Sm, Rm = M[:, 2 * d * m : 2 * d * m + m], M[:, 2 * d * m + m :]
+        V = (Rm - Sm**2)[:, None, :]
+        stats_.append(np.stack([NS / V, NT / V]))
+    draws = np.concatenate(stats_, axis=1)  # (2, B, d, m)
+    q = [0.5 - 0.5 * level, 0.5 + 0.5 * level]
+    lo_hi = np.quantile(draws, q, axis=1)  # (2 quantiles, 2 estimators, d, m)
+    sd = draws.std(axis=1, ddof=1)
+    return (lo_hi[:, 0], sd[0]), (lo_hi[:, 1], sd[1])
+
+
 def sobol_indices(
     model,
     inputs,
@@ -383,6 +408,8 @@ def sobol_indices(
     workers=1,
     chunksize=None,
     vectorized=False,
+    interval="asymptotic",
+    n_bootstrap=1000,
 ):
     """First-order and total Sobol indices of a model by sampling, with confidence intervals.
 
@@ -427,6 +454,12 @@ def sobol_indices(
     vectorized : bool
         ``model(X)`` takes a (k, d) array of points and returns (k, *output_shape): one
         call per task instead of one per point.
+    interval : {"asymptotic", "bootstrap"}
+        ``"asymptotic"``: normal intervals from the delta method; ``"bootstrap"``:
+        percentile intervals of ``n_bootstrap`` resamples of the n rows (as SALib), the
+        standard errors then the resamples' standard deviations. No model runs are added.
+    n_bootstrap : int
+        Resamples of the bootstrap.
 
     Returns
     -------
@@ -475,6 +508,9 @@ def sobol_indices(
         raise ValueError(f"`design` must be 'sobol' or 'random', got {design!r}")
     if isinstance(level, bool) or not isinstance(level, numbers.Real) or not 0 < level < 1:
         raise ValueError(f"`level` must be a number in (0, 1), got {level!r}")
+    if interval not in ("asymptotic", "bootstrap"):
+        raise ValueError(f"`interval` must be 'asymptotic' or 'bootstrap', got {interval!r}")
+    n_bootstrap = check_int("n_bootstrap", n_bootstrap, minimum=10)
     workers = check_int("workers", workers, minimum=1)
     d = inputs.dim
     check_allocation(
@@ -548,8 +584,13 @@ def sobol_indices(
         )
     S = num_S.mean(axis=0) / V
     T = num_T.mean(axis=0) / V
-    se_S, se_T = _delta_se(num_S, s, r), _delta_se(num_T, s, r)
-    z = float(special.ndtri(0.5 + 0.5 * level))
+    if interval == "asymptotic":
+        se_S, se_T = _delta_se(num_S, s, r), _delta_se(num_T, s, r)
+        z = float(special.ndtri(0.5 + 0.5 * level))
+        int_S = np.stack([S - z * se_S, S + z * se_S])
+        int_T = np.stack([T - z * se_T, T + z * se_T])
+    else:
+        (int_S, se_S), (int_T, se_T) = _bootstrap(num_S, num_T, s, r, level, n_bootstrap, rng)
 
     def out(a):
         return a.reshape((*a.shape[:-1], *shape))
@@ -557,8 +598,8 @@ def sobol_indices(
     return SobolResult(
         first_order=out(S),
         total=out(T),
-        first_order_interval=out(np.stack([S - z * se_S, S + z * se_S])),
-        total_interval=out(np.stack([T - z * se_T, T + z * se_T])),
+        first_order_interval=out(int_S),
+        total_interval=out(int_T),
         first_order_se=out(se_S),
         total_se=out(se_T),
         variance=V.reshape(shape),

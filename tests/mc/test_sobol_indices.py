@@ -140,3 +140,21 @@ def test_a_dask_client_gives_identical_indices():
         )
     np.testing.assert_array_equal(out.total, serial.total)
     np.testing.assert_array_equal(out.first_order_interval, serial.first_order_interval)
+
+
+def test_bootstrap_intervals_agree_with_the_asymptotic_ones_and_cover_the_truth():
+    S0, T0 = ishigami_reference()
+    inside, ratio = [], []
+    for seed in range(6):
+        kw = dict(seed=seed, design="random", vectorized=True)
+        a = sobol_indices(ishigami, [(-np.pi, np.pi)] * 3, 2048, **kw)
+        b = sobol_indices(ishigami, [(-np.pi, np.pi)] * 3, 2048, interval="bootstrap", **kw)
+        np.testing.assert_array_equal(a.total, b.total)  # same runs, other intervals
+        ratio.append(b.total_se / a.total_se)
+        inside.append((b.total_interval[0] <= T0) & (T0 <= b.total_interval[1]))
+        inside.append((b.first_order_interval[0] <= S0) & (S0 <= b.first_order_interval[1]))
+    # two estimates of one standard error: equal up to the bootstrap's own noise
+    assert 0.8 < np.median(ratio) < 1.25
+    assert np.mean(inside) >= 0.85
+    with pytest.raises(ValueError, match="interval"):
+        sobol_indices(ishigami, [(-np.pi, np.pi)] * 3, 64, seed=0, interval="bca")
