@@ -193,3 +193,19 @@ def test_make_distribution_law_is_accepted_and_exact_on_its_own_polynomials():
     m2, m4 = law.moment(2, kind="raw"), law.moment(4, kind="raw")
     assert float(pce.mean) == pytest.approx(m2, rel=1e-8)
     assert float(pce.variance) == pytest.approx(m4 - m2**2, rel=1e-8)
+
+
+def test_a_custom_unbounded_law_has_its_variance_checked_once_during_the_fit():
+    class _Logistic(stats.rv_continuous):  # no closed-form moments given: scipy integrates
+        def _cdf(self, x):
+            return 1.0 / (1.0 + np.exp(-x))
+
+        def _ppf(self, u):
+            return np.log(u / (1.0 - u))
+
+    inputs = Inputs([_Logistic(name="mylogistic")(), stats.uniform()])
+    m = inputs.marginals[0]
+    assert "finite_variance" not in m.__dict__
+    pce = fit_pce(lambda x: x[0] + x[1], inputs, "lstsq", order=1, n_samples=20, seed=0)
+    assert "finite_variance" in m.__dict__  # cached: the indices integrate nothing
+    assert np.all(np.isfinite(pce.total()))
