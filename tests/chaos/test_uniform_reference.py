@@ -14,8 +14,9 @@ exact arithmetic are held to the array's scale instead of to themselves):
   a fixed sum of at most a few hundred products, whose reordering error is bounded by
   ``n * eps * max|term|`` with ``n * eps`` about 1e-14 (``eps`` = 2.2e-16).
 * ``1e-12`` for the regression fits (``lstsq``, ``lars``, ``omp``, ``vector_lars``): the
-  same reordering error is amplified by the condition number of the (sub)design matrices
-  solved along the path, measured at 10-100 on these designs.
+  same reordering error is amplified by the condition number of the design matrices
+  solved (2 to 11 for the final designs of these fits, measured once; the path's
+  intermediate least-squares problems are of the same kind), with a margin of 100.
 
 A change of algorithm moves these numbers by far more (1e-6 or more), so the test still
 catches one; the one-ulp differences seen across machines (about 1e-16 relative) pass.
