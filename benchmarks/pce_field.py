@@ -1,7 +1,7 @@
 """Benchmark: a sparse PCE of a 10 000-value field output at 300 runs (PCA-PCE).
 
-The model is a decaying, phase-shifted profile on 10 000 points with one normal, one
-uniform and one beta input (not of finite rank in the inputs). ``fit_pce(method="lars")``
+The model is a decaying, phase-shifted profile on 10 000 points with one normal, two
+uniform and one beta input (not of finite rank in the inputs; four inputs since issue 30). ``fit_pce(method="lars")``
 compresses the evaluations into their leading principal components by default and selects
 on those; the route it replaces, one sparse selection per output component
 (``compress=False``), is timed on 100 evenly spaced components and scaled to 10 000.
@@ -42,12 +42,16 @@ from ecfm_uq.memory import format_bytes, set_memory_budget  # noqa: E402
 N_FIELD = 10_000
 N_RUNS = 300
 S_GRID = np.linspace(0.0, 1.0, N_FIELD)
-INPUTS = [stats.norm(0, 1), stats.uniform(-1, 2), stats.beta(2, 3)]
+INPUTS = [stats.norm(0, 1), stats.uniform(-1, 2), stats.beta(2, 3), stats.uniform(0, 1)]
 SUBSET = np.linspace(0, N_FIELD - 1, 100).astype(int)
 
 
 def field(x):
-    return np.exp(-(1 + 0.3 * x[0]) * S_GRID) * (1 + 0.2 * x[1] * np.sin(2 * np.pi * S_GRID + x[2]))
+    return (
+        np.exp(-(1 + 0.3 * x[0]) * S_GRID)
+        * (1 + 0.2 * x[1] * np.sin(2 * np.pi * S_GRID + x[2]))
+        * (1 + 0.1 * x[3] * S_GRID**2)
+    )
 
 
 def field_subset(x):
@@ -65,10 +69,13 @@ def _fit_under_budget(field, budget):
         res = fit_pce(field, INPUTS, "lars", n_samples=N_RUNS, seed=0)
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
-        res.first_order(zero_variance=0.0), res.total(zero_variance=0.0)  # timed, untraced
-        elapsed = time.perf_counter() - t0
     finally:
         set_memory_budget(previous)
+    # timed, untraced, and outside the small budget: the indices of all 10 000 components
+    # hold about four P x 10 000 arrays (60 MiB for the 197 terms of four inputs), which a
+    # user under 32 MiB would take in slices of components
+    res.first_order(zero_variance=0.0), res.total(zero_variance=0.0)
+    elapsed = time.perf_counter() - t0
     return res, elapsed, peak
 
 

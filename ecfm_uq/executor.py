@@ -46,6 +46,17 @@ def _evaluate_chunk(fn, chunk, name="fn"):
     return np.stack(outs)
 
 
+def _evaluate_batch(fn, chunk, name="fn"):
+    """Evaluate a vectorized ``fn`` on a whole chunk: ``fn(chunk)`` of shape (len(chunk), ...)."""
+    out = np.asarray(fn(chunk), dtype=float)
+    if out.ndim == 0 or out.shape[0] != len(chunk):
+        raise ValueError(
+            f"a vectorized `{name}` must return one output row per point: got shape "
+            f"{out.shape} for {len(chunk)} points"
+        )
+    return out
+
+
 def output_array_bytes(n, shape):
     """Bytes of the (n, *shape) float array :func:`evaluate_samples` returns."""
     return 8.0 * n * math.prod(shape)
@@ -77,6 +88,7 @@ def evaluate_samples(
     callback=None,
     name="fn",
     check=None,
+    vectorized=False,
 ):
     """Evaluate ``fn`` at each sample, in parallel, and stack the outputs.
 
@@ -113,6 +125,9 @@ def evaluate_samples(
         (:mod:`ecfm_uq.memory`), naming the cheaper calls. A caller that needs more
         memory per output (a fit's work arrays) passes its own check, which should include
         :func:`output_array_bytes`.
+    vectorized : bool
+        ``fn`` takes a whole chunk of samples, (k, ...) → (k, *shape), instead of one
+        sample: one call per task.
 
     Returns
     -------
@@ -153,7 +168,7 @@ def evaluate_samples(
             f"dask.distributed.Client), got {type(executor).__name__}"
         )
     chunks = [samples[:1]] + [samples[i : i + chunksize] for i in range(1, n, chunksize)]
-    task = functools.partial(_evaluate_chunk, fn, name=name)
+    task = functools.partial(_evaluate_batch if vectorized else _evaluate_chunk, fn, name=name)
 
     own_pool = executor is None and workers > 1
     if own_pool:

@@ -111,4 +111,14 @@ def test_summary_rows_with_only_order_zero(result):
     pc = result["pce"]["convergence"]
     short = {**result, "pce": {**result["pce"], "convergence": {k: v[:1] for k, v in pc.items()}}}
     rows = study.summary_rows(short)
-    assert rows[-1]["holds"] is None
+    (decay,) = [r for r in rows if r["quantity"].startswith("PCE variance error")]
+    assert decay["holds"] is None
+
+
+def test_sobol_verification_rows(result):
+    sob = result["sobol"]
+    # the sampling estimator against the closed form, and the PCE inside its intervals
+    assert sob["max_sampling_error"] <= 0.02
+    assert sob["max_pce_error"] <= 1e-2
+    assert sob["pce_inside_intervals"] >= sob["n_intervals"] - 1
+    assert sob["sampling_runs"] == 4096 * 5

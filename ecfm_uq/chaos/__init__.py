@@ -11,6 +11,7 @@ Public API
 ----------
 ChaosBasis           basis terms Psi_k, multi-indices, evaluation, quadrature
 Germ                 one germ variable of the Askey scheme (uniform, normal, gamma, beta)
+OwnGerm              any law's own orthonormal polynomials (arbitrary chaos; germ="own")
 gauss_legendre       Gauss-Legendre nodes and probability weights on [0, 1]
 expectation_tensor   E[Psi_k], E[Psi_i Psi_j], E[Psi_i Psi_j Psi_k] (dense or sparse)
 weighted_gram        E[g(omega) Psi_k Psi_l]
@@ -32,6 +33,7 @@ from .germs import Germ
 from .input_projection import input_basis, input_coefficients, input_gram
 from .inputs import Inputs, UniformInputs
 from .nonintrusive import fit_pce, sample_design, smolyak_rule
+from .ownlaw import OwnGerm
 from .pce import PolynomialChaosExpansion
 from .projection import project
 from .quadrature import gauss_legendre
@@ -49,6 +51,7 @@ from .tensors import (
 __all__ = [
     "ChaosBasis",
     "Germ",
+    "OwnGerm",
     "PolynomialChaosExpansion",
     "Inputs",
     "UniformInputs",

@@ -72,9 +72,12 @@ class ChaosBasis:
         deterministic (zero-order chaos) case.
     dim : int, optional
         Number of independent uniform variables, ``dim >= 1``. Default 1.
-    index_set : {"total", "tensor"}, optional
+    index_set : {"total", "tensor"} or (P, dim) array_like of int, optional
         ``"total"``: multi-indices with :math:`|\\alpha|_1 \\le p`;
         ``"tensor"``: :math:`\\max_d \\alpha_d \\le p`. Default ``"total"``.
+        An array gives the multi-indices themselves (a sparse basis, as a sparse fit
+        selects it): distinct, non-negative, of total degree at most ``order``, the
+        first row all zeros; ``index_set`` is then ``"custom"``.
     normalized : bool, optional
         ``True`` (default): orthonormal, :math:`\\mathbb{E}[\\Psi_k \\Psi_l] = \\delta_{kl}`.
         ``False``: the paper's unnormalised :math:`P_n(2\\omega - 1)` products, with
@@ -127,9 +130,13 @@ class ChaosBasis:
     def __init__(self, order, dim=1, index_set="total", normalized=True, germ=None):
         self.order = check_int("order", order, minimum=0)
         self.dim = check_int("dim", dim, minimum=1)
+        custom = None
         if not isinstance(index_set, str):
-            raise TypeError(f"`index_set` must be one of {list(_INDEX_SETS)}, got {index_set!r}")
-        self.index_set = check_choice("index_set", index_set, _INDEX_SETS)
+            custom = self._check_indices(index_set)
+            index_set = "custom"
+        else:
+            index_set = check_choice("index_set", index_set, _INDEX_SETS)
+        self.index_set = index_set
         if not isinstance(normalized, bool | np.bool_):
             raise TypeError(f"`normalized` must be True or False, got {normalized!r}")
         self.normalized = bool(normalized)
@@ -141,7 +148,9 @@ class ChaosBasis:
                 f"Legendre germs, got germ={self.germs}; use normalized=True"
             )
 
-        if self.index_set == "total":
+        if custom is not None:
+            n_terms = len(custom)
+        elif self.index_set == "total":
             n_terms = math.comb(self.order + self.dim, self.dim)
         else:
             n_terms = (self.order + 1) ** self.dim
@@ -150,8 +159,12 @@ class ChaosBasis:
                 f"order={self.order}, dim={self.dim} ({self.index_set!r}) gives {n_terms} terms; "
                 "reduce `order` or `dim`"
             )
-        gen = _total_degree_indices if self.index_set == "total" else _tensor_indices
-        self.indices = np.array(gen(self.order, self.dim), dtype=np.int64).reshape(-1, self.dim)
+        if custom is not None:
+            self.indices = custom
+        else:
+            gen = _total_degree_indices if self.index_set == "total" else _tensor_indices
+            self.indices = np.array(gen(self.order, self.dim), dtype=np.int64)
+            self.indices = self.indices.reshape(-1, self.dim)
         self.indices.setflags(write=False)
 
         if self.normalized:
@@ -160,6 +173,34 @@ class ChaosBasis:
             norms2 = np.prod(1.0 / (2.0 * self.indices + 1.0), axis=1)
         norms2.setflags(write=False)
         self.norms2 = norms2
+
+    def _check_indices(self, index_set):
+        alpha = None
+        if isinstance(index_set, list | tuple | np.ndarray):
+            try:
+                alpha = np.array(index_set)
+            except ValueError:  # ragged rows
+                alpha = None
+        if alpha is None or alpha.dtype == object:
+            raise TypeError(
+                f"`index_set` must be one of {list(_INDEX_SETS)} or a (P, dim) int array of "
+                f"multi-indices, got {index_set!r}"
+            )
+        if alpha.ndim != 2 or alpha.shape[1] != self.dim or alpha.dtype.kind not in "iu":
+            raise ValueError(
+                f"an `index_set` array must be (P, {self.dim}) integers, got shape "
+                f"{alpha.shape} of {alpha.dtype}"
+            )
+        alpha = alpha.astype(np.int64)
+        if len(alpha) == 0 or np.any(alpha[0] != 0):
+            raise ValueError("the first row of an `index_set` array must be all zeros (the mean)")
+        if np.any(alpha < 0) or np.any(alpha.sum(axis=1) > self.order):
+            raise ValueError(
+                f"`index_set` rows must be non-negative with total degree <= order={self.order}"
+            )
+        if len(np.unique(alpha, axis=0)) != len(alpha):
+            raise ValueError("`index_set` rows must be distinct multi-indices")
+        return alpha
 
     @property
     def size(self):
@@ -179,13 +220,16 @@ class ChaosBasis:
     def __eq__(self, other):
         if not isinstance(other, ChaosBasis):
             return NotImplemented
-        return (self.order, self.dim, self.index_set, self.normalized, self.germs) == (
+        same = (self.order, self.dim, self.index_set, self.normalized, self.germs) == (
             other.order,
             other.dim,
             other.index_set,
             other.normalized,
             other.germs,
         )
+        if same and self.index_set == "custom":
+            return bool(np.array_equal(self.indices, other.indices))
+        return same
 
     def __hash__(self):
         return hash((self.order, self.dim, self.index_set, self.normalized, self.germs))

@@ -48,6 +48,18 @@ class Inputs:
         independent inputs.
     names : sequence of str, optional
         Input names (default ``x0, x1, ...``).
+    germ : None, "own", "transform" or a sequence of them, optional
+        ``"own"``: expand the input on the orthonormal polynomials of its own law
+        (arbitrary polynomial chaos, :mod:`ecfm_uq.chaos.ownlaw`; a model polynomial in
+        the input is then represented exactly). ``"transform"``: the isoprobabilistic
+        transform to a uniform or normal germ (the only route up to v0.3).
+        ``None`` (default): the Askey germ for uniform, normal, gamma and beta inputs;
+        own polynomials for other laws of bounded support (triangular, truncated on both
+        sides, a custom bounded ``rv_continuous``) and for truncated normals (their
+        moment problems are determinate, so the polynomials are dense); the transform for
+        the rest (lognormal, Weibull, Gumbel, ...: own polynomials on request). One value
+        for every input or one per input; independent inputs only (dependent ones are
+        expanded on independent standard normals).
 
     Attributes
     ----------
@@ -81,7 +93,7 @@ class Inputs:
     [[1.1, 1.0]]
     """
 
-    def __init__(self, marginals, correlation=None, names=None):
+    def __init__(self, marginals, correlation=None, names=None, germ=None):
         if type(marginals).__module__.startswith("chaospy") and len(marginals) > 1:
             if getattr(marginals, "stochastic_dependent", False):
                 raise TypeError(
@@ -90,7 +102,7 @@ class Inputs:
                     "marginals and a `correlation`"
                 )
             marginals = list(marginals)  # a chaospy.J / Iid of 1-D laws
-        elif hasattr(marginals, "dist") or type(marginals).__module__.startswith("chaospy"):
+        elif _is_distribution(marginals):
             marginals = [marginals]
         try:
             items = list(marginals)
@@ -108,6 +120,17 @@ class Inputs:
         self.names = names
         self.marginals = tuple(as_marginal(d, n) for d, n in zip(items, names, strict=True))
         self.correlation = None if correlation is None else self._check_correlation(correlation)
+        choice = self._check_germ(germ)
+        if any(c == "own" for c in choice) and self.correlation is not None:
+            raise ValueError(
+                "`germ='own'` is for independent inputs; dependent inputs (a `correlation`) "
+                "are expanded on independent standard normals"
+            )
+        if self.correlation is None:
+            self.marginals = tuple(
+                m.own(n) if c == "own" or (c is None and m.own_by_default) else m
+                for m, n, c in zip(self.marginals, names, choice, strict=True)
+            )
         self.dependent = self.correlation is not None and not np.array_equal(
             self.correlation, np.eye(self.dim)
         )
@@ -118,6 +141,20 @@ class Inputs:
             self.correlation = None
             self.germs = tuple(m.germ for m in self.marginals)
         self.affine = not self.dependent and all(m.affine for m in self.marginals)
+
+    def _check_germ(self, germ):
+        """``germ`` → one entry per input: None, "own" or "transform"."""
+        d = len(self.marginals)
+        items = [germ] * d if germ is None or isinstance(germ, str) else list(germ)
+        if len(items) != d:
+            raise ValueError(f"`germ` must give one entry per input ({d}), got {len(items)}")
+        for g in items:
+            if g is not None and g not in ("own", "transform"):
+                raise ValueError(
+                    "`germ` entries must be None (the default), 'own' (the law's own "
+                    f"polynomials) or 'transform' (to a uniform or normal germ), got {g!r}"
+                )
+        return items
 
     def _check_correlation(self, correlation):
         d = len(self.marginals)
@@ -448,8 +485,13 @@ class UniformInputs(Inputs):
 
 
 def _is_distribution(obj):
-    return type(obj).__module__.startswith("chaospy") or (
-        hasattr(obj, "dist") and hasattr(obj, "ppf") and hasattr(obj, "cdf")
+    """A 1-D law: chaospy, scipy (frozen, unfrozen rv_continuous, new-style) or cdf + ppf."""
+    from scipy import stats
+
+    return (
+        type(obj).__module__.startswith("chaospy")
+        or isinstance(obj, stats.rv_continuous | stats.rv_discrete)
+        or (hasattr(obj, "cdf") and (hasattr(obj, "ppf") or hasattr(obj, "icdf")))
     )
 
 

@@ -23,7 +23,9 @@ standard normal :math:`z` (:meth:`Marginal.from_normal`).
 
 from __future__ import annotations
 
+import functools
 import numbers
+import re
 
 import numpy as np
 from scipy import special, stats
@@ -98,6 +100,44 @@ class Marginal:
     def __repr__(self):
         return self.label
 
+    @property
+    def own_by_default(self):
+        """Expand on the law's own polynomials unless asked otherwise (see ``Inputs``)?
+
+        Laws of bounded support and truncated normals: their moments determine them, so
+        their own polynomials are dense in L2; an Askey law keeps its germ, and other
+        unbounded laws (lognormal: not determined by its moments) the transform.
+        """
+        if self.kind == "bounded":
+            return True
+        name = getattr(getattr(self.law, "dist", None), "name", None)
+        if name == "truncnorm":
+            return True
+        inner = getattr(self.law, "d", None)
+        return type(inner).__name__ == "TruncatedDistribution" and repr(inner).startswith(
+            "truncate(Normal("
+        )
+
+    def own(self, name="x"):
+        """This law expanded on its own orthonormal polynomials (arbitrary chaos).
+
+        The germ becomes the standardised input :math:`g = (x - \\mu)/\\sigma` with the
+        polynomials of the law itself (:class:`~ecfm_uq.chaos.ownlaw.OwnGerm`), so a model
+        polynomial in the input is represented exactly; ``kind`` is kept.
+        """
+        from .ownlaw import OwnGerm
+
+        if self.germ.family == "own":
+            return self
+        out = Marginal.__new__(Marginal)
+        out.__dict__.update(self.__dict__)
+        germ = OwnGerm(self.law, name=name, label=self.label)
+        out.germ = germ
+        out.loc, out.scale = germ.mean, germ.std
+        out.affine = True
+        out.label = f"{self.label} (own polynomials)"
+        return out
+
     def __eq__(self, other):
         if not isinstance(other, Marginal):
             return NotImplemented
@@ -111,11 +151,15 @@ class Marginal:
 
     __hash__ = None
 
-    @property
+    @functools.cached_property
     def finite_variance(self):
-        """The law has a finite variance (False for Cauchy, Student t with 2 dof, ...)."""
-        if self.affine or self.kind == "lognormal":
-            return True
+        """The law has a finite variance (False for Cauchy, Student t with 2 dof, ...).
+
+        Computed once per marginal: for a law without closed-form moments (a custom
+        ``rv_continuous``) scipy integrates numerically, which takes up to seconds.
+        """
+        if self.affine or self.kind in ("lognormal", "bounded"):
+            return True  # closed-form moments, or a bounded support
         try:
             v = float(self.law.var())
         except Exception:  # a law without a variance method: assume finite
@@ -199,16 +243,21 @@ def _scipy_params(frozen):
 
 def _from_scipy(d, name):
     if isinstance(d.dist, stats.rv_discrete):
-        raise TypeError(
-            f"input {name!r} is the discrete distribution {d.dist.name}: a polynomial chaos "
-            "needs continuous inputs; treat the input as continuous or condition on its values"
-        )
+        raise _discrete(name, d.dist.name)
     shapes, loc, scale = _scipy_params(d)
-    if not (np.isfinite(loc) and np.isfinite(scale) and scale > 0) or not np.all(
-        np.isfinite(shapes)
+    # shape parameters may be infinite (truncnorm(a, np.inf): a normal truncated below);
+    # scipy itself decides whether they are valid, seen as a finite median
+    with np.errstate(all="ignore"):
+        median = float(np.asarray(d.ppf(0.5)))
+    if (
+        not (np.isfinite(loc) and np.isfinite(scale) and scale > 0)
+        or np.any(np.isnan(shapes))
+        or not np.isfinite(median)
     ):
         raise ValueError(
-            f"input {name!r} has invalid parameters loc={loc}, scale={scale}, {shapes}"
+            f"input {name!r} ({d.dist.name}) has parameters scipy rejects: loc={loc}, "
+            f"scale={scale}, shapes={shapes} (its median is {median}); check them against "
+            f"scipy.stats.{d.dist.name}'s documentation"
         )
     kind = d.dist.name
     if kind == "uniform":
@@ -238,9 +287,106 @@ def _from_scipy(d, name):
             shapes,
             label=f"LogNormal(s={shapes[0]:g}, loc={loc:g}, scale={scale:g})",
         )
-    lo, hi = d.support()
+    return _transformed(d, f"{kind}{tuple(shapes)}")
+
+
+def _transformed(law, label):
+    """A marginal reached through its CDF: uniform germ when bounded, normal germ else."""
+    lo, hi = (float(v) for v in law.support())
     bounded = np.isfinite(lo) and np.isfinite(hi)
-    return Marginal("bounded" if bounded else "unbounded", d, label=f"{kind}{tuple(shapes)}")
+    return Marginal("bounded" if bounded else "unbounded", law, label=label)
+
+
+# scipy >= 1.15: the new-style distribution classes (stats.Normal, stats.truncate(...),
+# stats.make_distribution(...)); looked up by name so older scipy versions still import
+def _new_style_classes():
+    try:
+        from scipy.stats import _distribution_infrastructure as infra
+    except ImportError:  # pragma: no cover - scipy < 1.15
+        return (), ()
+    return (
+        getattr(infra, "ContinuousDistribution", ()),
+        getattr(infra, "DiscreteDistribution", ()),
+    )
+
+
+class _NewStyleLaw:
+    """A scipy new-style continuous distribution with the frozen-distribution methods used here.
+
+    ``cdf``/``sf``/``ppf``/``isf`` map to scipy's ``cdf``/``ccdf``/``icdf``/``iccdf``
+    (the complementary ones keep the upper tail's precision); the variance is read once.
+    """
+
+    def __init__(self, d):
+        self.d = d
+
+    def cdf(self, x):
+        return np.asarray(self.d.cdf(np.asarray(x, dtype=float)), dtype=float)
+
+    def sf(self, x):
+        return np.asarray(self.d.ccdf(np.asarray(x, dtype=float)), dtype=float)
+
+    def ppf(self, u):
+        return np.asarray(self.d.icdf(np.asarray(u, dtype=float)), dtype=float)
+
+    def isf(self, u):
+        return np.asarray(self.d.iccdf(np.asarray(u, dtype=float)), dtype=float)
+
+    def pdf(self, x):
+        return np.asarray(self.d.pdf(np.asarray(x, dtype=float)), dtype=float)
+
+    def support(self):
+        lo, hi = self.d.support()
+        return float(lo), float(hi)
+
+    def var(self):
+        return float(self.d.variance())
+
+    def mean(self):
+        return float(self.d.mean())
+
+
+def _from_new_style(d, name):
+    cls = type(d).__name__
+    lo, hi = (float(np.asarray(v)) for v in d.support())
+    if type(d).__name__ == "Normal" and type(d).__module__.startswith("scipy.stats"):
+        return _from_scipy(stats.norm(float(d.mean()), float(d.standard_deviation())), name)
+    if type(d).__name__ == "Uniform" and type(d).__module__.startswith("scipy.stats"):
+        return _from_scipy(stats.uniform(lo, hi - lo), name)
+    label = re.sub(r"np\.float64\(([^)]*)\)", r"\1", repr(d))  # scipy's own repr, cleaned
+    return _transformed(_NewStyleLaw(d), label if len(label) <= 80 else cls)
+
+
+class _DuckLaw:
+    """Any object with ``cdf`` and ``ppf`` (and optionally ``sf``, ``isf``, ``support``)."""
+
+    def __init__(self, d):
+        self.d = d
+
+    def cdf(self, x):
+        return np.asarray(self.d.cdf(np.asarray(x, dtype=float)), dtype=float)
+
+    def sf(self, x):
+        if hasattr(self.d, "sf"):
+            return np.asarray(self.d.sf(np.asarray(x, dtype=float)), dtype=float)
+        return 1.0 - self.cdf(x)
+
+    def ppf(self, u):
+        return np.asarray(self.d.ppf(np.asarray(u, dtype=float)), dtype=float)
+
+    def isf(self, u):
+        if hasattr(self.d, "isf"):
+            return np.asarray(self.d.isf(np.asarray(u, dtype=float)), dtype=float)
+        return self.ppf(1.0 - np.asarray(u, dtype=float))
+
+    def support(self):
+        if hasattr(self.d, "support"):
+            lo, hi = self.d.support()
+            return float(lo), float(hi)
+        return float(self.ppf(0.0)), float(self.ppf(1.0))
+
+    def var(self):
+        return float(self.d.var())
 
 
 def _cp_param(d, key, fallback, inner=False):
@@ -326,7 +472,14 @@ class _ChaospyLaw:
 
 
 def as_marginal(dist, name="x"):
-    """A :class:`Marginal` from a scipy.stats frozen distribution or a 1-D chaospy one.
+    """A :class:`Marginal` from any continuous 1-D law.
+
+    Accepted: a scipy.stats frozen distribution (truncated ones with an infinite bound
+    included, e.g. ``truncnorm(a, np.inf, loc, scale)``), an instance of a user's
+    ``rv_continuous`` subclass (frozen or, without shape parameters, not), a scipy
+    new-style distribution (``stats.Normal(mu=, sigma=)``, ``stats.truncate(...)``,
+    ``stats.make_distribution(...)``), a 1-D chaospy distribution, or any object with
+    ``cdf`` and ``ppf`` methods (and optionally ``sf``, ``isf``, ``support``, ``var``).
 
     Raises
     ------
@@ -339,13 +492,45 @@ def as_marginal(dist, name="x"):
         getattr(dist, "dist", None), stats.rv_continuous | stats.rv_discrete
     ):
         return _from_scipy(dist, name)
+    if isinstance(dist, stats.rv_discrete):
+        raise _discrete(name, dist.name)
+    if isinstance(dist, stats.rv_continuous):
+        # an unfrozen law (e.g. an instance of a user's rv_continuous subclass)
+        if dist.numargs:
+            raise TypeError(
+                f"input {name!r} is the scipy law {dist.name} without its shape parameters "
+                f"({dist.shapes}); freeze it: {dist.name}({dist.shapes}, loc=..., scale=...)"
+            )
+        return _from_scipy(dist(), name)
+    continuous, discrete = _new_style_classes()
+    if discrete and isinstance(dist, discrete):
+        raise _discrete(name, type(dist).__name__)
+    if continuous and isinstance(dist, continuous):
+        return _from_new_style(dist, name)
     if type(dist).__module__.startswith("chaospy"):
         return _from_chaospy(dist, name)
     if isinstance(dist, numbers.Number):
         raise TypeError(
             f"input {name!r} is the number {dist!r}: pass a distribution (a constant is not an input)"
         )
+    if hasattr(dist, "cdf") or hasattr(dist, "ppf"):
+        missing = [m for m in ("cdf", "ppf") if not callable(getattr(dist, m, None))]
+        if missing:
+            raise TypeError(
+                f"input {name!r} ({type(dist).__name__}) has no {' and no '.join(missing)}: "
+                "a chaos input is mapped to its germ through its CDF and inverse CDF (ppf); "
+                "give the law both methods, or pass a scipy.stats distribution"
+            )
+        return _transformed(_DuckLaw(dist), type(dist).__name__)
     raise TypeError(
-        f"input {name!r} must be a scipy.stats frozen distribution (e.g. scipy.stats.norm(0, 1)) "
-        f"or a chaospy distribution, got {type(dist).__name__}"
+        f"input {name!r} must be a scipy.stats frozen distribution (e.g. scipy.stats.norm(0, "
+        "1)) or a new-style one (scipy.stats.Normal(mu=0, sigma=1)), a chaospy distribution "
+        f"or an object with cdf and ppf methods, got {type(dist).__name__}"
+    )
+
+
+def _discrete(name, law):
+    return TypeError(
+        f"input {name!r} is the discrete distribution {law}: a polynomial chaos needs "
+        "continuous inputs; treat the input as continuous or condition on its values"
     )

@@ -18,10 +18,14 @@ One entry point, :func:`fit_pce`, dispatches on ``method`` to
   most correlated with the residual enters, then OLS), which finds exactly sparse
   expansions from fewer runs (Ishigami: 1e-8 index errors from 100 runs).
 
-Both sparse methods raise the candidate degree one by one (the candidate set is the
-total-degree, or hyperbolic ``q_norm``, basis of that degree), run the path on it,
-refit every nested active set by OLS and score it with the corrected leave-one-out
-error; they stop after ``early_stop`` degrees without improvement.
+Both sparse methods raise the candidate degree one by one, run the path on the candidate
+set of that degree, refit every nested active set by OLS and score it with the corrected
+leave-one-out error. By default (``q_norm=None``) the candidate sets are hyperbolic ones
+for q in (0.5, 0.75, 1), each q a chain of degrees with its own early stop, tried while
+affordable (:mod:`ecfm_uq.chaos.adaptive`); with a given ``q_norm`` the v0.3 selection
+runs on that one q, stopping after ``early_stop`` degrees without improvement. A
+regression fit whose corrected LOO error exceeds 1e-2 of the output variance warns and
+points at :func:`ecfm_uq.mc.sobol_indices` to check its indices by sampling.
 
 All return the same :class:`~ecfm_uq.chaos.PolynomialChaosExpansion` as the stochastic
 Galerkin solver, with ``.diagnostics`` saying what was done. Model evaluations go through
@@ -396,7 +400,7 @@ def fit_pce(
     index_set=None,
     n_points=None,
     rule="gauss",
-    q_norm=1.0,
+    q_norm=None,
     early_stop=2,
     compress=None,
     compress_tol=1e-6,
@@ -446,11 +450,17 @@ def fit_pce(
     rule : {"gauss", "clenshaw-curtis"}
         1-D rules of the Smolyak grid: Gauss-Legendre (not nested) or Clenshaw-Curtis
         (nested).
-    q_norm : float
-        Hyperbolic truncation of the sparse-regression candidates, :math:`\\|\\alpha\\|_q \\le p`
-        (1 = total degree; smaller keeps fewer interactions).
+    q_norm : float, optional
+        Sparse methods. ``None`` (default): adaptive truncation (:mod:`ecfm_uq.chaos.adaptive`):
+        for each q in (0.5, 0.75, 1) a chain of hyperbolic candidate sets
+        :math:`\\|\\alpha\\|_q \\le p`, p = 1, 2, ..., while affordable and improving the
+        corrected LOO error; the result keeps the selected terms only, and
+        ``diagnostics`` says what was chosen (``degree``, ``q_norm``, ``n_candidates``,
+        ``adaptive_trace`` of (degree, q, candidates, error)). A number in (0, 1]: the
+        v0.3 selection on that fixed q up to the candidate degree (1 = total degree).
     early_stop : int
-        Sparse methods: stop raising the degree after this many degrees without improvement.
+        Sparse methods: stop raising the degree (of each q chain) after this many degrees
+        without improvement.
     compress : bool, "exact" or "randomized", optional
         Sparse methods on a field output: select on the leading principal components of
         the evaluations instead of on every component (PCA-PCE, Blatman & Sudret 2013),
@@ -484,7 +494,9 @@ def fit_pce(
     PolynomialChaosExpansion
         With ``diagnostics``: ``method``, ``n_evaluations``, ``wall_time``, and
         ``loo_error`` / ``corrected_loo_error`` (regression; relative to the output
-        variance, per output component), ``degree`` and ``n_terms`` (sparse methods).
+        variance, per output component), ``degree`` and ``n_terms`` (sparse methods),
+        ``poor_fit`` (regression: the corrected LOO error exceeds 1e-2 of the variance;
+        a ``RuntimeWarning`` then points at :func:`ecfm_uq.mc.sobol_indices`).
 
     Raises
     ------
@@ -545,8 +557,8 @@ def fit_pce(
     elif method == "lstsq":
         pce, n_eval = _fit_lstsq(model, inputs, order, index_set, data, ev)
     else:
-        if isinstance(q_norm, bool) or not 0 < float(q_norm) <= 1:
-            raise ValueError(f"`q_norm` must lie in (0, 1], got {q_norm!r}")
+        if q_norm is not None and (isinstance(q_norm, bool) or not 0 < float(q_norm) <= 1):
+            raise ValueError(f"`q_norm` must be None (adaptive) or lie in (0, 1], got {q_norm!r}")
         early_stop = check_int("early_stop", early_stop, minimum=1)
         if isinstance(compress, np.bool_):
             compress = bool(compress)
@@ -566,7 +578,7 @@ def fit_pce(
             index_set,
             data,
             ev,
-            float(q_norm),
+            None if q_norm is None else float(q_norm),
             early_stop,
             method,
             compress,
@@ -577,4 +589,32 @@ def fit_pce(
         n_evaluations=n_eval,
         wall_time=time.perf_counter() - t0,
     )
+    _warn_if_poor(pce)
+    # an input's variance check is computed once, here (a custom law's variance is a
+    # numerical integral of up to seconds), so the indices of the fit cost milliseconds
+    for m in getattr(inputs, "marginals", ()):
+        m.finite_variance  # noqa: B018  (a cached property: computing it is the point)
     return pce
+
+
+# A corrected leave-one-out error above this share of the output variance: the expansion
+# misses that share, and its Sobol indices can be off by about as much.
+POOR_LOO_ERROR = 1e-2
+
+
+def _warn_if_poor(pce):
+    """Say so when a regression fit's corrected LOO error is poor, and how to check it."""
+    err = pce.diagnostics.get("corrected_loo_error")
+    if err is None:
+        return
+    worst = float(np.max(err)) if np.size(err) else 0.0
+    pce.diagnostics["poor_fit"] = bool(worst > POOR_LOO_ERROR)
+    if worst > POOR_LOO_ERROR:
+        warnings.warn(
+            f"fit_pce: the corrected leave-one-out error is {worst:.1e} of the output "
+            f"variance (> {POOR_LOO_ERROR:g}): the expansion misses that share and its Sobol "
+            "indices may be off by about as much. Add runs (n_samples), or check the indices "
+            "by sampling: ecfm_uq.mc.sobol_indices(model, inputs, n=2**12, seed=0)",
+            RuntimeWarning,
+            stacklevel=3,
+        )

@@ -38,6 +38,16 @@ import scipy.linalg as sla
 
 from .._validation import check_int
 from ..memory import check_allocation, memory_budget
+from ._paths import (  # noqa: F401  (_loo_nested, _path_order: imported from here by tests)
+    _CANDIDATES_PER_RUN,
+    _CHOLESKY_RTOL,
+    _SELECTION_SHARE,
+    _lar_order_gram,
+    _loo_nested,
+    _path_order,
+    _sparse_select,
+)
+from .adaptive import _select_adaptive
 from .basis import ChaosBasis
 from .compression import (
     StreamingSketch,
@@ -51,22 +61,17 @@ from .pce import PolynomialChaosExpansion
 
 __all__ = ["candidate_degree", "compress_outputs"]
 
-# Sparse regression: largest candidate basis per model run, and the highest degree tried
-# (the degree loop stops earlier when the corrected LOO error stops improving).
-_CANDIDATES_PER_RUN = 10
+# Sparse regression: the highest degree tried (the degree loop stops earlier when the
+# corrected LOO error stops improving); the candidates per run are in _paths.
 _MAX_DEGREE = 30
 # The default candidate set also fits the memory budget and a work limit: the selection
 # holds about _SELECTION_COPIES arrays of P * min(n, P) floats (design or Gram form); its
 # work is modelled by _selection_work and kept below _WORK_LIMIT (a few minutes of one core).
 _SELECTION_COPIES = 4
-_SELECTION_SHARE = 0.5
 _WORK_LIMIT = 4e12
 # Below this design size (or when P >= n) the selection runs on the design matrix, exactly
 # as in earlier releases; above it, on the Gram matrix built in blocks of rows.
 _EXACT_DESIGN_BYTES = 128 * 2**20
-# Gram path: a selected column whose Cholesky pivot falls below this share of its norm is
-# numerically dependent on the earlier ones (the Gram squares the conditioning).
-_CHOLESKY_RTOL = 1e-6
 # Field outputs whose evaluations do not fit in memory: range-sketch columns of the
 # one-pass compression, the largest that fits (the largest rank it can keep).
 _STREAM_COLUMNS = (64, 48, 32)
@@ -140,93 +145,6 @@ def _uses_gram(n, P, budget=None):
 
 
 # --------------------------------------------------------------------------------------
-# leave-one-out errors
-# --------------------------------------------------------------------------------------
-def _loo_nested(Q, R, y):
-    """Corrected LOO errors of the OLS fits on the first k = 1..s columns, all at once.
-
-    With :math:`X = QR` (economic), the fit on the first k columns uses :math:`Q_k`, so the
-    hat diagonals and residuals of all nested fits are cumulative sums:
-    :math:`h^{(k)}_i = \\sum_{j<k} Q_{ij}^2`, :math:`r^{(k)} = y - \\sum_{j<k} Q_j (Q_j^T y)`.
-    The LOO residual is :math:`r_i / (1 - h_i)` (no refits), normalised by the sample
-    variance, and multiplied by Chapelle's correction (Blatman & Sudret 2011)
-
-    .. math:: T(k, n) = \\frac{n}{n - k}\\Bigl(1 + \\operatorname{tr}(C^{-1})/n\\Bigr),
-              \\qquad C = X_k^T X_k / n,\\quad \\operatorname{tr}(C^{-1})/n = \\|R_k^{-1}\\|_F^2.
-
-    Returns
-    -------
-    loo, corrected : (s,) ndarray
-    """
-    n, s = Q.shape
-    z = Q.T @ y
-    fitted = np.cumsum(Q * z[None, :], axis=1)
-    h = np.cumsum(Q**2, axis=1)
-    resid = y[:, None] - fitted
-    one_h = 1.0 - h
-    with np.errstate(divide="ignore", invalid="ignore"):
-        e = np.where(one_h > 1e-10, resid / one_h, np.inf)
-    var = np.var(y) if np.var(y) > 0 else 1.0
-    loo = np.mean(e**2, axis=0) / var
-    Rinv = sla.solve_triangular(R, np.eye(s))
-    trace = np.cumsum(np.sum(np.triu(Rinv) ** 2, axis=0))
-    k = np.arange(1, s + 1)
-    with np.errstate(divide="ignore"):
-        T = np.where(k < n, n / np.maximum(n - k, 1) * (1.0 + trace), np.inf)
-    return loo, loo * T
-
-
-def _path_order(X, y, max_steps, solver):
-    """Order in which the columns of ``X`` enter a LARS or OMP path (nested active sets)."""
-    from sklearn.exceptions import ConvergenceWarning
-    from sklearn.linear_model import lars_path, orthogonal_mp
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        warnings.simplefilter("ignore", RuntimeWarning)
-        if solver == "lars":
-            _, active, _ = lars_path(X, y, method="lar", max_iter=max_steps, return_path=False)
-            return list(active)[:max_steps]
-        path = orthogonal_mp(X, y, n_nonzero_coefs=max_steps, return_path=True)
-    path = path.reshape(X.shape[1], -1)
-    # OMP only adds: the first nonzero step of each column gives its entry order
-    nz = path != 0
-    first = np.where(nz.any(axis=1), np.argmax(nz, axis=1), path.shape[1])
-    entered = np.flatnonzero(first < path.shape[1])
-    return entered[np.argsort(first[entered], kind="stable")].tolist()
-
-
-def _sparse_select(Psi, y, candidates, n, solver):
-    """Hybrid LARS/OMP on the candidate columns: (columns, coefficients, corrected LOO).
-
-    The path is computed on centred, unit-norm candidate columns (the constant term is
-    always kept); every nested active set along it is then refitted by OLS, and the one
-    with the smallest corrected leave-one-out error wins (Blatman & Sudret 2011).
-    """
-    # centred and scaled in place: one copy of the candidate columns, not three
-    Xc = Psi[:, candidates]
-    Xc -= Xc.mean(axis=0)
-    scale = np.linalg.norm(Xc, axis=0)
-    scale[scale == 0] = 1.0
-    Xc /= scale
-    # beyond n / 2 terms the LOO correction factor exceeds 2: such fits never win
-    max_steps = min(len(candidates), max(n // 2, 2))
-    active = _path_order(Xc, y - y.mean(), max_steps, solver)
-    del Xc
-    cols = [0] + [int(candidates[j]) for j in active]
-    Q, R = sla.qr(Psi[:, cols], mode="economic")
-    d = np.abs(np.diag(R))
-    # stop at the first column that is numerically dependent on the earlier ones
-    bad = np.flatnonzero(d < 1e-10 * d[0])
-    s = int(bad[0]) if bad.size else len(cols)
-    Q, R, cols = Q[:, :s], R[:s, :s], cols[:s]
-    _, corrected = _loo_nested(Q, R, y)
-    k = int(np.argmin(corrected)) + 1
-    coef = sla.solve_triangular(R[:k, :k], Q[:, :k].T @ y)
-    return cols[:k], coef, float(corrected[k - 1])
-
-
-# --------------------------------------------------------------------------------------
 # Gram form: the candidates' Gram matrix built in blocks of rows, never the design
 # --------------------------------------------------------------------------------------
 class _GramDesign:
@@ -289,63 +207,6 @@ class _GramDesign:
 
     def positions(self, cols):
         return np.array([self.position[int(c)] for c in cols], dtype=np.int64)
-
-
-def _lar_order_gram(G, c, max_steps):
-    """Entry order of least-angle regression (LAR) from the Gram matrix of unit-norm columns.
-
-    The LAR of Efron et al. (2004) in Gram form: the correlations
-    :math:`c = X^T r` are updated as :math:`c \\leftarrow c - \\gamma\\,G_{:,A} w` without
-    the design. The inverse :math:`L^{-1}` of the Cholesky factor of :math:`G_{AA}` grows
-    by one row per step and the rows :math:`G_{A,:}` are kept contiguous, so a step is a
-    few matrix-vector products, O(k P). Stops at ``max_steps``, when the correlations
-    vanish, or at a column numerically dependent on the active ones.
-    """
-    P = len(c)
-    max_steps = min(max_steps, P)
-    c = np.array(c, dtype=float)
-    inactive = np.ones(P, dtype=bool)
-    GA = np.empty((max_steps, P))
-    Linv = np.zeros((max_steps, max_steps))
-    z = np.empty(max_steps)  # L^{-1} s_A, s_A the signs of the active correlations
-    v = np.empty(max_steps)  # L^{-T} z = G_AA^{-1} s_A (signs never change in LAR)
-    active = []
-    j = int(np.argmax(np.abs(c)))
-    C = abs(c[j])
-    floor = 1e3 * np.finfo(float).eps * max(C, np.finfo(float).tiny)
-    for k in range(max_steps):
-        if C <= floor:
-            break
-        GA[k] = G[j]
-        l = Linv[:k, :k] @ GA[:k, j]
-        d2 = G[j, j] - l @ l
-        if not d2 > _CHOLESKY_RTOL**2 * G[j, j]:
-            break  # dependent on the active columns
-        d = math.sqrt(d2)
-        Linv[k, :k] = -(l @ Linv[:k, :k]) / d
-        Linv[k, k] = 1.0 / d
-        z[k] = (math.copysign(1.0, c[j]) - l @ z[:k]) / d
-        v[:k] += z[k] * Linv[k, :k]
-        v[k] = z[k] / d
-        active.append(j)
-        inactive[j] = False
-        if k + 1 == max_steps:
-            break
-        AA = 1.0 / math.sqrt(z[: k + 1] @ z[: k + 1])
-        a = AA * (v[: k + 1] @ GA[: k + 1])
-        idx = np.flatnonzero(inactive)
-        ci, ai = c[idx], a[idx]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            g = np.concatenate([(C - ci) / (AA - ai), (C + ci) / (AA + ai)])
-        g[~(g > 1e-14 * C)] = np.inf
-        m = int(np.argmin(g))
-        gamma = min(g[m], C / AA)
-        if not np.isfinite(gamma):
-            break
-        c -= gamma * a
-        C -= gamma * AA
-        j = int(idx[m % len(idx)])
-    return active
 
 
 def _path_order_gram(Gs, Xys, n, max_steps, solver):
@@ -499,28 +360,37 @@ def _fit_sparse(
     n = len(omega)
     if n < 4:
         raise ValueError(f"too few regression samples: `{name}` gives {n} points; pass at least 4")
-    if order is None:
+    adaptive = q_norm is None
+    if order is None and adaptive:
+        # the degree grows while the corrected LOO error improves and a candidate set
+        # of the next degree is affordable (_select_adaptive_column)
+        order, limit = _MAX_DEGREE, "adaptive"
+    elif order is None:
         # candidate degrees while the candidate set stays below _CANDIDATES_PER_RUN * n,
         # the selection within the memory budget and its work within _WORK_LIMIT
         order, limit = candidate_degree(n, dim)
     else:
         limit = "order"
     order = check_int("order", order, minimum=1)
-    basis = ChaosBasis(order, dim, germ=inputs.germs)
-    P = basis.size
-    alpha = np.asarray(basis.indices, dtype=float)
-    qn = (np.sum(alpha**q_norm, axis=1)) ** (1.0 / q_norm)
-    gram = _uses_gram(n, P)
-    # checked before the model runs: the largest array the selection may need (the
-    # design path evaluates all P terms, the Gram path only the candidates)
-    P_sel = int(np.count_nonzero(qn <= order + 1e-12)) if gram else P
-    check_allocation(
-        _selection_bytes(n, P_sel),
-        f"the sparse-regression {'Gram matrix' if gram else 'design'} of {P_sel} candidates "
-        f"from n = {n} runs (order {order}, {dim} inputs)",
-        "leave `order` to its default (sized by n and the memory budget), or pass a "
-        f"smaller `order`{' or `q_norm` < 1' if gram else ''}",
-    )
+    if adaptive:
+        # the largest candidate set an affordable selection holds (checked per set)
+        P, gram = _CANDIDATES_PER_RUN * n, False
+    else:
+        basis = ChaosBasis(order, dim, germ=inputs.germs)
+        P = basis.size
+        alpha = np.asarray(basis.indices, dtype=float)
+        qn = (np.sum(alpha**q_norm, axis=1)) ** (1.0 / q_norm)
+        gram = _uses_gram(n, P)
+        # checked before the model runs: the largest array the selection may need (the
+        # design path evaluates all P terms, the Gram path only the candidates)
+        P_sel = int(np.count_nonzero(qn <= order + 1e-12)) if gram else P
+        check_allocation(
+            _selection_bytes(n, P_sel),
+            f"the sparse-regression {'Gram matrix' if gram else 'design'} of {P_sel} "
+            f"candidates from n = {n} runs (order {order}, {dim} inputs)",
+            "leave `order` to its default (sized by n and the memory budget), or pass a "
+            f"smaller `order`{' or `q_norm` < 1' if gram else ''}",
+        )
 
     def check_outputs(n_runs, out_shape):
         """Before the other runs: the evaluations and what the fit adds per component."""
@@ -589,9 +459,14 @@ def _fit_sparse(
             Z, V, ybar, comp_err, info = compress_outputs(
                 yf, tol, "auto" if compress is True else compress, return_info=True
             )
-        cz, deg, err, nt = _select_columns(selector(Z), P, Z, qn, order, early_stop)
-        # only the terms up to the highest selected degree are nonzero (graded order)
-        P_top = ChaosBasis(max(int(deg.max()), 1), dim).size
+        if adaptive:
+            union, cz, ainfo = _select_adaptive(inputs.germs, omega, Z, early_stop, order, solver)
+            deg, err, nt = ainfo["degree"], ainfo["errors"], ainfo["n_terms"]
+            P_top = len(union)
+        else:
+            cz, deg, err, nt = _select_columns(selector(Z), P, Z, qn, order, early_stop)
+            # only the terms up to the highest selected degree are nonzero (graded order)
+            P_top = ChaosBasis(max(int(deg.max()), 1), dim).size
         check_allocation(
             8.0 * 2 * P_top * m,
             f"the expansion's coefficients ({P_top} terms by {m} output values)",
@@ -617,12 +492,19 @@ def _fit_sparse(
             compression_info=info,
         )
         n_terms = np.count_nonzero(coeffs, axis=0)
+    elif adaptive:
+        union, coeffs, ainfo = _select_adaptive(inputs.germs, omega, yf, early_stop, order, solver)
+        chosen_deg, errors, n_terms = ainfo["degree"], ainfo["errors"], ainfo["n_terms"]
     else:
         coeffs, chosen_deg, errors, n_terms = _select_columns(
             selector(yf), P, yf, qn, order, early_stop
         )
     top = max(max(chosen_deg), 1)
-    basis_out = ChaosBasis(top, dim, germ=inputs.germs)
+    if adaptive:
+        # the selected terms only (a custom index set), not the total-degree basis
+        basis_out = ChaosBasis(top, dim, index_set=union, germ=inputs.germs)
+    else:
+        basis_out = ChaosBasis(top, dim, germ=inputs.germs)
     c = coeffs[: basis_out.size].reshape((basis_out.size, *shape))
     pce = PolynomialChaosExpansion(basis_out, c, inputs)
     if compress:
@@ -642,4 +524,17 @@ def _fit_sparse(
         selection="gram" if gram else "design",
         **extra,
     )
+    if adaptive:
+        # what the adaptive truncation chose (per output component, or per principal
+        # component when compressed) and the first one's path of (degree, q, P, LOO)
+        key = "component_" if compress else ""
+        pce.diagnostics.update(
+            selection="adaptive",
+            q_norm=ainfo["q_norm"] if compress else ainfo["q_norm"].reshape(shape),
+            candidate_degree=int(max(t[0] for t in ainfo["trace"]) if ainfo["trace"] else 1),
+            adaptive_trace=ainfo["trace"],
+        )
+        pce.diagnostics[f"{key}n_candidates"] = (
+            ainfo["n_candidates"] if compress else ainfo["n_candidates"].reshape(shape)
+        )
     return pce, n

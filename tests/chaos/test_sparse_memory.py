@@ -55,7 +55,8 @@ def test_gram_form_selects_what_the_design_form_selects(method, monkeypatch):
     # one problem, both forms: the same columns and, to round-off, the same coefficients
     x = np.random.default_rng(3).random((1500, 4))
     y = np.array([product_model(np.r_[xi, 0.5 * np.ones(4)]) for xi in x])
-    kw = dict(samples=x, evaluations=y, order=4)
+    # q_norm=1.0: the fixed total-degree candidates, the path with a Gram form
+    kw = dict(samples=x, evaluations=y, order=4, q_norm=1.0)
     ref = fit_pce(None, [(0.0, 1.0)] * 4, method, **kw)
     monkeypatch.setattr(sparse, "_EXACT_DESIGN_BYTES", 0)
     new = fit_pce(None, [(0.0, 1.0)] * 4, method, **kw)
@@ -73,7 +74,7 @@ def test_tight_budget_fits_eight_inputs_without_the_candidate_matrix(budget):
     budget(limit)
     tracemalloc.start()
     try:
-        pce = fit_pce(product_model, [(0.0, 1.0)] * 8, "lars", n_samples=n, seed=0)
+        pce = fit_pce(product_model, [(0.0, 1.0)] * 8, "lars", n_samples=n, seed=0, q_norm=1.0)
         _, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()
@@ -98,7 +99,7 @@ def test_explicit_order_over_the_budget_is_refused_before_the_model_runs(budget)
 
     budget(2**20)
     with pytest.raises(MemoryBudgetError, match="smaller `order`"):
-        fit_pce(never, [(0.0, 1.0)] * 8, "lars", order=6, n_samples=5000, seed=0)
+        fit_pce(never, [(0.0, 1.0)] * 8, "lars", order=6, n_samples=5000, seed=0, q_norm=1.0)
     with pytest.raises(MemoryBudgetError, match="method='lars'"):
         fit_pce(never, [(0.0, 1.0)] * 8, "lstsq", order=4, n_samples=5000, seed=0)
 

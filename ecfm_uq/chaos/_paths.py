@@ -1,0 +1,190 @@
+"""Sparse-regression primitives: LAR/OMP paths and nested corrected leave-one-out errors.
+
+Shared by the fixed-candidate selection (:mod:`ecfm_uq.chaos.sparse`) and the adaptive
+one (:mod:`ecfm_uq.chaos.adaptive`): the order in which candidate columns enter a
+least-angle regression (Efron et al. 2004) or orthogonal matching pursuit path, in design
+or Gram form, and the corrected leave-one-out errors of all nested OLS refits along it
+(Blatman & Sudret 2011).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import scipy.linalg as sla
+
+# Largest candidate set per model run (both selections).
+_CANDIDATES_PER_RUN = 10
+# Share of the memory budget a selection may hold.
+_SELECTION_SHARE = 0.5
+# Gram path: a selected column whose Cholesky pivot falls below this share of its norm is
+# numerically dependent on the earlier ones (the Gram squares the conditioning).
+_CHOLESKY_RTOL = 1e-6
+
+
+def _loo_nested(Q, R, y):
+    """Corrected LOO errors of the OLS fits on the first k = 1..s columns, all at once.
+
+    With :math:`X = QR` (economic), the fit on the first k columns uses :math:`Q_k`, so the
+    hat diagonals and residuals of all nested fits are cumulative sums:
+    :math:`h^{(k)}_i = \\sum_{j<k} Q_{ij}^2`, :math:`r^{(k)} = y - \\sum_{j<k} Q_j (Q_j^T y)`.
+    The LOO residual is :math:`r_i / (1 - h_i)` (no refits), normalised by the sample
+    variance, and multiplied by Chapelle's correction (Blatman & Sudret 2011)
+
+    .. math:: T(k, n) = \\frac{n}{n - k}\\Bigl(1 + \\operatorname{tr}(C^{-1})/n\\Bigr),
+              \\qquad C = X_k^T X_k / n,\\quad \\operatorname{tr}(C^{-1})/n = \\|R_k^{-1}\\|_F^2.
+
+    Returns
+    -------
+    loo, corrected : (s,) ndarray
+    """
+    n, s = Q.shape
+    z = Q.T @ y
+    fitted = np.cumsum(Q * z[None, :], axis=1)
+    h = np.cumsum(Q**2, axis=1)
+    resid = y[:, None] - fitted
+    one_h = 1.0 - h
+    with np.errstate(divide="ignore", invalid="ignore"):
+        e = np.where(one_h > 1e-10, resid / one_h, np.inf)
+    var = np.var(y) if np.var(y) > 0 else 1.0
+    loo = np.mean(e**2, axis=0) / var
+    Rinv = sla.solve_triangular(R, np.eye(s))
+    trace = np.cumsum(np.sum(np.triu(Rinv) ** 2, axis=0))
+    k = np.arange(1, s + 1)
+    with np.errstate(divide="ignore"):
+        T = np.where(k < n, n / np.maximum(n - k, 1) * (1.0 + trace), np.inf)
+    return loo, loo * T
+
+
+def _path_order(X, y, max_steps, solver):
+    """Order in which the columns of ``X`` enter a LARS or OMP path (nested active sets)."""
+    from sklearn.exceptions import ConvergenceWarning
+    from sklearn.linear_model import lars_path, orthogonal_mp
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        if solver == "lars":
+            _, active, _ = lars_path(X, y, method="lar", max_iter=max_steps, return_path=False)
+            return list(active)[:max_steps]
+        path = orthogonal_mp(X, y, n_nonzero_coefs=max_steps, return_path=True)
+    path = path.reshape(X.shape[1], -1)
+    # OMP only adds: the first nonzero step of each column gives its entry order
+    nz = path != 0
+    first = np.where(nz.any(axis=1), np.argmax(nz, axis=1), path.shape[1])
+    entered = np.flatnonzero(first < path.shape[1])
+    return entered[np.argsort(first[entered], kind="stable")].tolist()
+
+
+def _sparse_select(Psi, y, candidates, n, solver, first_steps=None):
+    """Hybrid LARS/OMP on the candidate columns: (columns, coefficients, corrected LOO).
+
+    The path is computed on centred, unit-norm candidate columns (the constant term is
+    always kept); every nested active set along it is then refitted by OLS, and the one
+    with the smallest corrected leave-one-out error wins (Blatman & Sudret 2011).
+
+    ``first_steps``: run the path in growing pieces, ``first_steps`` steps first and
+    twice as many while the best set lies in the last quarter of the steps run (the
+    path's prefix does not depend on where it stops, so each piece repeats the last);
+    the LOO error is then minimised over the steps run, not the whole path. ``None``:
+    the whole path (up to n / 2 steps) at once.
+    """
+    # centred and scaled in place: one copy of the candidate columns, not three
+    Xc = Psi[:, candidates]
+    Xc -= Xc.mean(axis=0)
+    scale = np.linalg.norm(Xc, axis=0)
+    scale[scale == 0] = 1.0
+    Xc /= scale
+    # beyond n / 2 terms the LOO correction factor exceeds 2: such fits never win
+    max_steps = min(len(candidates), max(n // 2, 2))
+    steps = max_steps if first_steps is None else min(max_steps, max(int(first_steps), 8))
+    if first_steps is not None and solver == "lars" and len(candidates) <= n:
+        # tall: LAR in its Gram form, a few small matrix-vector products per step
+        G, c = Xc.T @ Xc, Xc.T @ (y - y.mean())
+
+        def path(steps):
+            return _lar_order_gram(G, c, steps)
+    else:
+
+        def path(steps):
+            return _path_order(Xc, y - y.mean(), steps, solver)
+
+    while True:
+        active = path(steps)
+        cols = [0] + [int(candidates[j]) for j in active]
+        Q, R = sla.qr(Psi[:, cols], mode="economic")
+        d = np.abs(np.diag(R))
+        # stop at the first column that is numerically dependent on the earlier ones
+        bad = np.flatnonzero(d < 1e-10 * d[0])
+        s = int(bad[0]) if bad.size else len(cols)
+        Q, R, cols = Q[:, :s], R[:s, :s], cols[:s]
+        _, corrected = _loo_nested(Q, R, y)
+        k = int(np.argmin(corrected)) + 1
+        if steps >= max_steps or len(active) < steps or s < len(cols) or 4 * k <= 3 * s:
+            break
+        steps = min(2 * steps, max_steps)
+    coef = sla.solve_triangular(R[:k, :k], Q[:, :k].T @ y)
+    return cols[:k], coef, float(corrected[k - 1])
+
+
+def _lar_order_gram(G, c, max_steps):
+    """Entry order of least-angle regression (LAR) from the Gram matrix of unit-norm columns.
+
+    The LAR of Efron et al. (2004) in Gram form: the correlations
+    :math:`c = X^T r` are updated as :math:`c \\leftarrow c - \\gamma\\,G_{:,A} w` without
+    the design. The inverse :math:`L^{-1}` of the Cholesky factor of :math:`G_{AA}` grows
+    by one row per step and the rows :math:`G_{A,:}` are kept contiguous, so a step is a
+    few matrix-vector products, O(k P). Stops at ``max_steps``, when the correlations
+    vanish, or at a column numerically dependent on the active ones.
+    """
+    P = len(c)
+    max_steps = min(max_steps, P)
+    c = np.array(c, dtype=float)
+    inactive = np.ones(P, dtype=bool)
+    GA = np.empty((max_steps, P))
+    Linv = np.zeros((max_steps, max_steps))
+    z = np.empty(max_steps)  # L^{-1} s_A, s_A the signs of the active correlations
+    v = np.empty(max_steps)  # L^{-T} z = G_AA^{-1} s_A (signs never change in LAR)
+    active = []
+    j = int(np.argmax(np.abs(c)))
+    C = abs(c[j])
+    floor = 1e3 * np.finfo(float).eps * max(C, np.finfo(float).tiny)
+    with np.errstate(divide="ignore", invalid="ignore"):  # once: a step costs ~50 us
+        for k in range(max_steps):
+            if C <= floor:
+                break
+            GA[k] = G[j]
+            l = Linv[:k, :k] @ GA[:k, j]
+            d2 = G[j, j] - l @ l
+            if not d2 > _CHOLESKY_RTOL**2 * G[j, j]:
+                break  # dependent on the active columns
+            d = math.sqrt(d2)
+            Linv[k, :k] = -(l @ Linv[:k, :k]) / d
+            Linv[k, k] = 1.0 / d
+            z[k] = (math.copysign(1.0, c[j]) - l @ z[:k]) / d
+            v[:k] += z[k] * Linv[k, :k]
+            v[k] = z[k] / d
+            active.append(j)
+            inactive[j] = False
+            if k + 1 == max_steps:
+                break
+            AA = 1.0 / math.sqrt(z[: k + 1] @ z[: k + 1])
+            a = AA * (v[: k + 1] @ GA[: k + 1])
+            # the step to the next column's entry: the smallest positive of the two
+            # candidate steps of each inactive column
+            g1 = (C - c) / (AA - a)
+            g2 = (C + c) / (AA + a)
+            g1[~(g1 > 1e-14 * C)] = np.inf
+            g2[~(g2 > 1e-14 * C)] = np.inf
+            g = np.minimum(g1, g2)
+            g[~inactive] = np.inf
+            m = int(np.argmin(g))
+            gamma = min(g[m], C / AA)
+            if not np.isfinite(gamma):
+                break
+            c -= gamma * a
+            C -= gamma * AA
+            j = m
+    return active

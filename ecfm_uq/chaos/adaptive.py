@@ -1,0 +1,298 @@
+"""The default sparse fit: degree- and q-norm-adaptive candidate sets (``q_norm=None``).
+
+For p = 1, 2, ... and each q in (0.5, 0.75, 1) the hyperbolic candidate set
+:math:`\\{\\alpha \\ne 0: \\|\\alpha\\|_q \\le p\\}` (Blatman & Sudret 2011) is selected
+by the hybrid LAR path and scored by the corrected leave-one-out error, as UQLab's
+degree- and q-norm-adaptive sparse PCE does; OpenTURNS' default is the q = 0.5 chain
+alone. The candidate sets are nested, so the columns met so far, their Gram matrix and
+their correlations with the outputs are grown in place (each column evaluated once), the
+path runs in its Gram form (a few small products per step) and only as far as the
+leave-one-out error can still improve. A set is tried only while affordable (work,
+candidates per run, memory budget); the result keeps the selected terms only (a
+``ChaosBasis`` with an explicit index set).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.linalg as sla
+
+from ..memory import check_allocation, memory_budget
+from ._paths import (
+    _SELECTION_SHARE,
+    _lar_order_gram,
+    _loo_nested,
+    _sparse_select,
+)
+
+__all__ = ["hyperbolic_indices"]
+
+# The q-norms tried at each degree (UQLab's qNorm-adaptive truncation; OpenTURNS' default
+# hyperbolic enumeration has q = 0.5): sparse candidate sets of high degree for few
+# interactions, the full total-degree set where it is affordable.
+_ADAPTIVE_Q = (0.5, 0.75, 1.0)
+# A candidate set is affordable when its selection's work n P min(n, P) stays below this
+# (about a second of LAR path on one core) and it has at most _candidate_cap(n)
+# columns; the degree loop stops when no q-norm is affordable.
+_ADAPTIVE_WORK = 1e9
+# At most max(_ADAPTIVE_PER_RUN * n, _ADAPTIVE_MIN_CAP) candidates in one set: beyond, the
+# LAR path (n / 2 steps at most) rarely finds better sets and each selection's Gram block
+# grows as P^2; small designs still see OpenTURNS' few hundred (q = 0.5, degree 10).
+_ADAPTIVE_PER_RUN = 2
+_ADAPTIVE_MIN_CAP = 500
+# OMP is the method for exactly sparse models from few runs (P >> n, compressed sensing):
+# it keeps v0.3's ten candidates per run.
+_OMP_PER_RUN = 10
+
+
+def _candidate_cap(n, solver="lars"):
+    if solver == "omp":
+        return _OMP_PER_RUN * n
+    return max(_ADAPTIVE_PER_RUN * n, _ADAPTIVE_MIN_CAP)
+
+
+def hyperbolic_indices(dim, p, q, cap=None):
+    """Multi-indices :math:`\\alpha \\ne 0` with :math:`\\|\\alpha\\|_q \\le p`, graded.
+
+    The hyperbolic truncation of Blatman & Sudret (2011),
+    :math:`\\|\\alpha\\|_q = (\\sum_d \\alpha_d^q)^{1/q}`: ``q = 1`` is the total-degree
+    set, smaller ``q`` keeps high degrees in few variables and drops most interactions.
+
+    Parameters
+    ----------
+    dim, p : int
+    q : float in (0, 1]
+    cap : int, optional
+        Return ``None`` as soon as the set is known to exceed ``cap`` members.
+
+    Returns
+    -------
+    (P, dim) ndarray of int or None
+        Graded by total degree, lexicographically descending within a degree (the order
+        of :class:`~ecfm_uq.chaos.ChaosBasis`).
+    """
+    if q == 1.0 and cap is not None and math.comb(p + dim, dim) - 1 > cap:
+        return None
+    limit = float(p) ** q * (1.0 + 1e-12)
+    cost = np.arange(p + 1, dtype=float) ** q
+    rows = np.zeros((1, 0), dtype=np.int64)
+    used = np.zeros(1)
+    for _ in range(dim):
+        ok = used[:, None] + cost[None, :] <= limit
+        r, k = np.nonzero(ok)
+        rows = np.column_stack([rows[r], k])
+        used = used[r] + cost[k]
+        # every prefix extends (by zeros) to a member: more prefixes than cap means too many
+        if cap is not None and len(rows) > cap + 1:
+            return None
+    rows = rows[rows.sum(axis=1) > 0]
+    keys = [-rows[:, d] for d in range(dim - 1, -1, -1)] + [rows.sum(axis=1)]
+    return rows[np.lexsort(keys)]
+
+
+def _affordable(n, P, K=0, solver="lars"):
+    """A candidate set of P columns, with K columns held already, within the limits."""
+    held = K + P + 1  # at most: the design's columns, the Gram's rows
+    return (
+        P <= _candidate_cap(n, solver)
+        and n * P * min(n, P) <= _ADAPTIVE_WORK
+        and 8.0 * (2 * n * held + 3 * held * held) <= _SELECTION_SHARE * memory_budget()
+    )
+
+
+class _GrowingDesign:
+    """The candidate columns met so far, their Gram matrix and correlations, grown in place.
+
+    The adaptive candidate sets are nested (in the degree and in q), so each column is
+    evaluated, and its Gram row computed, once: the selection of a set reads the blocks
+    of :math:`G = \\Psi^T\\Psi` and :math:`\\Psi^T Y` it needs, centres and scales them
+    (the constant column is column 0) and runs LAR in its Gram form; only the selected
+    columns are refitted, by a QR of the design.
+    """
+
+    def __init__(self, germs, omega, Y):
+        self.germs, self.omega, self.Y = germs, omega, Y
+        self.n = len(omega)
+        self.position = {}
+        self.alpha = np.zeros((1, len(germs)), dtype=np.int64)
+        self.B = np.ones((self.n, 1))
+        self.G = np.array([[float(self.n)]])
+        self.XtY = Y.sum(axis=0, keepdims=True)
+        self.degree, self.tables = -1, None
+
+    def extend(self, alpha):
+        """Add the multi-indices ``alpha`` (rows) not met yet; return their positions."""
+        new = [a for a in map(tuple, alpha.tolist()) if a not in self.position]
+        if new:
+            new_alpha = np.array(new, dtype=np.int64)
+            p = int(new_alpha.max())
+            if p > self.degree:
+                self.tables = [g.table(self.omega[:, d], p) for d, g in enumerate(self.germs)]
+                self.degree = p
+            Bn = self.tables[0][:, new_alpha[:, 0]]
+            for d in range(1, len(self.germs)):
+                Bn *= self.tables[d][:, new_alpha[:, d]]
+            k0, k1 = self.B.shape[1], self.B.shape[1] + len(new)
+            check_allocation(
+                8.0 * (self.n * k1 + 2 * k1 * k1),
+                f"the adaptive sparse-regression design of {k1} candidates from n = {self.n} runs",
+                "pass a smaller `order`, or a `q_norm` < 1",
+            )
+            cross = self.B.T @ Bn
+            G = np.empty((k1, k1))
+            G[:k0, :k0] = self.G
+            G[:k0, k0:] = cross
+            G[k0:, :k0] = cross.T
+            G[k0:, k0:] = Bn.T @ Bn
+            self.G = G
+            self.XtY = np.vstack([self.XtY, Bn.T @ self.Y])
+            self.B = np.hstack([self.B, Bn])
+            self.alpha = np.vstack([self.alpha, new_alpha])
+            for k, a in enumerate(new):
+                self.position[a] = k0 + k
+        return np.array([self.position[a] for a in map(tuple, alpha.tolist())], dtype=np.int64)
+
+    def select(self, j, pos, first_steps):
+        """Hybrid LAR on the columns at ``pos`` for output column j: (positions, coef, LOO)."""
+        n, y = self.n, self.Y[:, j]
+        ybar = float(np.mean(y))
+        mu = self.G[0, pos] / n  # the column means (column 0 is the constant)
+        Gc = self.G[np.ix_(pos, pos)] - n * np.outer(mu, mu)
+        c = self.XtY[pos, j] - n * mu * ybar
+        scale = np.sqrt(np.maximum(np.diag(Gc), 0.0))
+        scale[scale == 0] = 1.0
+        Gc /= scale[:, None]
+        Gc /= scale[None, :]
+        c = c / scale
+        # beyond n / 2 terms the LOO correction factor exceeds 2: such fits never win
+        max_steps = min(len(pos), max(n // 2, 2))
+        steps = min(max_steps, max(int(first_steps), 8))
+        while True:
+            active = _lar_order_gram(Gc, c, steps)
+            cols = [0] + [int(pos[a]) for a in active]
+            Q, R = sla.qr(self.B[:, cols], mode="economic")
+            d = np.abs(np.diag(R))
+            # stop at the first column that is numerically dependent on the earlier ones
+            bad = np.flatnonzero(d < 1e-10 * d[0])
+            s = int(bad[0]) if bad.size else len(cols)
+            Q, R, cols = Q[:, :s], R[:s, :s], cols[:s]
+            _, corrected = _loo_nested(Q, R, y)
+            k = int(np.argmin(corrected)) + 1
+            # grow the path while the best set lies in the last quarter of the steps run
+            if steps >= max_steps or len(active) < steps or s < len(cols) or 4 * k <= 3 * s:
+                break
+            steps = min(2 * steps, max_steps)
+        coef = sla.solve_triangular(R[:k, :k], Q[:, :k].T @ y)
+        return cols[:k], coef, float(corrected[k - 1])
+
+
+def _select_adaptive_column(design, j, solver, early_stop, max_degree):
+    """Degree- and q-adaptive sparse selection of output column j.
+
+    For p = 1, 2, ...: the candidate sets :math:`\\{\\alpha: \\|\\alpha\\|_q \\le p\\}` for
+    q in ``_ADAPTIVE_Q`` that are affordable, each selected by the hybrid LAR path (run in
+    pieces: the best set's size so far and 16 more, grown while the best set is among the last
+    steps run) and scored by the corrected LOO error (Blatman & Sudret 2011). Each q is a
+    chain of degrees with its own early stop (``early_stop`` degrees without improving
+    that chain's error) and ends when its set is no longer affordable; the best set of
+    all chains wins.
+
+    Returns
+    -------
+    alpha : (k, dim) ndarray
+        Selected multi-indices, the zero index first.
+    coef : (k,) ndarray
+    err : float
+        Corrected LOO error.
+    choice : tuple (p, q, P)
+    trace : list of (p, q, P, err)
+    """
+    n, dim = design.n, len(design.germs)
+    best, trace = None, []
+    cap = _candidate_cap(n, solver)
+    # one chain of degrees per q, each with its own early stop: the cheap q = 0.5 chain
+    # may still improve at high degree after the dearer ones stopped (the LOO error of a
+    # chain may stall for a degree or two, e.g. odd degrees of an even function)
+    chain_best = dict.fromkeys(_ADAPTIVE_Q, np.inf)
+    worse = dict.fromkeys(_ADAPTIVE_Q, 0)
+    live = list(_ADAPTIVE_Q)
+    for p in range(1, max_degree + 1):
+        previous = None
+        for q in list(live):
+            alpha = hyperbolic_indices(dim, p, q, cap)
+            if alpha is None or not _affordable(n, len(alpha), design.B.shape[1], solver):
+                # nested in q and p: every larger q, at every higher degree, is dearer
+                live = [r for r in live if r < q]
+                break
+            if previous is not None and len(alpha) == previous[0]:
+                err = previous[1]  # the same set as at the smaller q
+            else:
+                pos = design.extend(alpha)
+                first = 32 if best is None else len(best[1]) + 16
+                if solver == "lars":
+                    cols, coef, err = design.select(j, pos, first)
+                else:
+                    y = design.Y[:, j]
+                    cols, coef, err = _sparse_select(design.B, y, pos, n, solver, first)
+                trace.append((p, q, len(alpha), err))
+                if best is None or err < best[2]:
+                    best = (design.alpha[cols], coef, err, (p, q, len(alpha)))
+            previous = (len(alpha), err)
+            if err < chain_best[q]:
+                chain_best[q], worse[q] = err, 0
+            else:
+                worse[q] += 1
+                if worse[q] >= early_stop:
+                    live.remove(q)
+        if not live:
+            break
+    sel, coef, err, choice = best
+    return sel, coef, err, choice, trace
+
+
+def _select_adaptive(germs, omega, Y, early_stop, max_degree, solver):
+    """:func:`_select_adaptive_column` for each column of Y (n, m), on one union basis.
+
+    Returns
+    -------
+    alpha : (P, dim) ndarray
+        The union of the selected multi-indices, graded, the zero index first.
+    coeffs : (P, m) ndarray
+    info : dict of per-column arrays (degree, q_norm, n_terms, corrected LOO error,
+        candidates of the winning set) and the first column's ``trace``.
+    """
+    n, m = Y.shape
+    dim = len(germs)
+    design = _GrowingDesign(germs, omega, Y)
+    picked, info = [], dict(degree=[], q_norm=[], n_terms=[], errors=[], n_candidates=[])
+    trace0 = None
+    for j in range(m):
+        y = Y[:, j]
+        if np.all(y == y[0]):
+            picked.append((np.zeros((1, dim), dtype=np.int64), np.array([y[0]])))
+            choice, err, trace = (0, 1.0, 0), 0.0, []
+        else:
+            sel, coef, err, choice, trace = _select_adaptive_column(
+                design, j, solver, early_stop, max_degree
+            )
+            picked.append((sel, coef))
+        if trace0 is None:
+            trace0 = trace
+        info["degree"].append(int(picked[-1][0].sum(axis=1).max()))
+        info["q_norm"].append(choice[1])
+        info["n_candidates"].append(choice[2])
+        info["n_terms"].append(len(picked[-1][1]))
+        info["errors"].append(err)
+    union = np.unique(np.vstack([s for s, _ in picked]), axis=0)
+    keys = [-union[:, d] for d in range(dim - 1, -1, -1)] + [union.sum(axis=1)]
+    union = union[np.lexsort(keys)]
+    where = {tuple(a): k for k, a in enumerate(union.tolist())}
+    coeffs = np.zeros((len(union), m))
+    for j, (sel, coef) in enumerate(picked):
+        rows = [where[tuple(a)] for a in sel.tolist()]
+        coeffs[rows, j] = coef
+    info = {k: np.array(v) for k, v in info.items()}
+    info["trace"] = trace0
+    return union, coeffs, info
