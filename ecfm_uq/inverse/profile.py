@@ -43,6 +43,7 @@ from scipy import stats
 
 from ..threads import library_threads
 from .profiler import MODEL_FAILURES, Profiler, beyond, walk
+from .uncertainty import interval_quantile
 
 __all__ = [
     "LikelihoodRatioTest",
@@ -201,9 +202,7 @@ def _quantile(result, level):
     """The delta-method quantile at ``level`` on the fit's own rule: Student-t with the
     uncertainty's ``dof`` where sigma was estimated, normal otherwise."""
     unc = result.uncertainty
-    dof = None if unc is None else unc.dof
-    q = 0.5 + 0.5 * level
-    return stats.norm.ppf(q) if dof is None else stats.t.ppf(q, dof)
+    return interval_quantile(level, None if unc is None else unc.dof)
 
 
 def _likelihood(result):

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
+
+from .uncertainty import interval_quantile
 
 __all__ = ["summary_table"]
 
@@ -22,8 +23,7 @@ def _interval(result, level, j):
     unc = result.uncertainty
     if unc is None or unc.stderr is None:
         return np.nan, np.nan, ""
-    q = 0.5 + level / 2
-    k = stats.norm.ppf(q) if unc.dof is None else stats.t.ppf(q, unc.dof)
+    k = interval_quantile(level, unc.dof)
     se = unc.stderr[j]
     return (
         result.eps[j] - k * se,
