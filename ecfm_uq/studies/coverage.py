@@ -140,7 +140,7 @@ def add_arguments(parser):
         type=int,
         default=DEFAULTS["n_datasets_slow"],
         help="synthetic data sets of the beam and random-force ECFM blocks (default "
-        f"{DEFAULTS['n_datasets_slow']}; 200 reproduces the v0.3 rows, ~40 minutes)",
+        f"{DEFAULTS['n_datasets_slow']}; 200 reproduces the v0.3 rows: ~13 s per data set)",
     )
     parser.add_argument(
         "--sigma",
