@@ -69,7 +69,7 @@ def test_pce_page_examples_run_and_match_closed_forms():
     np.testing.assert_allclose(pce.total(), [(V1 + V13) / V, V2 / V, V13 / V], atol=1e-8)
     # the Galerkin beam: one germ, so every first-order index is 1
     np.testing.assert_allclose(ns["beam"].first_order(), 1.0, rtol=1e-12)
-    # chaospy interop: x0 + x1^2 + x0 x1 has T = (20, 36) / 51 (see tests/test_pce.py)
+    # chaospy interop: x0 + x1^2 + x0 x1 has T = (20, 36) / 51 (see tests/chaos/test_pce.py)
     np.testing.assert_allclose(ns["chaospy"].Sens_t(ns["poly"], ns["dist"]), [20 / 51, 36 / 51])
 
 

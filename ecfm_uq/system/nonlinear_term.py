@@ -25,7 +25,7 @@ combines tensor rules of :math:`l_i` points with :math:`\\sum_i l_i \\le L + d`;
 monomial :math:`\\omega^\\alpha` is integrated exactly if some rule has
 :math:`2 l_i - 1 \\ge \\alpha_i`, i.e. :math:`\\sum_i (\\lfloor\\alpha_i/2\\rfloor + 1) \\le L + d`,
 which holds for every total degree :math:`|\\alpha| \\le D` when :math:`L = \\lfloor D/2 \\rfloor`
-(checked against the tensor rule in ``tests/test_nonlinear_term.py``).
+(checked against the tensor rule in ``tests/system/test_nonlinear_term.py``).
 """
 
 from __future__ import annotations

@@ -210,7 +210,7 @@ def test_docs_example_runs_and_prints_what_it_says():
     import re
     from pathlib import Path
 
-    text = (Path(__file__).resolve().parents[1] / "docs" / "fem.md").read_text()
+    text = (Path(__file__).resolve().parents[2] / "docs" / "fem.md").read_text()
     blocks = [b for b in re.findall(r"```python\n(.*?)```", text, re.S) if "fem_lognormal" in b]
     assert len(blocks) == 1
     ns = {}
