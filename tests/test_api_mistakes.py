@@ -243,6 +243,12 @@ MISTAKES = [
         ValueError,
         "unknown `formulation`",
     ),
+    (
+        "random forces without sigma",
+        lambda: fit(SteadyProblem(_GAMMA_SYSTEM, np.eye(N), F), [0.0], formulation="ecfm-random"),
+        ValueError,
+        "formulation='ecfm-random' needs `sigma`",
+    ),
 ]
 # the G placeholder: a coupling of the wrong chaos size
 MISTAKES[6] = (
@@ -342,7 +348,6 @@ def test_fit_from_an_overflowing_start_is_refused_clearly():
             SteadyProblem(system, M, np.ones(3)),
             [400.0],
             formulation="ecfm",
-            options={"forces": "exact"},
         )
 
 
@@ -360,14 +365,14 @@ def test_fit_treats_overflow_at_trial_points_as_failed_inner_solves():
         return orig(eps)
 
     system.terms[0].coef._value = value
-    res = fit(SteadyProblem(system, M, v), [1.0], formulation="ecfm", options={"forces": "exact"})
+    res = fit(SteadyProblem(system, M, v), [1.0], formulation="ecfm")
     assert "inner solves failed" in res.message and "overflow" in res.message
 
 
 def test_ecfm_on_unexplainable_data_says_forces_stayed_large():
     system, M = _heat_system(np.linspace(1.0, 2.0, 8))
     v = np.array([1.0, -2.0, 1.0])  # no diffusion coefficient gives this shape
-    res = fit(SteadyProblem(system, M, v), [0.0], formulation="ecfm", options={"forces": "exact"})
+    res = fit(SteadyProblem(system, M, v), [0.0], formulation="ecfm")
     verdict = res.extra["verdict"]
     assert verdict["consistent"] is False
     assert verdict["force_to_data"] > 0.1
@@ -377,7 +382,7 @@ def test_ecfm_on_unexplainable_data_says_forces_stayed_large():
 def test_ecfm_on_consistent_data_is_consistent():
     system, M = _heat_system(np.linspace(1.0, 2.0, 8))
     v = M @ solve_steady(system, [0.3]).Theta[:, 0]
-    res = fit(SteadyProblem(system, M, v), [0.0], formulation="ecfm", options={"forces": "exact"})
+    res = fit(SteadyProblem(system, M, v), [0.0], formulation="ecfm")
     assert res.success
     verdict = res.extra["verdict"]
     assert verdict["consistent"] is True, verdict["message"]

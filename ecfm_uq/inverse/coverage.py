@@ -132,12 +132,7 @@ def steady_coverage(
     for _ in range(n):
         v = v0 + sigma * rng.normal(size=v0.size)
         problem = SteadyProblem(system, M_obs, v)
-        # the paper's exact-match ECFM (the random-force ECFM is fit's default with sigma)
-        opts = {"forces": "exact"} if formulation == "ecfm" else None
-        res = fit(
-            problem, eps0, formulation=formulation, sigma=sigma if known_sigma else None,
-            options=opts,
-        )  # fmt: skip
+        res = fit(problem, eps0, formulation=formulation, sigma=sigma if known_sigma else None)
         if not res.success or res.eps_ci95 is None:
             failed += 1
             continue
@@ -231,7 +226,7 @@ def interval_coverage(
     """Delta-method and profile-likelihood coverage of fits with ``sigma`` known.
 
     Data set r is ``clean + sigma * xi_r`` (``numpy.random.default_rng(seed)``); each is
-    fitted by :func:`~ecfm_uq.inverse.fit` (``formulation`` ``"standard"`` or ``"ecfm"``,
+    fitted by :func:`~ecfm_uq.inverse.fit` (``formulation`` ``"standard"`` or ``"ecfm-random"``,
     the random-force ECFM, with ``options``) and both intervals are computed
     (:func:`~ecfm_uq.inverse.profile_likelihood`).
 
@@ -359,7 +354,7 @@ def discrepancy_power(
         tau_rej, chi_rej, rms = [], [], []
         for _ in range(n):
             v = clean + sigma * rng.normal(size=clean.size)
-            res = fit(problem.with_data(v), eps0, formulation="ecfm", sigma=sigma, alpha=alpha,
+            res = fit(problem.with_data(v), eps0, formulation="ecfm-random", sigma=sigma, alpha=alpha,
                       options=options)  # fmt: skip
             std = res.extra["standard"]
             tau_rej.append(not res.verdict.consistent)

@@ -426,7 +426,7 @@ class _Search:
 
 
 def fit_random_force(problem, eps0, s):
-    """:func:`~ecfm_uq.inverse.fit` of ``formulation="ecfm"`` with ``sigma`` (settings ``s``).
+    """:func:`~ecfm_uq.inverse.fit` of ``formulation="ecfm-random"`` (settings ``s``).
 
     Starts from the standard estimate (``tau = 0``) and minimizes the marginal likelihood
     with ``tau`` profiled out.

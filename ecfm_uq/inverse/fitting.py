@@ -21,6 +21,8 @@ SteadyProblem          ``"standard"``, ``"ecfm"``       ``"least-squares"`` (tru
                                                         (``"BFGS"``, ...),
                                                         ``"all-at-once"`` (SLSQP on
                                                         (theta, eps), standard only)
+SteadyProblem          ``"ecfm-random"`` (sigma)        trust-region on the marginal
+                                                        likelihood (forces N(0, tau^2))
 SteadyProblem          ``"noisy-ecfm"`` (sigma)         ``"all-at-once"``
 DynamicInverseProblem  ``"standard"``, ``"ecfm"``       ``"least-squares"`` (L-BFGS-B
                                                         beyond 16 parameters),
@@ -35,7 +37,6 @@ ReplicatedProblem      ``"standard"``,                  ``"trust-region"``;
 from __future__ import annotations
 
 import numbers
-from dataclasses import replace
 
 import numpy as np
 
@@ -88,6 +89,45 @@ def _check_sigma(sigma, kind, n_data):
         raise type(e)(f"{e}; `sigma` is the known sensor noise standard deviation") from e
 
 
+#: the formulations of each problem kind, by name (what each one is: the table above)
+FORMULATIONS = {
+    "model": ("standard",),
+    "steady": ("standard", "ecfm", "ecfm-random", "noisy-ecfm"),
+    "dynamic": ("standard", "ecfm"),
+    "replicated": ("standard", "inner-outer", "penalty", "ecfm"),
+}
+
+
+def _check_formulation(kind, settings):
+    """Refuse a formulation the problem kind has not, and the v0.3 switches by name.
+
+    The formulation is chosen by its name alone: ``"ecfm"`` is the paper's exact-match
+    ECFM with or without ``sigma``; the random-force ECFM is ``"ecfm-random"`` (it needs
+    ``sigma``).
+    """
+    if "forces" in settings.options:
+        raise ValueError(
+            "`options['forces']` is gone: the force model is the formulation's name, "
+            "formulation='ecfm' (the paper's exact-match forces) or formulation="
+            "'ecfm-random' (random forces, with sigma)"
+        )
+    names = FORMULATIONS[kind]
+    if settings.formulation not in names:
+        hint = ""
+        if settings.formulation == "ecfm-random":
+            hint = "; the random-force ECFM is defined for a SteadyProblem"
+        raise ValueError(
+            f"unknown `formulation` {settings.formulation!r} for a {kind} problem; choose "
+            f"one of {list(names)}{hint}"
+        )
+    if settings.formulation == "ecfm-random" and settings.sigma is None:
+        raise ValueError(
+            "formulation='ecfm-random' needs `sigma`, the sensors' noise standard deviation "
+            "(the forces' variance is estimated against it); without a noise level use "
+            "formulation='ecfm' (exact-match forces) or 'standard'"
+        )
+
+
 def _size(problem, *args, **kwargs):
     system = getattr(problem, "system", None)
     return None if system is None else dense_unknowns(system)
@@ -119,8 +159,9 @@ def fit(
         Starting point.
     formulation : str
         ``"standard"`` (least squares / maximum likelihood), ``"ecfm"`` (the paper's
-        explicit constraint forces), ``"noisy-ecfm"`` (the paper's z / chi-squared
-        bounds, steady), ``"inner-outer"`` / ``"penalty"`` (pseudo-likelihood forces,
+        explicit constraint forces, matching the data exactly), ``"ecfm-random"`` (random
+        constraint forces with a variance estimated against ``sigma``, steady),
+        ``"noisy-ecfm"`` (the paper's z / chi-squared bounds, steady), ``"inner-outer"`` / ``"penalty"`` (pseudo-likelihood forces,
         replicated data); see the table in :mod:`ecfm_uq.inverse.fitting`.
     method : str
         The optimizer; ``"auto"`` picks the formulation's default.
@@ -141,8 +182,7 @@ def fit(
         Method- and formulation-specific settings by name (e.g. ``{"lr": 1e-2}`` for
         Adam, ``{"penalty": 100}`` for the penalty form, ``{"covariance": "sandwich"}``
         and ``{"polish": False}`` for the steady least-squares fits,
-        ``{"forces": "exact"}`` for the paper's ECFM, ``{"force_prior": "sparse"}`` for
-        random-force ECFM with a variance per force (a localized discrepancy) and
+        ``{"force_prior": "sparse"}`` for the random-force ECFM with a variance per force (a localized discrepancy) and
         ``{"tau_in_intervals": "held"}`` for its intervals with tau held at its
         estimate); an unknown name is refused.
     uncertainty : bool
@@ -187,20 +227,14 @@ def fit(
         uncertainty=bool(uncertainty),
         alpha=check_alpha(alpha),
     )
-    forces = settings.options.get("forces", "random") if formulation == "ecfm" else None
-    if forces not in (None, "random", "exact"):
-        raise ValueError(f"`options['forces']` must be 'random' or 'exact', got {forces!r}")
-    if forces is not None and "forces" in settings.options:
-        settings = replace(
-            settings, options={k: v for k, v in settings.options.items() if k != "forces"}
-        )
+    _check_formulation(kind, settings)
     if kind == "model":
         from .model_problem import fit_model_problem
 
         return fit_model_problem(problem, eps0, settings)
     if kind == "steady" and (formulation == "noisy-ecfm" or method == "all-at-once"):
         from .noisy import fit_all_at_once as fitter
-    elif kind == "steady" and forces == "random" and settings.sigma is not None:
+    elif formulation == "ecfm-random":
         from .discrepancy import fit_random_force as fitter
     elif kind == "steady":
         from .steady import fit_steady_problem as fitter

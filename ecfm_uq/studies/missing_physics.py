@@ -9,7 +9,7 @@ model does not have, with 0.1 % noise of known sigma. Four fits of the same data
 (:func:`~ecfm_uq.inverse.fit`):
 
 * ``standard``: least squares; the conductivity absorbs the source;
-* ``paper_ecfm``: the paper's exact-match forces (``options={"forces": "exact"}``);
+* ``paper_ecfm``: the paper's exact-match forces (``formulation="ecfm"``);
 * ``random_force_ecfm``: the forces as a random discrepancy (the default ECFM with
   ``sigma``), whose posterior-mean forces and z-scores map the missing physics and whose
   test of tau = 0 says whether the model explains the data;
@@ -117,8 +117,7 @@ def run(settings, out_dir, progress):
     progress.log("missing-physics: four fits")
     fits = {
         "standard": fit(problem, eps0, sigma=sigma),
-        "paper_ecfm": fit(problem, eps0, formulation="ecfm", sigma=sigma,
-                          options={"forces": "exact"}),
+        "paper_ecfm": fit(problem, eps0, formulation="ecfm", sigma=sigma),
     }  # fmt: skip
     fits.update((name, _random_force_fit(problem, eps0, sigma, p)) for name, p in PRIORS.items())
     nearest = int(np.argmin(np.linalg.norm(fem.sensors - s["source_at"], axis=1)))
@@ -163,7 +162,9 @@ def _noisy(clean, sigma, seed):
 
 
 def _random_force_fit(problem, eps0, sigma, prior):
-    return fit(problem, eps0, formulation="ecfm", sigma=sigma, options={"force_prior": prior})
+    return fit(
+        problem, eps0, formulation="ecfm-random", sigma=sigma, options={"force_prior": prior}
+    )
 
 
 def _noise_seeds(problem, clean, sigma, nearest, s, progress):

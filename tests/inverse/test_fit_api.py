@@ -37,7 +37,7 @@ def data(sigma=0.0, seed=0):
     return system, v + sigma * np.random.default_rng(seed).standard_normal(v.size)
 
 
-@pytest.mark.parametrize("formulation", ["standard", "ecfm"])
+@pytest.mark.parametrize("formulation", ["standard", "ecfm-random"])
 def test_steady_fit_reports_status_counts_uncertainty_and_verdict(formulation):
     system, v = data(0.01)
     res = fit(SteadyProblem(system, M_OBS, v), [1.0, 1.0], formulation=formulation, sigma=0.01)
@@ -47,7 +47,7 @@ def test_steady_fit_reports_status_counts_uncertainty_and_verdict(formulation):
     assert isinstance(res.uncertainty, Uncertainty) and res.uncertainty.success
     np.testing.assert_array_equal(res.eps_cov, res.uncertainty.cov)  # the v0.2 name
     assert isinstance(res.verdict, Verdict) and res.extra["verdict"] is res.verdict
-    # with sigma, ECFM is the random-force marginal likelihood: its verdict is the
+    # the random-force ECFM is a marginal likelihood: its verdict is the
     # likelihood-ratio test of tau = 0 (issue 20 item 3); the standard fit's the chi2 test
     test = "chi2" if formulation == "standard" else "likelihood-ratio tau=0"
     assert res.verdict.alpha == 0.05 and res.verdict.test == test

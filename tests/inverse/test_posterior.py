@@ -93,8 +93,8 @@ def test_posterior_of_a_random_force_ecfm_fit_is_its_laplace_approximation():
     clean = rod.data([1.5, 20.0], source=10.0)
     sigma = 0.002 * np.abs(clean).mean()
     v = clean + sigma * np.random.default_rng(3).standard_normal(clean.size)
-    res = fit(SteadyProblem(rod.system, rod.M_obs, v), [1.0, 10.0], formulation="ecfm",
-              sigma=sigma)  # fmt: skip
+    res = fit(SteadyProblem(rod.system, rod.M_obs, v), [1.0, 10.0],
+              formulation="ecfm-random", sigma=sigma)  # fmt: skip
     assert res.extra["tau"] > 0 and not res.verdict.consistent
     post = sample_posterior(res, bounds=[(0.0, 3.0), (5.0, 40.0)], n_steps=3000, seed=1)
     assert post.success, post.message

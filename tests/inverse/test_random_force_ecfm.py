@@ -5,7 +5,7 @@ map of a localized source missing from a model with a parameter inside the opera
 import numpy as np
 import pytest
 
-from ecfm_uq.inverse import SteadyProblem, fit
+from ecfm_uq.inverse import ModelProblem, SteadyProblem, fit
 from ecfm_uq.spectral import SineBasis, hat_forces, load, mass, sensor_matrix, stiffness
 from ecfm_uq.system import Coefficient, GalerkinSystem, LinearTerm, LoadTerm, solve_steady
 
@@ -40,7 +40,7 @@ def readings(amplitude, rel_noise, seed):
 
 def test_on_consistent_data_it_is_the_standard_estimate():
     v, sigma = readings(0.0, 0.02, 0)
-    res = fit(SteadyProblem(model(), M_OBS, v), [1.0, 10.0], formulation="ecfm", sigma=sigma)
+    res = fit(SteadyProblem(model(), M_OBS, v), [1.0, 10.0], formulation="ecfm-random", sigma=sigma)
     std = res.extra["standard"]
     assert res.success and res.extra["tau"] == 0.0
     np.testing.assert_array_equal(res.eps, std.eps)
@@ -53,7 +53,7 @@ def test_on_consistent_data_it_is_the_standard_estimate():
 @pytest.mark.parametrize("amplitude", [10.0, 60.0])
 def test_a_missing_source_is_flagged_and_mapped_and_the_estimate_is_not_worse(amplitude):
     v, sigma = readings(amplitude, 1e-3, 1)
-    res = fit(SteadyProblem(model(), M_OBS, v), [1.0, 10.0], formulation="ecfm", sigma=sigma)
+    res = fit(SteadyProblem(model(), M_OBS, v), [1.0, 10.0], formulation="ecfm-random", sigma=sigma)
     std = res.extra["standard"]
     assert res.success, res.message
     assert not res.verdict.consistent and res.verdict.p_value < 1e-3  # MC resolution 1/4001
@@ -66,15 +66,24 @@ def test_a_missing_source_is_flagged_and_mapped_and_the_estimate_is_not_worse(am
     assert abs(z[np.argmax(lam)]) > 3
 
 
-def test_exact_forces_stay_available_and_bad_options_are_named():
+def test_formulations_are_chosen_by_name_and_bad_options_are_named():
     v, sigma = readings(0.0, 0.02, 2)
     problem = SteadyProblem(model(), M_OBS, v)
-    exact = fit(problem, [1.0, 10.0], formulation="ecfm", sigma=sigma, options={"forces": "exact"})
+    # sigma does not switch the estimator: "ecfm" is the paper's exact-match ECFM with it
+    exact = fit(problem, [1.0, 10.0], formulation="ecfm", sigma=sigma)
+    plain = fit(problem, [1.0, 10.0], formulation="ecfm")
+    np.testing.assert_array_equal(exact.eps, plain.eps)
     assert exact.verdict.test == "chi2" and "tau" not in exact.extra
-    with pytest.raises(ValueError, match=r"options\['forces'\]"):
-        fit(problem, [1.0, 10.0], formulation="ecfm", sigma=sigma, options={"forces": "x"})
+    random = fit(problem, [1.0, 10.0], formulation="ecfm-random", sigma=sigma)
+    assert "tau" in random.extra
+    with pytest.raises(ValueError, match=r"options\['forces'\]` is gone.*'ecfm-random'"):
+        fit(problem, [1.0, 10.0], formulation="ecfm", sigma=sigma, options={"forces": "exact"})
+    with pytest.raises(ValueError, match="needs `sigma`"):
+        fit(problem, [1.0, 10.0], formulation="ecfm-random")
+    with pytest.raises(ValueError, match="for a model problem.*'standard'"):
+        fit(ModelProblem(lambda e: e, [1.0]), [1.0], formulation="ecfm-random", sigma=1.0)
     with pytest.raises(TypeError, match="unknown name"):
-        fit(problem, [1.0, 10.0], formulation="ecfm", sigma=sigma, options={"lr": 1})
+        fit(problem, [1.0, 10.0], formulation="ecfm-random", sigma=sigma, options={"lr": 1})
 
 
 @pytest.mark.slow
@@ -97,7 +106,7 @@ def test_equations_in_other_units_give_the_same_fits_intervals_and_force_map(sca
     for amplitude, noise in ((0.0, 0.02), (10.0, 1e-3)):
         v, sigma = readings(amplitude, noise, 4)
         ref, res = (
-            fit(SteadyProblem(m, M_OBS, v), [1.0, 10.0], formulation="ecfm", sigma=sigma,
+            fit(SteadyProblem(m, M_OBS, v), [1.0, 10.0], formulation="ecfm-random", sigma=sigma,
                 options={"force_prior": prior})
             for m in (model(), scaled())
         )  # fmt: skip

@@ -26,7 +26,7 @@ def _missing_source_fit(**options):
     sigma = 0.02 * float(np.abs(clean).mean())
     v = clean + sigma * np.random.default_rng(1).standard_normal(clean.size)
     problem = SteadyProblem(rod.system, rod.M_obs, v)
-    res = fit(problem, [1.5, 20.0], formulation="ecfm", sigma=sigma, options=options)
+    res = fit(problem, [1.5, 20.0], formulation="ecfm-random", sigma=sigma, options=options)
     return rod, v, sigma, res
 
 
@@ -156,7 +156,7 @@ def test_where_tau_hat_is_zero_along_the_profile_it_is_the_standard_profile():
     sigma = 0.02 * float(np.abs(clean).mean())
     v = clean + sigma * np.random.default_rng(0).standard_normal(clean.size)
     problem = SteadyProblem(rod.system, rod.M_obs, v)
-    res = fit(problem, [1.5, 20.0], formulation="ecfm", sigma=sigma)
+    res = fit(problem, [1.5, 20.0], formulation="ecfm-random", sigma=sigma)
     std = fit(problem, [1.5, 20.0], formulation="standard", sigma=sigma)
     assert res.extra["tau"] == 0.0
     with warnings.catch_warnings():
@@ -214,8 +214,8 @@ def test_an_open_profile_does_not_recentre_where_the_reaction_rate_underflows():
     rng = np.random.default_rng(0)
     for _ in range(12):  # the 12th data set of the coverage study's stream
         v = clean + sigma * rng.normal(size=clean.size)
-    res = fit(SteadyProblem(rod.system, rod.M_obs, v), [0.5, 20.0], formulation="ecfm",
-              sigma=sigma)  # fmt: skip
+    res = fit(SteadyProblem(rod.system, rod.M_obs, v), [0.5, 20.0],
+              formulation="ecfm-random", sigma=sigma)  # fmt: skip
     assert res.success and res.extra["tau"] > 0 and res.interval_likelihood is not None
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
@@ -237,6 +237,6 @@ def test_an_estimate_run_off_to_a_vanishing_reaction_rate_is_not_converged():
     data = [clean + sigma * rng.normal(size=clean.size) for _ in range(27)]
     for k in (17, 26):
         res = fit(SteadyProblem(rod.system, rod.M_obs, data[k]), [0.5, 20.0],
-                  formulation="ecfm", sigma=sigma)  # fmt: skip
+                  formulation="ecfm-random", sigma=sigma)  # fmt: skip
         assert res.eps[0] < -10 and not res.extra["standard"].success
         assert not res.success and "infinity" in res.message, (k, res.message)

@@ -90,9 +90,9 @@ def test_the_forces_concentrate_at_the_missing_source_and_the_parameters_are_rec
 ):
     v, sigma = readings(amplitude, 1e-3, 1)
     problem = SteadyProblem(model(), M_OBS, v)
-    res = fit(problem, [1.0, 10.0], formulation="ecfm", sigma=sigma,
+    res = fit(problem, [1.0, 10.0], formulation="ecfm-random", sigma=sigma,
               options={"force_prior": "sparse"})  # fmt: skip
-    shared = fit(problem, [1.0, 10.0], formulation="ecfm", sigma=sigma)
+    shared = fit(problem, [1.0, 10.0], formulation="ecfm-random", sigma=sigma)
     std = res.extra["standard"]
     assert res.success, res.message
     assert res.extra["force_prior"] == "sparse"
@@ -126,7 +126,7 @@ def test_the_forces_concentrate_at_the_missing_source_and_the_parameters_are_rec
 
 def test_on_consistent_data_without_forces_it_is_the_standard_estimate():
     v, sigma = readings(0.0, 0.02, 0)
-    res = fit(SteadyProblem(model(), M_OBS, v), [1.0, 10.0], formulation="ecfm", sigma=sigma,
+    res = fit(SteadyProblem(model(), M_OBS, v), [1.0, 10.0], formulation="ecfm-random", sigma=sigma,
               options={"force_prior": "sparse"})  # fmt: skip
     assert res.success and res.verdict.consistent
     np.testing.assert_array_equal(res.extra["force_tau"], 0.0)
@@ -136,7 +136,7 @@ def test_on_consistent_data_without_forces_it_is_the_standard_estimate():
 def test_an_unknown_force_prior_is_named():
     v, sigma = readings(0.0, 0.02, 0)
     with pytest.raises(ValueError, match=r"options\['force_prior'\].*'shared'.*'sparse'"):
-        fit(SteadyProblem(model(), M_OBS, v), [1.0, 10.0], formulation="ecfm", sigma=sigma,
+        fit(SteadyProblem(model(), M_OBS, v), [1.0, 10.0], formulation="ecfm-random", sigma=sigma,
             options={"force_prior": "laplace"})  # fmt: skip
 
 
@@ -160,7 +160,7 @@ def test_a_stochastic_fe_model_with_a_missing_source():
     clean = fem.M_obs @ system.mean(solve_steady(truth, [0.2]).Theta)
     sigma = 1e-3 * np.abs(clean).mean()
     v = clean + sigma * np.random.default_rng(0).standard_normal(clean.size)
-    res = fit(SteadyProblem(system, fem.M_obs, v), [0.0], formulation="ecfm", sigma=sigma,
+    res = fit(SteadyProblem(system, fem.M_obs, v), [0.0], formulation="ecfm-random", sigma=sigma,
               options={"force_prior": "sparse"})  # fmt: skip
     std = res.extra["standard"]
     assert res.success and not res.verdict.consistent

@@ -92,11 +92,7 @@ def test_steady_covariance_equals_refit_jacobian(formulation):
 
     system, M_obs, v0, true, _ = _heat_case()
     v = v0 + 0.01 * np.random.default_rng(1).normal(size=v0.size)
-    # the paper's ECFM (exact forces): with sigma, "random" forces would be another estimator
-    kw = {
-        "formulation": formulation,
-        "options": {"forces": "exact"} if formulation == "ecfm" else None,
-    }
+    kw = {"formulation": formulation}
     res = fit(SteadyProblem(system, M_obs, v), [1.0, 1.0], sigma=0.01, **kw)
     h = 1e-3
     cols = []

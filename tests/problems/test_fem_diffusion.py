@@ -61,13 +61,7 @@ def test_sensor_matrix_interpolates_p1_fields(problem):
 def test_calibration_recovers_the_conductivity(problem, formulation):
     system = problem.system
     v = problem.M_obs @ system.mean(solve_steady(system, EPS_TRUE).Theta)
-    options = {"forces": "exact"} if formulation == "ecfm" else None
-    res = fit(
-        SteadyProblem(system, problem.M_obs, v),
-        [0.0, 0.0],
-        formulation=formulation,
-        options=options,
-    )
+    res = fit(SteadyProblem(system, problem.M_obs, v), [0.0, 0.0], formulation=formulation)
     assert res.success, res.message
     np.testing.assert_allclose(res.eps, EPS_TRUE, atol=1e-6)
     if formulation == "ecfm":
@@ -86,12 +80,7 @@ def test_ecfm_forces_locate_an_unmodelled_source(problem):
     K = (10 ** EPS_TRUE[0]) * problem.K0 + EPS_TRUE[1] * problem.Kb
     shift = spla.spsolve(K.tocsc(), extra)  # mean-field response to the missing load
     v = problem.M_obs @ (base + shift)
-    res = fit(
-        SteadyProblem(system, problem.M_obs, v),
-        [0.0, 0.0],
-        formulation="ecfm",
-        options={"forces": "exact"},
-    )
+    res = fit(SteadyProblem(system, problem.M_obs, v), [0.0, 0.0], formulation="ecfm")
     lam = res.extra["lam"]
     assert np.argmax(np.abs(lam)) == 2
 

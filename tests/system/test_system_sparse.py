@@ -304,7 +304,7 @@ def test_inverse_layer_takes_a_sparse_sensor_matrix():
     system, M_obs = diffusion(N=12, dim=1, order=0)  # P = 1: the noisy fits need it
     v = M_obs @ system.mean(solve_steady(system, [0.2, 1.1]).Theta)
     for kw in (
-        {"eps0": [0.0, 1.0], "formulation": "ecfm", "options": {"forces": "exact"}},
+        {"eps0": [0.0, 1.0], "formulation": "ecfm"},
         {"eps0": np.zeros(2), "method": "all-at-once"},
     ):
         dense = fit(SteadyProblem(system, M_obs, v), **kw)
