@@ -42,8 +42,9 @@ import time
 import numpy as np
 import scipy.optimize as sopt
 
-from .._validation import as_dense_rows, as_finite_array, check_positive
+from .._validation import as_dense_rows, as_finite_array
 from ..system import solve_steady
+from .convergence import decide_status, kkt_optimality
 from .noise import noise_bounds, sample_moments
 from .result import InverseResult
 
@@ -251,13 +252,6 @@ def _start(problem, eps0, theta0, lam0, solve_options):
     return problem.stack(theta0, eps0, lam0), note
 
 
-def _check_v02_names(gradients, ftol):
-    """The deprecated aliases' own argument names, checked under those names."""
-    if gradients not in _GRADIENTS:
-        raise ValueError(f"unknown `gradients` {gradients!r}; choose 'analytic' or 'fd'")
-    check_positive("ftol", ftol)
-
-
 def _solve(problem, z0, note, gradients, maxiter, ftol, method_name):
     hist_eps, hist_loss = [], []
 
@@ -300,16 +294,22 @@ def _solve(problem, z0, note, gradients, maxiter, ftol, method_name):
         "n_variables": problem.size,
         "z": z,
     }
-    finite = np.all(np.isfinite(z))
-    success = bool(res.success) and bool(finite)
-    msg = f"SLSQP: {res.message}"
-    if not finite:
-        msg += " (non-finite iterate)"
+    # the status is read from the KKT conditions at z, not from SLSQP's own "success"
+    with np.errstate(all="ignore"):
+        opt = kkt_optimality(
+            z, float(res.fun), problem.objective_grad(z), problem.equality(z),
+            problem.equality_jac(z), problem.inequality(z), problem.inequality_jac(z),
+            f_scale=max((abs(x) for x in hist_loss if np.isfinite(x)), default=0.0),
+            f_lower=0.0,  # both objectives are 1/2 ||.||^2
+        )  # fmt: skip
+    status = decide_status(opt, exhausted=res.status == 9 or res.nit >= maxiter)
     return InverseResult(
         eps=eps.copy(),
         loss=float(res.fun) if np.isfinite(res.fun) else float("inf"),
-        success=success,
-        message=msg,
+        status=status,
+        optimality=opt.value if np.isfinite(opt.value) else None,
+        optimizer="SLSQP",
+        message=f"SLSQP: {res.message} [{opt.message}]",
         nit=int(res.nit),
         method=method_name,
         eps_history=np.array(hist_eps),

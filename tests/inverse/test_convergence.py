@@ -233,3 +233,62 @@ def test_dynamic_gauss_newton_covariance_is_sigma2_inverse_gtg(burgers):
     np.testing.assert_allclose(res.eps_cov, 0.01**2 * np.linalg.inv(G.T @ G), rtol=1e-5)
     sand = fit(p, [1.6, 0.8], sigma=0.01, options={"covariance": "sandwich"})
     assert sand.uncertainty.method == "implicit"
+
+
+def test_kkt_test_on_a_quadratic_program_with_known_multipliers():
+    """min 1/2 ||z - a||^2 s.t. z0 + z1 = 1, z1 >= 0.6 (scaled): the solution and its
+    multipliers are known in closed form; a shifted point, an infeasible one and a bound
+    held by a multiplier of the wrong sign are refused."""
+    from ecfm_uq.inverse.convergence import KKT_TOL, kkt_optimality
+
+    a = np.array([2.0, 0.0, 3.0])
+    H = np.array([[1.0, 1.0, 0.0]])
+    C = np.array([[0.0, 1.0, 0.0]]) / 0.6  # (z1 - 0.6) / 0.6 >= 0
+
+    def check(z):
+        f = 0.5 * np.sum((z - a) ** 2)
+        return kkt_optimality(z, f, z - a, H @ z - 1.0, H, (C @ z - 1.0), C, f_scale=10.0)
+
+    # with z1 = 0.6 active: z0 = 0.4; grad = (-1.6, 0.6, 0) = y (1, 1, 0) + mu (0, 1/0.6, 0)
+    # gives y = -1.6, mu = 1.32 >= 0
+    z_star = np.array([0.4, 0.6, 3.0])
+    ok = check(z_star)
+    assert ok.converged and ok.test == "kkt" and ok.value <= 1e-12
+    assert "1 active" in ok.message
+    shifted = check(z_star + np.array([1e-3, -1e-3, 1e-3]))  # feasible for the equality only
+    assert not shifted.converged
+    moved = check(np.array([0.4, 0.6, 3.0 + 1e-3]))  # feasible, not stationary in z2
+    assert not moved.converged and moved.value > KKT_TOL
+    # without the inequality the optimum is z = (1.5, -0.5, 3): there the bound is
+    # violated; at z1 = 0.6 with the bound pulling the wrong way (a = (0, 2, 3)) the
+    # multiplier would be negative: not a KKT point
+    a[:] = [0.0, 2.0, 3.0]
+    wrong_sign = check(np.array([0.4, 0.6, 3.0]))
+    assert not wrong_sign.converged
+    a[:] = [2.0, 0.0, 3.0]
+    assert not check(np.array([1.5, -0.5, 3.0])).converged  # infeasible
+    assert np.isinf(check(np.array([1.5, -0.5, 3.0])).value)
+    # units: scaling the objective and the equations changes nothing
+    f, g = 0.5 * np.sum((z_star - a) ** 2), z_star - a
+    scaled = kkt_optimality(z_star, 1e9 * f, 1e9 * g, 1e-6 * (H @ z_star - 1.0), 1e-6 * H,
+                            C @ z_star - 1.0, C)  # fmt: skip
+    assert scaled.converged
+
+
+def test_all_at_once_status_comes_from_the_kkt_conditions():
+    """The SLSQP fits are judged by the KKT test, not by SLSQP's own success: stopped by
+    the iteration budget they are MAX_ITERATIONS, converged they carry the measured
+    stationarity."""
+    from ecfm_uq.inverse.convergence import KKT_TOL
+
+    system = two_parameter_model()
+    v = M_OBS @ solve_steady(system, [0.3, 2.0]).Theta[:, 0] * (1 + 1e-2 * np.array([1, -1, 1]))
+    problem = SteadyProblem(system, M_OBS, v)
+    stopped = fit(problem, [0.0, 1.0], method="all-at-once", maxiter=2)
+    assert stopped.status is FitStatus.MAX_ITERATIONS, stopped.message
+    assert "KKT" in stopped.message or "infeasible" in stopped.message
+    done = fit(problem, [0.0, 1.0], method="all-at-once")
+    assert done.status is FitStatus.CONVERGED, done.message
+    assert done.optimality <= KKT_TOL and done.optimizer == "SLSQP"
+    reduced = fit(problem, [0.0, 1.0])
+    np.testing.assert_allclose(done.eps, reduced.eps, rtol=1e-5)
