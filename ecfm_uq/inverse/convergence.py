@@ -79,6 +79,7 @@ __all__ = [
     "kkt_optimality",
     "least_squares_optimality",
     "polish_least_squares",
+    "scaled_gradient_optimality",
 ]
 
 #: relative-offset tolerance of the least-squares test
@@ -90,6 +91,9 @@ XTOL = 1e-8
 RANK_RCOND = 1e-10
 #: Newton-decrement tolerance of the general test (relative to max(|z|, 1))
 DECREMENT_TOL = 1e-10
+#: gradient of a negative log-likelihood in the parameters' standard-error units: below
+#: this the estimate is within that fraction of a standard error of the optimum
+SCALED_GRADIENT_TOL = 1e-3
 #: KKT stationarity tolerance of the constrained (all-at-once) fits: the first-order
 #: change of the objective, relative to the objective, that a relative change of one
 #: variable could still make along the constraints
@@ -325,6 +329,32 @@ def kkt_optimality(z, f, g, h, H, c=None, C=None, *, f_scale=0.0, f_lower=None,
     return Optimality(ok, value, "kkt",  tol,
                       f"KKT stationarity {value:.1e} {rel} {tol:.0e} "
                       f"({int(active.sum())} active inequalities)")  # fmt: skip
+
+
+def scaled_gradient_optimality(g, x=None, bounds=None, *, tol=SCALED_GRADIENT_TOL):
+    """Whether a negative log-likelihood's gradient vanishes in standard-error units.
+
+    ``g`` is the gradient with respect to parameters scaled by their standard errors
+    (:math:`\\epsilon = \\hat\\epsilon_0 + s \\odot x`): a log-likelihood is unit-free and
+    so is ``x``, so :math:`\\max_k |g_k| \\le` ``tol`` leaves the estimate within about
+    ``tol`` standard errors of the optimum whatever the units. Components held at a bound
+    of ``bounds`` (in ``x``) by a gradient pointing out of the box are dropped (KKT).
+
+    Returns
+    -------
+    Optimality
+        ``test == "scaled gradient"``.
+    """
+    g = np.asarray(g, dtype=float).ravel()
+    if not np.all(np.isfinite(g)):
+        return Optimality(False, np.inf, "scaled gradient", tol, "non-finite gradient")
+    if x is not None and bounds is not None:
+        g = g[~_active_bounds(np.asarray(x, dtype=float).ravel(), g, bounds)]
+    value = float(np.max(np.abs(g), initial=0.0))
+    ok = value <= tol
+    rel = "<=" if ok else ">"
+    return Optimality(ok, value, "scaled gradient", tol,
+                      f"gradient {value:.1e} {rel} {tol:.0e} in standard-error units")  # fmt: skip
 
 
 def decide_status(opt, exhausted):

@@ -77,6 +77,7 @@ from scipy import optimize, stats
 
 from ..errors import ConvergenceError, ModelEvaluationError
 from ..system import solve_steady
+from .convergence import decide_status, scaled_gradient_optimality
 from .diagnostics import fd_hessian
 from .finite_differences import fd_gradient
 from .loglik import LogLikelihood
@@ -91,7 +92,6 @@ __all__ = ["RandomForceModel", "fit_random_force"]
 _FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError, ValueError)
 # the scaled variance s = tau^2 * a0^2 / sigma^2 is searched on this log grid, then refined
 _S_GRID = np.concatenate([[0.0], np.logspace(-6, 10, 97)])
-_OPTIMALITY = 1e-3  # converged: the eps-gradient in standard-error units below this
 _RESTARTS = 5  # L-BFGS-B restarts of the eps search after a stalled line search
 _N_SIM = 4000  # simulations of the test's null distribution (p-value resolution 1/4001)
 _SIM_SEED = 20_261_124  # fixed: the same data always give the same p-value
@@ -352,6 +352,9 @@ class _Search:
         self.eps_std, self.scale, self.bnds = eps_std, scale, bnds
         self.maxiter, self.tol, self.nfev = maxiter, tol, 0
 
+    def _optimal(self, g, x):
+        return scaled_gradient_optimality(g, x, self.bnds).converged
+
     def objective(self, model, count=True):
         def p(x):
             self.nfev += count
@@ -379,10 +382,10 @@ class _Search:
         def stop_when_optimal(intermediate_result):
             # our own criterion, not the optimizer's (its ftol on a finite-difference
             # gradient behaves differently across scipy versions): the gradient in
-            # standard-error units below _OPTIMALITY leaves eps within that fraction of a
-            # standard error
+            # standard-error units (convergence.scaled_gradient_optimality) leaves eps
+            # within that fraction of a standard error
             g = last["g"]
-            if g is not None and g.size and np.max(np.abs(g)) < _OPTIMALITY:
+            if g is not None and g.size and self._optimal(g, intermediate_result.x):
                 raise StopIteration
 
         nit, njev, maxiter = 0, 0, self.maxiter
@@ -395,7 +398,7 @@ class _Search:
                 callback=stop_when_optimal,
                 options={"maxiter": maxiter - nit, "ftol": self.tol, "gtol": 1e-6},
             )  # fmt: skip
-            if last["g"] is not None and np.max(np.abs(last["g"]), initial=0.0) < _OPTIMALITY:
+            if last["g"] is not None and self._optimal(last["g"], res.x):
                 res.success = True
             moved = np.max(np.abs(res.x - x)) if x.size else 0.0
             nit, njev = nit + res.nit, njev + res.njev
@@ -486,19 +489,15 @@ def fit_random_force(problem, eps0, s):
     eps = eps_std + scale * x
     val, g_hat, lin = _profiled(model, eps)
     grad = fd_gradient(p, x, 1e-5)
-    optimality = float(np.max(np.abs(grad))) if grad.size else 0.0
+    # the one status decision (the optimizer's own success is not asked): the gradient
+    # of the profiled marginal likelihood in standard-error units, bounds projected
+    opt = scaled_gradient_optimality(grad, x, search.bnds)
+    optimality = opt.value
     hits = at_bound(eps, s.bounds)
-    # unit-free: the gradient in standard-error units; 1e-3 leaves the estimate within
-    # about a thousandth of a standard error of the optimum
-    if res.success or optimality < _OPTIMALITY:
-        status = FitStatus.CONVERGED
-    elif res.nit >= search.maxiter:
-        status = FitStatus.MAX_ITERATIONS
-    else:
-        status = FitStatus.STALLED
+    status = decide_status(opt, exhausted=res.nit >= search.maxiter)
     lam, lam_sd = model.forces(lin, g_hat)
     unc = _uncertainty(p, x, scale, standard, g_hat, model, lin)
-    message = str(res.message)
+    message = f"{res.message} [{opt.message}]"
     if status == FitStatus.CONVERGED:
         # a small gradient is not an optimum where the data no longer determine eps (an
         # estimate run off towards infinity, e.g. a reaction rate 10^eps0 -> 0): the same

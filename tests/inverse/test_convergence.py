@@ -292,3 +292,20 @@ def test_all_at_once_status_comes_from_the_kkt_conditions():
     assert done.optimality <= KKT_TOL and done.optimizer == "SLSQP"
     reduced = fit(problem, [0.0, 1.0])
     np.testing.assert_allclose(done.eps, reduced.eps, rtol=1e-5)
+
+
+def test_scaled_gradient_test_projects_active_bounds():
+    """The random-force fit's test: the gradient in standard-error units, components held
+    at a bound by a gradient pointing out of the box dropped (and only those)."""
+    from ecfm_uq.inverse.convergence import SCALED_GRADIENT_TOL, scaled_gradient_optimality
+
+    assert scaled_gradient_optimality([1e-4, -5e-4]).converged
+    off = scaled_gradient_optimality([1e-4, 2e-3])
+    assert not off.converged and off.value == 2e-3 and off.tol == SCALED_GRADIENT_TOL
+    # x1 at its upper bound 0, pushed up (g < 0: decreasing x1's objective means x1 up)
+    held = scaled_gradient_optimality([1e-4, -0.5], [0.3, 0.0], [(None, None), (None, 0.0)])
+    assert held.converged
+    # the same gradient at the lower bound points into the box: not held, not optimal
+    free = scaled_gradient_optimality([1e-4, -0.5], [0.3, 0.0], [(None, None), (0.0, None)])
+    assert not free.converged
+    assert not scaled_gradient_optimality([np.nan]).converged
