@@ -52,6 +52,7 @@ from .drivers import (
     verify_least_squares,
 )
 from .gradients import choose_gradient
+from .interface import InverseProblem
 from .optimizers import adam
 from .result import InverseResult, Verdict
 from .status import FitStatus
@@ -59,7 +60,7 @@ from .status import FitStatus
 FORMULATIONS = ("standard", "ecfm")
 
 
-class DynamicInverseProblem:
+class DynamicInverseProblem(InverseProblem):
     """A time-dependent model, its initial state, time grid and sensor data.
 
     Parameters
@@ -150,10 +151,21 @@ class DynamicInverseProblem:
         C = self.M_obs.shape[0]
         self.V = as_finite_array("V", V, shape=(self.n_steps + 1, C))
 
+    data_attribute = "V"
+
     @property
     def n_sensors(self):
         """Number of sensors C."""
         return self.M_obs.shape[0]
+
+    @property
+    def n_data(self):
+        """Number of readings fitted, ``n_steps * C`` (``V[0]`` is the initial time)."""
+        return int(np.size(self.V[1:]))
+
+    def forget_solves(self):
+        """A copy with other data starts cold (no warm start from the old data's fits)."""
+        self._last = {}
 
     # -- forward solves --------------------------------------------------------------------
     def solve(self, eps, formulation="standard", sensitivities=False, keep_factors=False):

@@ -25,6 +25,7 @@ import numpy as np
 from .._validation import as_finite_array
 from ..errors import ConvergenceError, ModelEvaluationError
 from .finite_differences import fd_jacobian
+from .interface import InverseProblem
 
 __all__ = ["ModelProblem"]
 
@@ -35,7 +36,7 @@ def _describe_call(name, eps):
     return f"`{name}` at eps={np.array2string(np.asarray(eps).real, precision=6)}"
 
 
-class ModelProblem:
+class ModelProblem(InverseProblem):
     """Data ``v`` and a model ``model(eps)`` that predicts them.
 
     Parameters
@@ -85,18 +86,6 @@ class ModelProblem:
         self.v = as_finite_array("data", data.ravel())
         self.model, self.jac, self.executor = model, jac, executor
         self.names = None if names is None else [str(n) for n in names]
-
-    @property
-    def n_data(self):
-        """Number of observations."""
-        return self.v.size
-
-    def with_data(self, v):
-        """The same model with other data (for refits and simulations)."""
-        new = object.__new__(type(self))
-        new.__dict__.update(self.__dict__)
-        new.v = as_finite_array("data", np.asarray(v, dtype=float).ravel(), shape=self.v.shape)
-        return new
 
     # -- evaluations ------------------------------------------------------------------------
     def predict(self, eps, *, first=False):

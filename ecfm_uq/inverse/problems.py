@@ -27,6 +27,7 @@ import numpy as np
 
 from .._validation import as_finite_array, as_operator
 from .gradients import choose_gradient
+from .interface import InverseProblem
 
 __all__ = ["ReplicatedProblem", "SteadyProblem"]
 
@@ -41,7 +42,7 @@ def _solve_options(tol, maxiter, solver):
     return out
 
 
-class SteadyProblem:
+class SteadyProblem(InverseProblem):
     """A steady model and one data set: :math:`v \\approx \\mathcal M\\,\\mathbb E[\\theta(\\epsilon)]`.
 
     Parameters
@@ -82,13 +83,6 @@ class SteadyProblem:
         """Number of measurements C."""
         return self.v.size
 
-    def with_data(self, v):
-        """The same problem with other data ``v`` (C,) (for refits and simulations)."""
-        new = object.__new__(type(self))
-        new.__dict__.update(self.__dict__)
-        new.v = as_finite_array("v", v, shape=self.v.shape)
-        return new
-
     def log_likelihood(self, formulation, sigma):
         """The :class:`~.loglik.LogLikelihood` of a fit of ``formulation`` (the standard
         one: Gaussian least squares of the sensors' residual), or why there is none."""
@@ -111,7 +105,7 @@ class SteadyProblem:
         )
 
 
-class ReplicatedProblem:
+class ReplicatedProblem(InverseProblem):
     """A stochastic (chaos) model and replicated data, for the pseudo-likelihood fits.
 
     Parameters

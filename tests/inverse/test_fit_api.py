@@ -137,3 +137,38 @@ def test_unknown_options_and_bad_arguments_are_named():
         fit(problem, [1.0, 1.0], bounds=[(0, 1)])
     with pytest.raises(TypeError, match="options"):
         fit(problem, [1.0, 1.0], options=[("lr", 1)])
+
+
+def test_every_problem_is_one_interface_and_copies_with_other_data():
+    """ModelProblem, SteadyProblem, DynamicInverseProblem and ReplicatedProblem share one
+    interface: n_data, with_data (a refit equals a fit of a problem built anew from the
+    same data; the original keeps its data), log_likelihood."""
+    from ecfm_uq.inverse import ModelProblem
+    from ecfm_uq.inverse.interface import InverseProblem
+    from ecfm_uq.problems.beam import BeamModel
+    from ecfm_uq.problems.burgers import BurgersModel
+
+    system, v = data(0.01, seed=1)
+    _, w = data(0.01, seed=2)
+    steady = SteadyProblem(system, M_OBS, v)
+    x = np.linspace(0, 1, 7)
+    model = ModelProblem(lambda e: e[0] * np.exp(-e[1] * x), 2.0 * np.exp(-0.5 * x))
+    m = BurgersModel(n_modes=8, n_steps=6, T=0.3)
+    V = m.true_data([1.75, 1.0])
+    dyn = DynamicInverseProblem(m.system, m.Theta0, m.dt, m.n_steps, m.M_obs, V)
+    beam = BeamModel()
+    rep = ReplicatedProblem(beam.system, beam.M_obs, beam.sample_data(1.0, 5, rng=None))
+    for problem, n in ((steady, 9), (model, 7), (dyn, 6 * m.M_obs.shape[0]), (rep, rep.v.size)):
+        assert isinstance(problem, InverseProblem) and problem.n_data == n
+        assert callable(problem.log_likelihood)
+        with pytest.raises(ValueError, match="shape"):
+            problem.with_data(np.zeros(problem.data.size + 1))
+    refit = fit(steady.with_data(w), [1.0, 1.0], sigma=0.01)
+    anew = fit(SteadyProblem(system, M_OBS, w), [1.0, 1.0], sigma=0.01)
+    np.testing.assert_array_equal(refit.eps, anew.eps)
+    np.testing.assert_array_equal(steady.v, v)  # the original keeps its data
+    shifted = model.with_data(3.0 * np.exp(-0.5 * x))
+    np.testing.assert_allclose(fit(shifted, [1.0, 1.0]).eps, [3.0, 0.5], rtol=1e-6)
+    other = dyn.with_data(m.true_data([1.6, 0.9]))
+    assert other._last is not dyn._last  # a copy starts cold
+    np.testing.assert_allclose(fit(other, [1.7, 1.0]).eps, [1.6, 0.9], rtol=1e-5)

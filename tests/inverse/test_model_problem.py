@@ -185,7 +185,9 @@ def test_user_callbacks_that_misbehave_get_named_errors():
         fit(ModelProblem(decay, y, jac=lambda e: np.ones((22, 2))), [1.0, 1.0, 0.0])
     with pytest.raises(ValueError, match="`jac` must be a callable"):
         ModelProblem(decay, y, jac="4-point")
-    with pytest.raises(ValueError, match="formulation='standard'"):
+    with pytest.raises(
+        ValueError, match=r"formulation` 'ecfm' for a model problem; choose one of \['standard'\]"
+    ):
         fit(ModelProblem(decay, y), [1.0, 1.0, 0.0], formulation="ecfm")
 
 
