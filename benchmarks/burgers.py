@@ -136,7 +136,7 @@ def main(argv=None):
     model = BurgersModel(newton_tol=1e-6)
     V = model.true_data(PAPER_TRUE_EPS)
     prob = DynamicInverseProblem(
-        model.system, model.Theta0, model.dt, model.n_steps, model.M_obs, V, tol=1e-6
+        model.system, model.Theta0, model.dt, model.n_steps, model.M_obs, V, solve_tol=1e-6
     )
     eps = np.array([1.6, 0.8])  # away from the optimum, as during the optimization
     prob.standard_objective(eps)  # warm-up (imports, caches)
@@ -150,7 +150,7 @@ def main(argv=None):
         ]
 
     fwd = DynamicInverseProblem(
-        model.system, model.Theta0, model.dt, model.n_steps, model.M_obs, V, tol=1e-6,
+        model.system, model.Theta0, model.dt, model.n_steps, model.M_obs, V, solve_tol=1e-6,
         gradient="forward",
     )  # fmt: skip
     fwd.standard_objective(eps)
@@ -178,7 +178,7 @@ def main(argv=None):
         args_ = (study_model.system, study_model.Theta0, study_model.dt, study_model.n_steps)
         ours = naive = 0.0
         for formulation in ("standard", "ecfm"):
-            problem = DynamicInverseProblem(*args_, study_model.M_obs, Vs, tol=1e-10)
+            problem = DynamicInverseProblem(*args_, study_model.M_obs, Vs, solve_tol=1e-10)
             t0 = time.perf_counter()
             res = fit(
                 problem,

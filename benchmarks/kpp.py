@@ -82,9 +82,8 @@ def gradient_part(n_state, n_source, seed, maxiter, ftol):
                 SteadyProblem(problem.system, problem.M_obs, data.v),
                 eps0,
                 **kw,
-                tol=ftol,  # SLSQP's ftol
                 maxiter=maxiter,
-                options={"jac": grads},
+                options={"jac": grads, "ftol": ftol},
             )
             rows[name, grads] = (time.perf_counter() - t0, res)
         print(f"  ({name} done)", file=sys.stderr, flush=True)

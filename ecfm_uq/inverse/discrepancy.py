@@ -77,7 +77,7 @@ from scipy import optimize, stats
 
 from ..errors import ConvergenceError, ModelEvaluationError
 from ..system import solve_steady
-from .convergence import decide_status, scaled_gradient_optimality
+from .convergence import SCALED_GRADIENT_TOL, decide_status, scaled_gradient_optimality
 from .diagnostics import fd_hessian
 from .finite_differences import fd_gradient
 from .loglik import LogLikelihood
@@ -353,7 +353,7 @@ class _Search:
         self.maxiter, self.tol, self.nfev = maxiter, tol, 0
 
     def _optimal(self, g, x):
-        return scaled_gradient_optimality(g, x, self.bnds).converged
+        return scaled_gradient_optimality(g, x, self.bnds, tol=self.tol).converged
 
     def objective(self, model, count=True):
         def p(x):
@@ -396,7 +396,7 @@ class _Search:
             res = optimize.minimize(
                 fun, x, jac=True, method="L-BFGS-B", bounds=self.bnds,
                 callback=stop_when_optimal,
-                options={"maxiter": maxiter - nit, "ftol": self.tol, "gtol": 1e-6},
+                options={"maxiter": maxiter - nit, "ftol": 1e-10, "gtol": 1e-6},
             )  # fmt: skip
             if last["g"] is not None and self._optimal(last["g"], res.x):
                 res.success = True
@@ -471,7 +471,7 @@ def fit_random_force(problem, eps0, s):
         ]
     search = _Search(
         eps_std, scale, bnds, 200 if s.maxiter is None else s.maxiter,
-        1e-10 if s.tol is None else s.tol,
+        SCALED_GRADIENT_TOL if s.tol is None else s.tol,
     )  # fmt: skip
     model = RandomForceModel(problem, s.sigma, "shared")
     x, res = search.run(model, np.zeros(system.n_eps))
@@ -491,7 +491,7 @@ def fit_random_force(problem, eps0, s):
     grad = fd_gradient(p, x, 1e-5)
     # the one status decision (the optimizer's own success is not asked): the gradient
     # of the profiled marginal likelihood in standard-error units, bounds projected
-    opt = scaled_gradient_optimality(grad, x, search.bnds)
+    opt = scaled_gradient_optimality(grad, x, search.bnds, tol=search.tol)
     optimality = opt.value
     hits = at_bound(eps, s.bounds)
     status = decide_status(opt, exhausted=res.nit >= search.maxiter)

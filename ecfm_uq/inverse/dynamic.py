@@ -44,7 +44,7 @@ from .._validation import as_dense_rows, as_finite_array, check_choice, check_in
 from ..errors import ConvergenceError
 from ..system import march
 from ..system.schemes import check_scheme
-from .convergence import least_squares_optimality
+from .convergence import OFFSET_TOL, least_squares_optimality
 from .drivers import (
     check_minimize_method,
     least_squares_scaled,
@@ -81,9 +81,9 @@ class DynamicInverseProblem(InverseProblem):
         is not used by either objective).
     t0 : float
         Initial time.
-    tol : float
+    solve_tol : float
         Newton tolerance per step on :math:`\\|R\\|_2`.
-    maxiter : int
+    solve_maxiter : int
         Newton iterations per step.
     gradient : {"auto", "forward", "adjoint"}
         Gradients by forward sensitivities (Eqs. discrete_sens, discrete_sens_ecfm) or by
@@ -95,7 +95,7 @@ class DynamicInverseProblem(InverseProblem):
     warm_start : bool
         Start each step's Newton iteration from the last trajectory of the same
         formulation (the previous optimizer iterate's) instead of the previous step: fewer
-        Newton iterations, the same solution to ``tol``.
+        Newton iterations, the same solution to ``solve_tol``.
     scheme : {"euler", "bdf2"}
         Time scheme of the march (:mod:`ecfm_uq.system.schemes`): backward Euler (the
         paper's, the default) or the second-order BDF2; sensitivities and adjoint
@@ -105,7 +105,7 @@ class DynamicInverseProblem(InverseProblem):
     ------
     ValueError
         On misshaped or non-finite data, a system without mass matrix, or a
-        non-positive ``dt``/``tol``.
+        non-positive ``dt``/``solve_tol``.
     """
 
     def __init__(
@@ -118,8 +118,8 @@ class DynamicInverseProblem(InverseProblem):
         V,
         *,
         t0=0.0,
-        tol=1e-10,
-        maxiter=30,
+        solve_tol=1e-10,
+        solve_maxiter=30,
         gradient="auto",
         solver="auto",
         warm_start=True,
@@ -131,8 +131,8 @@ class DynamicInverseProblem(InverseProblem):
         self.dt = check_positive("dt", dt)
         self.n_steps = check_int("n_steps", n_steps, minimum=1)
         self.t0 = float(as_finite_array("t0", t0, ndim=0))
-        self.tol = check_positive("tol", tol)
-        self.maxiter = check_int("maxiter", maxiter, minimum=1)
+        self.solve_tol = check_positive("solve_tol", solve_tol)
+        self.solve_maxiter = check_int("solve_maxiter", solve_maxiter, minimum=1)
         self.gradient = choose_gradient(gradient, system.n_eps)
         self.solver = solver
         self.warm_start = bool(warm_start)
@@ -201,8 +201,8 @@ class DynamicInverseProblem(InverseProblem):
                 t0=self.t0,
                 constraint=constraint,
                 sensitivities=sensitivities,
-                tol=self.tol,
-                maxiter=self.maxiter,
+                tol=self.solve_tol,
+                maxiter=self.solve_maxiter,
                 strict=True,
                 solver=self.solver,
                 keep_factors=keep_factors,
@@ -498,13 +498,14 @@ def fit_dynamic_problem(problem, eps0, s):
             return z, g, traj
 
         out = minimize_scaled(
-            evaluate, eps0, method, s.bounds, _DEFAULT_TOL if s.tol is None else s.tol,
+            evaluate, eps0, method, s.bounds, _DEFAULT_TOL,
             _DEFAULT_MAXITER if s.maxiter is None else s.maxiter, options,
         )  # fmt: skip
         if n_eps <= _LSQ_MAX_EPS:
             out = verify_least_squares(
-                out, residual, s.bounds, out.status is FitStatus.MAX_ITERATIONS, polish=polish
-            )
+                out, residual, s.bounds, out.status is FitStatus.MAX_ITERATIONS, polish=polish,
+                tol=OFFSET_TOL if s.tol is None else s.tol,
+            )  # fmt: skip
         res = _result(out, formulation, method)
         traj = out.payload
     if traj is None and method != "adam":  # stopped where the model cannot be marched

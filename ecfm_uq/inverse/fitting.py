@@ -173,9 +173,15 @@ def fit(
     bounds : sequence of (lo, hi), optional
         Bounds on :math:`\\epsilon` (``None`` for an open side).
     tol : float, optional
-        Optimality tolerance: the relative offset of the least-squares methods
-        (:data:`~ecfm_uq.inverse.convergence.OFFSET_TOL` when omitted), the relative
-        gradient tolerance of the ``minimize`` methods.
+        The tolerance of the test that decides the status (:mod:`.convergence`), on every
+        path: the relative offset of a sum of squares (least squares, the ``minimize``
+        methods and Adam on it; :data:`~.convergence.OFFSET_TOL`), the KKT stationarity
+        of the all-at-once fits (:data:`~.convergence.KKT_TOL`), the gradient in
+        standard-error units of the random-force ECFM
+        (:data:`~.convergence.SCALED_GRADIENT_TOL`), the relative gradient of the
+        replicated fits. An optimizer's own stopping settings go in ``options``
+        (``ftol`` of SLSQP, ``gtol`` of BFGS, ...). A model solve's tolerance is the
+        problem's ``solve_tol``.
     maxiter : int, optional
         Iterations (epochs for Adam, residual evaluations for ``"least-squares"``).
     options : dict, optional

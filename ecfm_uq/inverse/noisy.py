@@ -42,9 +42,9 @@ import time
 import numpy as np
 import scipy.optimize as sopt
 
-from .._validation import as_dense_rows, as_finite_array
+from .._validation import as_dense_rows, as_finite_array, check_positive
 from ..system import solve_steady
-from .convergence import decide_status, kkt_optimality
+from .convergence import KKT_TOL, decide_status, kkt_optimality
 from .noise import noise_bounds, sample_moments
 from .result import InverseResult
 
@@ -252,7 +252,7 @@ def _start(problem, eps0, theta0, lam0, solve_options):
     return problem.stack(theta0, eps0, lam0), note
 
 
-def _solve(problem, z0, note, gradients, maxiter, ftol, method_name):
+def _solve(problem, z0, note, gradients, maxiter, ftol, tol, method_name):
     hist_eps, hist_loss = [], []
 
     def callback(xk, *args):
@@ -300,7 +300,7 @@ def _solve(problem, z0, note, gradients, maxiter, ftol, method_name):
             z, float(res.fun), problem.objective_grad(z), problem.equality(z),
             problem.equality_jac(z), problem.inequality(z), problem.inequality_jac(z),
             f_scale=max((abs(x) for x in hist_loss if np.isfinite(x)), default=0.0),
-            f_lower=0.0,  # both objectives are 1/2 ||.||^2
+            f_lower=0.0, tol=tol,  # both objectives are 1/2 ||.||^2
         )  # fmt: skip
     status = decide_status(opt, exhausted=res.status == 9 or res.nit >= maxiter)
     return InverseResult(
@@ -318,9 +318,9 @@ def _solve(problem, z0, note, gradients, maxiter, ftol, method_name):
     )
 
 
-#: defaults of the all-at-once SLSQP fits: ``tol`` is SLSQP's ``ftol`` (its precision
-#: goal on the objective, also its feasibility tolerance)
-_DEFAULT_TOL = 1e-12
+#: defaults of the all-at-once SLSQP fits: SLSQP's ``ftol`` (its precision goal on the
+#: objective, also its feasibility tolerance; ``options={"ftol": ...}``)
+_DEFAULT_FTOL = 1e-12
 _DEFAULT_MAXITER = 500
 
 
@@ -343,7 +343,7 @@ def fit_all_at_once(problem, eps0, s):
             f"formulation='noisy-ecfm' is solved all at once by SLSQP: pass method='auto' "
             f"or 'all-at-once', not {s.method!r}"
         )
-    known = {"theta0": None, "jac": "analytic"}
+    known = {"theta0": None, "jac": "analytic", "ftol": _DEFAULT_FTOL}
     if s.formulation == "noisy-ecfm":
         known["lam0"] = None
         if s.sigma is None:
@@ -351,7 +351,8 @@ def fit_all_at_once(problem, eps0, s):
     opts = s.take(known)
     if opts["jac"] not in _GRADIENTS:
         raise ValueError(f"unknown `options['jac']` {opts['jac']!r}; choose 'analytic' or 'fd'")
-    tol = _DEFAULT_TOL if s.tol is None else s.tol
+    ftol = check_positive("options['ftol']", opts["ftol"])
+    tol = KKT_TOL if s.tol is None else s.tol
     maxiter = _DEFAULT_MAXITER if s.maxiter is None else s.maxiter
     system = problem.system
     if s.formulation == "standard":
@@ -363,7 +364,7 @@ def fit_all_at_once(problem, eps0, s):
         )
         label = "noisy-ecfm"
     z0, note = _start(inverse, eps0, opts["theta0"], opts.get("lam0"), problem.solve_options)
-    res = _solve(inverse, z0, note, opts["jac"], maxiter, tol, label)
+    res = _solve(inverse, z0, note, opts["jac"], maxiter, ftol, tol, label)
     if not res.success:
         res.uncertainty_message = "uncertainty not computed: the fit did not succeed"
     elif not s.uncertainty:

@@ -17,7 +17,7 @@ InverseProblem`
 ==========================  =======================================  ======================
 
 Each validates its data once, here, and holds the settings of the model's solves
-(Newton ``tol``/``maxiter``, linear ``solver``, forward or adjoint ``gradient``): the
+(Newton ``solve_tol``/``solve_maxiter``, linear ``solver``, forward or adjoint ``gradient``): the
 one place those are given. The optimizer's settings are arguments of ``fit``.
 """
 
@@ -53,7 +53,7 @@ class SteadyProblem(InverseProblem):
         Measurement operator :math:`\\mathcal M`.
     v : (C,) array_like
         Observations.
-    tol, maxiter : optional
+    solve_tol, solve_maxiter : optional
         Newton settings of every model solve (the solver's defaults when omitted).
     solver : str, SolverOptions or dict
         Linear solver of every model solve (:func:`ecfm_uq.system.solve_steady`).
@@ -67,7 +67,7 @@ class SteadyProblem(InverseProblem):
         On a misshaped or non-finite ``M_obs``/``v``.
     """
 
-    def __init__(self, system, M_obs, v, *, tol=None, maxiter=None, solver="auto",
+    def __init__(self, system, M_obs, v, *, solve_tol=None, solve_maxiter=None, solver="auto",
                  gradient="auto"):  # fmt: skip
         self.system = system
         M_obs = as_operator("M_obs", M_obs)
@@ -76,7 +76,7 @@ class SteadyProblem(InverseProblem):
         self.M_obs = M_obs
         self.v = as_finite_array("v", v, shape=(M_obs.shape[0],))
         self.gradient = choose_gradient(gradient, system.n_eps)
-        self.solve_options = _solve_options(tol, maxiter, solver)
+        self.solve_options = _solve_options(solve_tol, solve_maxiter, solver)
 
     @property
     def n_sensors(self):
@@ -115,17 +115,17 @@ class ReplicatedProblem(InverseProblem):
     M_obs : (C, N) array_like
     v : (C, D) array_like
         ``D >= 2`` replicates per sensor.
-    tol, maxiter, solver : optional
+    solve_tol, solve_maxiter, solver : optional
         Settings of every model solve (see :class:`SteadyProblem`).
     var_rtol, hessian, fd_step
         Of the pseudo-likelihood (:class:`~ecfm_uq.inverse.pseudo_likelihood.PseudoLikelihood`).
     """
 
-    def __init__(self, system, M_obs, v, *, tol=None, maxiter=None, solver="auto",
+    def __init__(self, system, M_obs, v, *, solve_tol=None, solve_maxiter=None, solver="auto",
                  var_rtol=1e-12, hessian="auto", fd_step=1e-5):  # fmt: skip
         from .pseudo_likelihood import PseudoLikelihood
 
-        opts = _solve_options(tol, maxiter, solver)
+        opts = _solve_options(solve_tol, solve_maxiter, solver)
         if opts == {"solver": "auto"}:
             opts = {}  # the pseudo-likelihood's own default: no override at all
         self.likelihood = PseudoLikelihood(

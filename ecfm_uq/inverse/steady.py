@@ -20,6 +20,7 @@ import numpy as np
 from .._validation import as_finite_array, as_operator
 from ..errors import ConvergenceError
 from ..system import solve_steady
+from .convergence import OFFSET_TOL
 from .drivers import (
     check_minimize_method,
     least_squares_scaled,
@@ -141,8 +142,8 @@ _RESIDUALS = {"standard": standard_residual, "ecfm": ecfm_residual}
 #: the least-squares driver's options (the rest go to scipy.optimize.least_squares) and
 #: the covariance conventions
 _COVARIANCES = ("gauss-newton", "sandwich")
-#: the reduced formulations' defaults (tol is the relative gradient tolerance: the
-#: optimizer sees the objective divided by its value at eps0, so it has no data units)
+#: the minimize methods' gradient tolerance (relative: the optimizer sees the objective
+#: divided by its value at eps0, so it has no data units); options={"gtol": ...} overrides
 _DEFAULT_TOL = 1e-10
 _DEFAULT_MAXITER = 500
 #: residual evaluations allowed to the least-squares method (its `maxiter`): hard
@@ -199,11 +200,13 @@ def fit_steady_problem(problem, eps0, s):
         if lsq:
             out = least_squares_scaled(residual, eps0, bounds, s.tol, maxiter, options)
         else:
-            gtol = _DEFAULT_TOL if s.tol is None else s.tol
-            out = minimize_scaled(evaluate, eps0, method, bounds, gtol, maxiter, options)
+            # tol is the status test's (the relative offset); the optimizer's own gtol is
+            # its default unless options give one
+            out = minimize_scaled(evaluate, eps0, method, bounds, _DEFAULT_TOL, maxiter, options)
             out = verify_least_squares(
-                out, residual, bounds, out.status is FitStatus.MAX_ITERATIONS, polish=polish
-            )
+                out, residual, bounds, out.status is FitStatus.MAX_ITERATIONS, polish=polish,
+                tol=OFFSET_TOL if s.tol is None else s.tol,
+            )  # fmt: skip
     except ConvergenceError as e:
         raise ConvergenceError(f"fit: {e}") from e
     if out.payload is None:  # the optimizer stopped where the model fails

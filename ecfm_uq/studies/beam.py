@@ -171,7 +171,7 @@ def build_model(s):
 def _fit_all(model, v, s, bounds, uncertainty=True):
     """The three estimators on one data set (``uncertainty=False``: the seed study, whose
     spread over data sets is the uncertainty it reports)."""
-    problem = ReplicatedProblem(model.system, model.M_obs, v, tol=s["solve_tol"])
+    problem = ReplicatedProblem(model.system, model.M_obs, v, solve_tol=s["solve_tol"])
     common = {"bounds": bounds, "uncertainty": uncertainty}
     out = {}
     for key, form in (("standard", "standard"), ("inner_outer", "inner-outer")):

@@ -197,8 +197,8 @@ def run(settings, out_dir, progress):
         model.n_steps,
         model.M_obs,
         V,
-        tol=model.newton_tol,
-        maxiter=model.newton_maxiter,
+        solve_tol=model.newton_tol,
+        solve_maxiter=model.newton_maxiter,
     )
 
     result = {

@@ -176,7 +176,7 @@ def run(settings, out_dir, progress):
         bar.update()
         fitted = SteadyProblem(problem.system, problem.M_obs, data.v)
         eps0 = np.zeros(problem.system.n_eps)
-        common = dict(maxiter=s["maxiter"], tol=s["ftol"])
+        common = dict(maxiter=s["maxiter"], options={"ftol": s["ftol"]})
         inv = fit(fitted, eps0, formulation="standard", method="all-at-once", **common)
         bar.update()
         ecfm = fit(fitted, eps0, formulation="noisy-ecfm", sigma=sigma, alpha=alpha, **common)

@@ -171,7 +171,7 @@ def burgers():
 
     def problem():
         return DynamicInverseProblem(
-            m.system, m.Theta0, m.dt, m.n_steps, m.M_obs, V, tol=m.newton_tol
+            m.system, m.Theta0, m.dt, m.n_steps, m.M_obs, V, solve_tol=m.newton_tol
         )
 
     return problem

@@ -25,7 +25,7 @@ TRUE = np.array([1.75, 1.0])
 def _problem(model, true_eps=TRUE, tol=1e-12):
     V = model.true_data(true_eps)
     return DynamicInverseProblem(
-        model.system, model.Theta0, model.dt, model.n_steps, model.M_obs, V, tol=tol
+        model.system, model.Theta0, model.dt, model.n_steps, model.M_obs, V, solve_tol=tol
     )
 
 
@@ -288,7 +288,9 @@ def test_dynamic_uncertainty_derivative_equals_tight_refits(formulation):
         # (sqrt(dt) (M theta_t - v_t), or sqrt(dt) lam_t for ECFM) with their forward-
         # sensitivity Jacobian, to round-off; independent of the library's optimizers.
         # (BFGS at gtol 1e-13 stops early on "precision loss" with scipy 1.15.)
-        p = DynamicInverseProblem(m.system, m.Theta0, m.dt, m.n_steps, m.M_obs, data, tol=1e-13)
+        p = DynamicInverseProblem(
+            m.system, m.Theta0, m.dt, m.n_steps, m.M_obs, data, solve_tol=1e-13
+        )
         w = np.sqrt(m.dt)
 
         def residual(e):

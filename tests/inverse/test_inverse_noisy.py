@@ -94,13 +94,16 @@ def test_standard_matches_closed_form_least_squares():
     res = fit(SteadyProblem(system, M_obs, v), np.zeros(3), method="all-at-once")
     assert res.success, res.message
     assert res.method == "standard-slsqp" and res.nit > 0
-    # SLSQP stops when the objective changes by less than tol (its ftol, 1e-12 by default)
+    # SLSQP stops when the objective changes by less than its ftol (1e-12 by default)
     assert -1e-14 < res.loss - f_ls < 1e-12
-    # with a tighter tol the parameters reach the closed form as closely as the loss can
+    # with a tighter ftol the parameters reach the closed form as closely as the loss can
     # resolve them: f - f_ls = d'(G'G)d / 2 is below round-off of f once
     # |d| < sqrt(2 eps_mach f / lambda_min(G'G)) (7e-8 here), so no minimizer of f in
     # double precision can promise more (scipy >= 1.16's SLSQP stops at 2e-9)
-    tight = fit(SteadyProblem(system, M_obs, v), np.zeros(3), method="all-at-once", tol=1e-16)
+    tight = fit(
+        SteadyProblem(system, M_obs, v), np.zeros(3), method="all-at-once",
+        options={"ftol": 1e-16},
+    )  # fmt: skip
     assert tight.success, tight.message
     resolvable = np.sqrt(2 * np.finfo(float).eps * f_ls / np.linalg.eigvalsh(G.T @ G)[0])
     assert np.max(np.abs(tight.eps - eps_ls)) < resolvable

@@ -185,8 +185,7 @@ def test_noisy_ecfm_covariance_equals_refit_jacobian():
             res.eps,
             formulation="noisy-ecfm",
             sigma=sigma,
-            tol=1e-16,
-            options={"theta0": res.extra["theta"]},
+            options={"theta0": res.extra["theta"], "ftol": 1e-16},
         ).eps
 
     D = _fd4(refit, v, 3e-2)  # SLSQP resolves eps to ~1e-9: a large step, O(h^4) stencil

@@ -23,7 +23,7 @@ def problem():
     tr = march(system, TRUE, model.Theta0, model.dt, model.n_steps, scheme="bdf2", tol=1e-13)
     V = (tr.Theta @ system.E1) @ model.M_obs.T
     return DynamicInverseProblem(
-        system, model.Theta0, model.dt, model.n_steps, model.M_obs, V, tol=1e-13,
+        system, model.Theta0, model.dt, model.n_steps, model.M_obs, V, solve_tol=1e-13,
         gradient="adjoint", scheme="bdf2",
     )  # fmt: skip
 
@@ -49,7 +49,7 @@ def test_the_euler_calibration_of_bdf2_data_is_biased(problem):
     does not pass by accident)."""
     euler = DynamicInverseProblem(
         problem.system, problem.Theta0, problem.dt, problem.n_steps, problem.M_obs,
-        problem.V, tol=1e-13,
+        problem.V, solve_tol=1e-13,
     )  # fmt: skip
     res = fit(euler, [1.5, 0.8], formulation="standard", uncertainty=False)
     assert np.abs(res.eps - TRUE).max() > 1e-4
