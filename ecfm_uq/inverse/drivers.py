@@ -10,6 +10,7 @@ optimizer, records the path and the inner-solve failures, and returns an
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -35,6 +36,38 @@ __all__ = [
 
 #: gradient methods of scipy.optimize.minimize the reduced fits accept by name
 MINIMIZE_METHODS = ("BFGS", "CG", "L-BFGS-B", "TNC", "SLSQP", "Newton-CG", "trust-constr")
+
+
+#: the options the least-squares driver takes (scipy.optimize.least_squares' keywords)
+LEAST_SQUARES_KEYWORDS = ("maxiter", "ftol", "xtol", "gtol", "x_scale", "loss", "f_scale",
+                          "diff_step", "tr_solver", "tr_options", "verbose")  # fmt: skip
+
+
+def check_minimize_options(method, options, n):
+    """Refuse, by name and before any model evaluation, options ``scipy.optimize.minimize``'s
+    ``method`` does not know (scipy itself only warns, after the first evaluations).
+
+    scipy's own check decides: a throw-away minimization of a quadratic in ``n``
+    variables with the same method and options, one iteration.
+    """
+    if not options:
+        return
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            sopt.minimize(lambda x: (0.5 * x @ x, x), np.ones(n), jac=True, method=method,
+                          options={**options, "maxiter": 1})  # fmt: skip
+        except Exception:  # a bad value, not a bad name: the real run reports it
+            return
+    for w in caught:
+        text = str(w.message)
+        if "Unknown solver options" in text:
+            names = text.split(":", 1)[-1].strip()
+            raise TypeError(
+                f"`options` has unknown name(s) {names} for method={method!r}: each name is "
+                f"an option of scipy.optimize.minimize(method={method!r}) "
+                f"(scipy.optimize.show_options('minimize', {method!r}))"
+            )
 
 
 def check_minimize_method(method):
@@ -98,6 +131,7 @@ def minimize_scaled(evaluate, eps0, method, bounds, gtol, maxiter, options):
     ConvergenceError
         When the objective cannot be evaluated at ``eps0``.
     """
+    check_minimize_options(method, options, np.size(eps0))
     hist_eps, hist_loss, failures = [], [], []
     counts = {"nfev": 0}
     last = {}

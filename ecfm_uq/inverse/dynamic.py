@@ -46,6 +46,7 @@ from ..system import march
 from ..system.schemes import check_scheme
 from .convergence import OFFSET_TOL, least_squares_optimality
 from .drivers import (
+    LEAST_SQUARES_KEYWORDS,
     check_minimize_method,
     least_squares_scaled,
     minimize_scaled,
@@ -482,6 +483,7 @@ def fit_dynamic_problem(problem, eps0, s):
         if res.status is FitStatus.CONVERGED:  # completed its epochs: at an optimum?
             _check_adam(problem, res, residual, s.bounds)
     elif method in ("least-squares", "trf"):
+        s.take(dict.fromkeys(LEAST_SQUARES_KEYWORDS))  # by name, before any march
         out = least_squares_scaled(
             residual, eps0, s.bounds, s.tol,
             _DEFAULT_MAX_NFEV if s.maxiter is None else s.maxiter, s.options,

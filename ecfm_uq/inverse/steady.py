@@ -22,6 +22,7 @@ from ..errors import ConvergenceError
 from ..system import solve_steady
 from .convergence import OFFSET_TOL
 from .drivers import (
+    LEAST_SQUARES_KEYWORDS,
     check_minimize_method,
     least_squares_scaled,
     minimize_scaled,
@@ -135,9 +136,8 @@ def ecfm_residual(system, M_obs, v, eps, **solve_kw):
 
 
 _OBJECTIVES = {"standard": standard_objective, "ecfm": ecfm_objective}
-#: options of the least-squares method: ours, then scipy.optimize.least_squares' keywords
-LEAST_SQUARES_OPTIONS = ("covariance", "polish", "maxiter", "ftol", "xtol", "gtol", "x_scale",
-                         "loss", "f_scale", "diff_step", "tr_solver", "tr_options", "verbose")  # fmt: skip
+#: options of the steady least-squares fits: ours, then the least-squares driver's
+LEAST_SQUARES_OPTIONS = ("covariance", "polish", *LEAST_SQUARES_KEYWORDS)
 _RESIDUALS = {"standard": standard_residual, "ecfm": ecfm_residual}
 #: the least-squares driver's options (the rest go to scipy.optimize.least_squares) and
 #: the covariance conventions

@@ -172,3 +172,50 @@ def test_every_problem_is_one_interface_and_copies_with_other_data():
     other = dyn.with_data(m.true_data([1.6, 0.9]))
     assert other._last is not dyn._last  # a copy starts cold
     np.testing.assert_allclose(fit(other, [1.7, 1.0]).eps, [1.6, 0.9], rtol=1e-5)
+
+
+@pytest.mark.parametrize(
+    "kw",
+    [
+        {},  # least squares
+        {"method": "BFGS"},
+        {"method": "L-BFGS-B"},
+        {"method": "all-at-once"},
+        {"formulation": "noisy-ecfm", "sigma": 0.01},
+        {"formulation": "ecfm-random", "sigma": 0.01},
+        {"formulation": "ecfm"},
+    ],
+)
+def test_an_unknown_option_is_refused_before_the_model_is_called(kw):
+    """On every path of a steady fit: the error names the key, and no load is evaluated."""
+    calls = []
+    F0 = load(B, np.ones_like)
+    F1 = load(B, lambda x: x)
+
+    def F(eps, t):
+        calls.append(1)
+        return eps[0] * F0 + eps[1] * F1
+
+    system = GalerkinSystem(
+        [LinearTerm(K), LoadTerm(F, lambda eps, t: np.column_stack([F0, F1]))],
+        2, Gamma=hat_forces(B, SENS, 0.1),
+    )  # fmt: skip
+    problem = SteadyProblem(system, M_OBS, np.ones(SENS.size))
+    with pytest.raises(TypeError, match="no_such_option"):
+        fit(problem, [1.0, 1.0], options={"no_such_option": 1}, **kw)
+    assert calls == []
+
+
+def test_an_unknown_option_of_a_dynamic_fit_is_refused_before_any_march():
+    from ecfm_uq.problems.burgers import BurgersModel
+
+    m = BurgersModel(n_modes=8, n_steps=6, T=0.3)
+    dyn = DynamicInverseProblem(
+        m.system, m.Theta0, m.dt, m.n_steps, m.M_obs, m.true_data([1.75, 1.0])
+    )
+    marched = []
+    dyn.solve = lambda *a, **k: marched.append(1)  # any march would be counted
+    for method in ("auto", "BFGS", "adam"):
+        with pytest.raises(TypeError, match="no_such_option"):
+            fit(dyn, [1.7, 1.0], method=method, options={"no_such_option": 1})
+    assert marched == []
