@@ -318,11 +318,22 @@ class DynamicInverseProblem:
 
     def log_likelihood(self, formulation, sigma):
         """The :class:`~.loglik.LogLikelihood` of a standard fit: Gaussian least squares
-        over the ``n = P C`` readings (sigma known, or profiled out), or why there is none."""
+        over the ``n = P C`` readings (sigma known, or profiled out), or why there is none.
+        ``sigma`` an array (per sensor, or a covariance over the sensors; :mod:`.whitening`):
+        that of the whitened readings."""
         from .loglik import least_squares_likelihood, no_likelihood
+        from .noise_model import noise_model
 
         if formulation != "standard":
             return no_likelihood(formulation)
+        noise = noise_model(sigma, self.n_sensors, "sensor, the same at every time")
+        if noise.kind in ("diagonal", "covariance"):
+            from .whitening import whitened_problem
+
+            like = whitened_problem(self, noise).log_likelihood(formulation, 1.0)
+            what = f"trajectory least squares, Gaussian noise {noise.describe()}"
+            return dataclasses.replace(like, description=what)
+        sigma = noise.scale
         dt = self.dt
 
         def rss(eps):  # z = dt/2 * sum of squared residuals over the P readings
