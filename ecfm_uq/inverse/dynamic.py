@@ -77,7 +77,10 @@ class DynamicInverseProblem:
         Measurement operator :math:`\\mathcal M`.
     V : (n_steps + 1, C) array_like
         Data; row ``i`` is :math:`v_i` at time ``t0 + i * dt`` (row 0, the initial time,
-        is not used by either objective).
+        is not used by either objective). Their noise is ``fit``'s ``sigma``: one number,
+        one standard deviation per sensor ``(C,)`` or a covariance over the sensors
+        ``(C, C)``, the same at every time, readings at different times independent
+        (:mod:`~ecfm_uq.inverse.whitening`).
     t0 : float
         Initial time.
     tol : float

@@ -23,7 +23,7 @@ SteadyProblem          ``"standard"``, ``"ecfm"``       ``"least-squares"`` (tru
                                                         (theta, eps), standard only)
 SteadyProblem          ``"ecfm-random"`` (sigma)        trust-region on the marginal
                                                         likelihood (forces N(0, tau^2))
-SteadyProblem          ``"noisy-ecfm"`` (sigma)         ``"all-at-once"``
+SteadyProblem          ``"noisy-ecfm"`` (scalar sigma)  ``"all-at-once"``
 DynamicInverseProblem  ``"standard"``, ``"ecfm"``       ``"least-squares"`` (L-BFGS-B
                                                         beyond 16 parameters),
                                                         ``"adam"``, any gradient method
@@ -32,12 +32,20 @@ ReplicatedProblem      ``"standard"``,                  ``"trust-region"``;
                        ``"inner-outer"`` (``"ecfm"``),  ``"SLSQP"`` for the penalty
                        ``"penalty"``                    form
 =====================  ===============================  ==============================
+
+``sigma`` is checked once, by :func:`_check_sigma`, before any model solve: a number for
+every formulation; an array (one value per observation or a covariance, per sensor for a
+time series) for ModelProblem, and for the Galerkin formulations that are functions of
+the sensors' residual, which then run once on the whitened problem
+(:mod:`.whitening`); ``"noisy-ecfm"`` (the paper's bounds on i.i.d. noise) and replicated
+data (noise from the replicates) refuse an array, naming what to do.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import numbers
+import re
 
 import numpy as np
 
@@ -115,7 +123,10 @@ def _check_sigma(sigma, kind, formulation, problem):
             raise ValueError(
                 f"`sigma` of shape {shape} gives one value per reading; a "
                 f"DynamicInverseProblem takes one number, one standard deviation per sensor "
-                f"({C},) or a covariance over the sensors ({C}, {C}), the same at every time"
+                f"({C},) or a covariance over the sensors ({C}, {C}), the same at every "
+                "time; for noise that changes with time fit the readings as a ModelProblem("
+                "lambda eps: problem.predictions(problem.solve(eps))[1:], problem.V[1:]) "
+                "with sigma=sigma.ravel() (formulation 'standard')"
             )
         return noise_model(sigma, C, "sensor, the same at every time")
     return noise_model(sigma, C)
@@ -198,10 +209,18 @@ def fit(
     method : str
         The optimizer; ``"auto"`` picks the formulation's default.
     sigma : float or array_like, optional
-        Known noise of the data (else estimated where needed): one standard deviation;
-        for a :class:`~.model_problem.ModelProblem` also one per observation or a
-        covariance matrix (:mod:`.noise_model`). Without it a least-squares fit has no
-        consistency test (``verdict.consistent is None``).
+        Known noise of the data (else estimated where needed): one standard deviation,
+        one per observation ``(n,)`` or a covariance matrix ``(n, n)``
+        (:mod:`.noise_model`). For a :class:`~.problems.SteadyProblem` ``n = C`` sensors;
+        for a :class:`~.dynamic.DynamicInverseProblem` ``sigma`` describes the ``C``
+        sensors, the same at every time (``(C,)`` or ``(C, C)``, readings at different
+        times independent). An array is whitened once and the fit runs on
+        :math:`W\\mathcal M` and :math:`Wv` with ``sigma = 1`` (:mod:`.whitening`) for
+        ``"standard"``, ``"ecfm"`` (whose estimate does not depend on it: it sets the
+        uncertainty and the verdict) and ``"ecfm-random"`` (data covariance
+        :math:`\\Sigma + \\tau^2AA^T`); ``"noisy-ecfm"`` and ``ReplicatedProblem`` refuse an
+        array. Without ``sigma`` a least-squares fit has no consistency test
+        (``verdict.consistent is None``).
     bounds : sequence of (lo, hi), optional
         Bounds on :math:`\\epsilon` (``None`` for an open side).
     tol : float, optional
@@ -293,17 +312,27 @@ def fit(
 
 def _in_data_units(result, noise):
     """A fit of whitened data reported for the data given: the estimate's derivative in
-    ``v`` (not ``W v``) and the noise described as given (not ``sigma=1``)."""
+    ``v`` (not ``W v``), and messages that name the noise as given where the fitter saw
+    ``sigma = 1``."""
     from .loglik import LogLikelihood
     from .whitening import jacobian_in_data_units
 
+    unit = re.compile(r"sigma ?= ?1(?![\d.e])")
+    said = f"sigma=1 (whitened: {noise.describe()})"
+
+    def restate(text):
+        return unit.sub(said, text)
+
     unc = result.uncertainty
-    if unc.jacobian is not None:
-        D = jacobian_in_data_units(unc.jacobian, noise)
-        result.uncertainty = dataclasses.replace(unc, jacobian=D)
+    result.uncertainty = dataclasses.replace(
+        unc, jacobian=jacobian_in_data_units(unc.jacobian, noise), message=restate(unc.message)
+    )
     for name in ("likelihood", "interval_likelihood"):
         like = getattr(result, name)
         if isinstance(like, LogLikelihood):
-            text = like.description.replace("sigma=1,", f"{noise.describe()},")
-            text = text.replace("sigma=1)", f"{noise.describe()})")
-            setattr(result, name, dataclasses.replace(like, description=text))
+            setattr(result, name, dataclasses.replace(like, description=restate(like.description)))
+    if result.verdict is not None:
+        result.verdict = dataclasses.replace(
+            result.verdict, message=restate(result.verdict.message)
+        )
+    result.message = restate(result.message)

@@ -64,6 +64,12 @@ class SteadyProblem:
     ------
     ValueError, TypeError
         On a misshaped or non-finite ``M_obs``/``v``.
+
+    Notes
+    -----
+    The noise of ``v`` is an argument of :func:`~ecfm_uq.inverse.fit`: ``sigma`` one
+    number, one standard deviation per sensor ``(C,)`` or a covariance ``(C, C)``
+    (whitened once, :mod:`~ecfm_uq.inverse.whitening`).
     """
 
     def __init__(self, system, M_obs, v, *, tol=None, maxiter=None, solver="auto",
