@@ -110,6 +110,12 @@ def test_steady_covariance_equals_whitening_by_hand_with_sigma_one():
     # the profile likelihood follows the whitening
     np.testing.assert_allclose(profile_intervals(res), profile_intervals(hand), rtol=1e-6)
     assert "covariance" in res.likelihood.description
+    # the full-Hessian (sandwich) covariance follows too
+    kw = {"options": {"covariance": "sandwich"}}
+    sw = fit(SteadyProblem(SYSTEM, M_OBS, v), EPS0, sigma=Sig, **kw)
+    sw_hand = fit(SteadyProblem(SYSTEM, W @ M_OBS, W @ v), EPS0, sigma=1.0, **kw)
+    assert sw.uncertainty.method == "implicit"
+    np.testing.assert_allclose(sw.uncertainty.cov, sw_hand.uncertainty.cov, rtol=1e-7)
 
 
 def test_steady_ecfm_estimate_ignores_sigma_its_uncertainty_and_verdict_follow_it():
@@ -216,6 +222,8 @@ def test_dynamic_sensor_covariance_equals_whitening_by_hand(burgers):
         np.testing.assert_allclose(res.eps, hand.eps, rtol=1e-8)
         np.testing.assert_allclose(res.uncertainty.cov, hand.uncertainty.cov, rtol=1e-6)
         assert res.verdict["chi2"] == pytest.approx(hand.verdict["chi2"], rel=1e-8)
+        if formulation == "standard":  # the profile likelihood follows
+            np.testing.assert_allclose(profile_intervals(res), profile_intervals(hand), rtol=1e-8)
     # independent: the readings' covariance kron(I, Sigma) given to a ModelProblem
     p = _dynamic(m, m.M_obs, V)
     std = fit(p, [1.5, 0.5], sigma=Sig)
