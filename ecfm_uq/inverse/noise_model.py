@@ -72,6 +72,18 @@ class NoiseModel:
         """:math:`W` as a dense (n, n) array (small n: sensors, not readings)."""
         return self.whiten(np.eye(self.n))
 
+    def pull_back(self, D):
+        """:math:`DW` for a matrix ``D`` (k, n): a derivative in the whitened data
+        :math:`Wv` written as one in the data :math:`v`."""
+        D = np.asarray(D, dtype=float)
+        if self.kind == "unknown":
+            return D
+        if self.kind == "covariance":  # D L^{-1} = (L^{-T} D^T)^T
+            return scipy.linalg.solve_triangular(
+                self.chol, D.T, lower=True, trans="T", check_finite=False
+            ).T
+        return D / self.scale
+
     def describe(self):
         """A few words for messages."""
         if self.kind == "scalar":

@@ -94,5 +94,4 @@ def jacobian_in_data_units(D, noise):
     if D is None:
         return None
     D = np.asarray(D, dtype=float)
-    p = D.shape[0]
-    return (D.reshape(p, -1, noise.n) @ noise.matrix()).reshape(p, -1)
+    return noise.pull_back(D.reshape(-1, noise.n)).reshape(D.shape)

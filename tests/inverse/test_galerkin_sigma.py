@@ -73,6 +73,18 @@ def test_steady_per_observation_sigma_equals_a_model_problem_and_curve_fit(heter
     e = (v - predict(res.eps)) / S
     assert res.verdict["chi2"] == pytest.approx(e @ e, rel=1e-9)
 
+    # d eps/dv in the data's units: Gauss-Newton's J^+ W as the ModelProblem's, and the
+    # exact one (implicit, full Hessian) against refits at perturbed data
+    np.testing.assert_allclose(res.uncertainty.jacobian, mp.uncertainty.jacobian, rtol=1e-6)
+    exact = fit(SteadyProblem(SYSTEM, M_OBS, v), EPS0, sigma=S, options={"covariance": "sandwich"})
+    h = 1e-3  # refits to round-off: a difference quotient of the estimate, O(h^2)
+
+    def refit(w):
+        return fit(SteadyProblem(SYSTEM, M_OBS, w), res.eps, sigma=S, tol=1e-12).eps
+
+    quotients = [(refit(v + h * d) - refit(v - h * d)) / (2 * h) for d in np.eye(S.size)]
+    np.testing.assert_allclose(exact.uncertainty.jacobian, np.transpose(quotients), rtol=1e-4)
+
     popt, pcov = optimize.curve_fit(
         lambda x, a, b: predict(np.array([a, b])), SENS, v, p0=EPS0, sigma=S,
         absolute_sigma=True, epsfcn=1e-12,
