@@ -30,7 +30,13 @@ original data, for every formulation that is a function of the sensors' residual
 
 For a :class:`~.dynamic.DynamicInverseProblem`, ``sigma`` describes the ``C`` sensors:
 one number, one standard deviation per sensor ``(C,)`` or a covariance over the sensors
-``(C, C)``, the same at every time, readings at different times independent.
+``(C, C)``, the same at every time, readings at different times independent. A
+``(C, C)`` array is always the covariance (variances on its diagonal), also when
+``n_steps == C``; a sigma per reading ``(n_steps, C)`` is refused by
+:func:`~ecfm_uq.inverse.fit` (noise that changes with time: fit the readings as a
+:class:`~.model_problem.ModelProblem`, whose ``sigma`` is one per observation). Why not
+here: the whitening would then change with time, which no single sensor matrix
+:math:`W\\mathcal M` expresses.
 
 The estimate's derivative in the data (``uncertainty.jacobian``) is returned in the units
 of the data the user gave: :func:`jacobian_in_data_units`.
