@@ -249,6 +249,17 @@ MISTAKES = [
         ValueError,
         "formulation='ecfm-random' needs `sigma`",
     ),
+    (
+        "sigma per sensor for the noisy ECFM",
+        lambda: fit(
+            SteadyProblem(_GAMMA_SYSTEM, np.eye(N), F),
+            [0.0],
+            formulation="noisy-ecfm",
+            sigma=[0.1, 0.2, 0.3],
+        ),  # fmt: skip
+        ValueError,
+        "formulation='noisy-ecfm' takes `sigma` as one number",
+    ),
 ]
 # the G placeholder: a coupling of the wrong chaos size
 MISTAKES[6] = (

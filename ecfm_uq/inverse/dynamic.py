@@ -79,7 +79,10 @@ class DynamicInverseProblem(InverseProblem):
         Measurement operator :math:`\\mathcal M`.
     V : (n_steps + 1, C) array_like
         Data; row ``i`` is :math:`v_i` at time ``t0 + i * dt`` (row 0, the initial time,
-        is not used by either objective).
+        is not used by either objective). Their noise is ``fit``'s ``sigma``: one number,
+        one standard deviation per sensor ``(C,)`` or a covariance over the sensors
+        ``(C, C)``, the same at every time, readings at different times independent
+        (:mod:`~ecfm_uq.inverse.whitening`).
     t0 : float
         Initial time.
     solve_tol : float
@@ -331,11 +334,22 @@ class DynamicInverseProblem(InverseProblem):
 
     def log_likelihood(self, formulation, sigma):
         """The :class:`~.loglik.LogLikelihood` of a standard fit: Gaussian least squares
-        over the ``n = P C`` readings (sigma known, or profiled out), or why there is none."""
+        over the ``n = P C`` readings (sigma known, or profiled out), or why there is none.
+        ``sigma`` an array (per sensor, or a covariance over the sensors; :mod:`.whitening`):
+        that of the whitened readings."""
         from .loglik import least_squares_likelihood, no_likelihood
+        from .noise_model import noise_model
 
         if formulation != "standard":
             return no_likelihood(formulation)
+        noise = noise_model(sigma, self.n_sensors, "sensor, the same at every time")
+        if noise.kind in ("diagonal", "covariance"):
+            from .whitening import whitened_problem
+
+            like = whitened_problem(self, noise).log_likelihood(formulation, 1.0)
+            what = f"trajectory least squares, Gaussian noise {noise.describe()}"
+            return dataclasses.replace(like, description=what)
+        sigma = noise.scale
         dt = self.dt
 
         def rss(eps):  # z = dt/2 * sum of squared residuals over the P readings

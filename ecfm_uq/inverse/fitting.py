@@ -23,7 +23,7 @@ SteadyProblem          ``"standard"``, ``"ecfm"``       ``"least-squares"`` (tru
                                                         (theta, eps), standard only)
 SteadyProblem          ``"ecfm-random"`` (sigma)        trust-region on the marginal
                                                         likelihood (forces N(0, tau^2))
-SteadyProblem          ``"noisy-ecfm"`` (sigma)         ``"all-at-once"``
+SteadyProblem          ``"noisy-ecfm"`` (scalar sigma)  ``"all-at-once"``
 DynamicInverseProblem  ``"standard"``, ``"ecfm"``       ``"least-squares"`` (L-BFGS-B
                                                         beyond 16 parameters),
                                                         ``"adam"``, any gradient method
@@ -32,17 +32,27 @@ ReplicatedProblem      ``"standard"``,                  ``"trust-region"``;
                        ``"inner-outer"`` (``"ecfm"``),  ``"SLSQP"`` for the penalty
                        ``"penalty"``                    form
 =====================  ===============================  ==============================
+
+``sigma`` is checked once, by :func:`_check_sigma`, before any model solve: a number for
+every formulation; an array (one value per observation or a covariance, per sensor for a
+time series) for ModelProblem, and for the Galerkin formulations that are functions of
+the sensors' residual, which then run once on the whitened problem
+(:mod:`.whitening`); ``"noisy-ecfm"`` (the paper's bounds on i.i.d. noise) and replicated
+data (noise from the replicates) refuse an array, naming what to do.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import numbers
+import re
 
 import numpy as np
 
 from .._validation import check_int, check_positive
 from ..system.plan import dense_unknowns
 from ..threads import library_threads
+from .noise_model import NoiseModel, noise_model
 from .settings import FitSettings
 from .verdict import DEFAULT_ALPHA, check_alpha, check_bounds
 
@@ -69,24 +79,57 @@ def _problem_kind(problem):
     )
 
 
-def _check_sigma(sigma, kind, n_data):
+#: formulations whose noise model is one standard deviation for every datum (paper's
+#: bounds on i.i.d. noise; replicates carry their own noise), with what to do instead
+_SCALAR_SIGMA_ONLY = {
+    ("steady", "noisy-ecfm"): (
+        "the paper's z and chi-squared bounds (Eq. ecfm_noise) are on the sample mean and "
+        "variance of i.i.d. noise; use formulation='ecfm-random' or 'standard', which take "
+        "it, or whiten the data and the sensor matrix by hand (W v, W M_obs) and pass "
+        "sigma=1 for bounds on the whitened discrepancy"
+    ),
+}
+
+
+def _check_sigma(sigma, kind, formulation, problem):
+    """``sigma`` validated once, before any model solve: ``None``, a positive float, or a
+    :class:`~.noise_model.NoiseModel` (one value per observation or a covariance: per
+    sensor for a time series) for the formulations that whiten (:mod:`.whitening`)."""
     if sigma is None:
         return None
     if kind == "model":
-        from .noise_model import noise_model
-
-        noise_model(sigma, n_data)  # raises naming `sigma` and the shapes it may take
-        return sigma
-    if not isinstance(sigma, numbers.Real) and np.ndim(sigma) > 0:
-        raise TypeError(
-            f"`sigma` for a {kind} problem is one noise standard deviation for every "
-            "observation in this version; a per-observation sigma or a covariance is taken "
-            "by ModelProblem (or whiten the data and the model's predictions by hand)"
+        noise = noise_model(sigma, problem.n_data)  # raises naming `sigma` and its shapes
+        return sigma if noise.kind == "scalar" else noise
+    if isinstance(sigma, numbers.Real) or np.ndim(sigma) == 0:
+        try:
+            return check_positive("sigma", sigma)
+        except (TypeError, ValueError) as e:
+            raise type(e)(f"{e}; `sigma` is the known sensor noise standard deviation") from e
+    if kind == "replicated":
+        raise ValueError(
+            f"`sigma` for a ReplicatedProblem (formulation={formulation!r}) cannot be an "
+            "array: the noise is estimated from the replicates; omit `sigma`"
         )
-    try:
-        return check_positive("sigma", sigma)
-    except (TypeError, ValueError) as e:
-        raise type(e)(f"{e}; `sigma` is the known sensor noise standard deviation") from e
+    if (kind, formulation) in _SCALAR_SIGMA_ONLY:
+        raise ValueError(
+            f"formulation={formulation!r} takes `sigma` as one number (the same noise "
+            f"standard deviation for every sensor), not an array of shape "
+            f"{np.shape(sigma)}: {_SCALAR_SIGMA_ONLY[kind, formulation]}"
+        )
+    C = problem.n_sensors
+    if kind == "dynamic":
+        shape = np.shape(sigma)
+        if len(shape) == 2 and shape != (C, C) and shape[1] == C:
+            raise ValueError(
+                f"`sigma` of shape {shape} gives one value per reading; a "
+                f"DynamicInverseProblem takes one number, one standard deviation per sensor "
+                f"({C},) or a covariance over the sensors ({C}, {C}), the same at every "
+                "time; for noise that changes with time fit the readings as a ModelProblem("
+                "lambda eps: problem.predictions(problem.solve(eps))[1:], problem.V[1:]) "
+                "with sigma=sigma.ravel() (formulation 'standard')"
+            )
+        return noise_model(sigma, C, "sensor, the same at every time")
+    return noise_model(sigma, C)
 
 
 #: the formulations of each problem kind, by name (what each one is: the table above)
@@ -166,10 +209,18 @@ def fit(
     method : str
         The optimizer; ``"auto"`` picks the formulation's default.
     sigma : float or array_like, optional
-        Known noise of the data (else estimated where needed): one standard deviation;
-        for a :class:`~.model_problem.ModelProblem` also one per observation or a
-        covariance matrix (:mod:`.noise_model`). Without it a least-squares fit has no
-        consistency test (``verdict.consistent is None``).
+        Known noise of the data (else estimated where needed): one standard deviation,
+        one per observation ``(n,)`` or a covariance matrix ``(n, n)``
+        (:mod:`.noise_model`). For a :class:`~.problems.SteadyProblem` ``n = C`` sensors;
+        for a :class:`~.dynamic.DynamicInverseProblem` ``sigma`` describes the ``C``
+        sensors, the same at every time (``(C,)`` or ``(C, C)``, readings at different
+        times independent). An array is whitened once and the fit runs on
+        :math:`W\\mathcal M` and :math:`Wv` with ``sigma = 1`` (:mod:`.whitening`) for
+        ``"standard"``, ``"ecfm"`` (whose estimate does not depend on it: it sets the
+        uncertainty and the verdict) and ``"ecfm-random"`` (data covariance
+        :math:`\\Sigma + \\tau^2AA^T`); ``"noisy-ecfm"`` and ``ReplicatedProblem`` refuse an
+        array. Without ``sigma`` a least-squares fit has no consistency test
+        (``verdict.consistent is None``).
     bounds : sequence of (lo, hi), optional
         Bounds on :math:`\\epsilon` (``None`` for an open side).
     tol : float, optional
@@ -225,7 +276,7 @@ def fit(
     settings = FitSettings(
         formulation=formulation,
         method=method,
-        sigma=_check_sigma(sigma, kind, getattr(problem, "n_data", None)),
+        sigma=_check_sigma(sigma, kind, formulation, problem),
         bounds=check_bounds(bounds, n_eps),
         tol=tol,
         maxiter=maxiter,
@@ -248,9 +299,46 @@ def fit(
         from .dynamic import fit_dynamic_problem as fitter
     else:
         from .replicated import fit_replicated_problem as fitter
-    result = fitter(problem, eps0, settings)
+    noise = settings.sigma if isinstance(settings.sigma, NoiseModel) else None
+    if noise is None:
+        result = fitter(problem, eps0, settings)
+    else:  # an array sigma: the same fit of whitened sensors and data, sigma = 1
+        from .whitening import whitened_problem
+
+        result = fitter(
+            whitened_problem(problem, noise), eps0, dataclasses.replace(settings, sigma=1.0)
+        )
+        _in_data_units(result, noise)
     # what the profile likelihood needs: the likelihood (or why there is none), the bounds
     if result.likelihood is None:
         result.likelihood = problem.log_likelihood(settings.formulation, settings.sigma)
     result.bounds = settings.bounds
     return result
+
+
+def _in_data_units(result, noise):
+    """A fit of whitened data reported for the data given: the estimate's derivative in
+    ``v`` (not ``W v``), and messages that name the noise as given where the fitter saw
+    ``sigma = 1``."""
+    from .loglik import LogLikelihood
+    from .whitening import jacobian_in_data_units
+
+    unit = re.compile(r"sigma ?= ?1(?![\d.e])")
+    said = f"sigma=1 (whitened: {noise.describe()})"
+
+    def restate(text):
+        return unit.sub(said, text)
+
+    unc = result.uncertainty
+    result.uncertainty = dataclasses.replace(
+        unc, jacobian=jacobian_in_data_units(unc.jacobian, noise), message=restate(unc.message)
+    )
+    for name in ("likelihood", "interval_likelihood"):
+        like = getattr(result, name)
+        if isinstance(like, LogLikelihood):
+            setattr(result, name, dataclasses.replace(like, description=restate(like.description)))
+    if result.verdict is not None:
+        result.verdict = dataclasses.replace(
+            result.verdict, message=restate(result.verdict.message)
+        )
+    result.message = restate(result.message)

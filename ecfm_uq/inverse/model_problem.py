@@ -304,6 +304,8 @@ def fit_model_problem(problem, eps0, s):
                 unc = {"uncertainty_message": f"uncertainty not computed: {e}"}
             else:
                 unc = estimate_uncertainty(None, out.x, r, s2, how, dof=dof, deps_dv=D)
+                if "eps_jacobian" in unc:  # d eps/d(W v) as d eps/dv: in the data's units
+                    unc["eps_jacobian"] = noise.pull_back(unc["eps_jacobian"])
         else:
             unc = {"uncertainty_message": "uncertainty not computed: as many parameters as "
                    "data leave no residual to estimate sigma; pass `sigma`"}  # fmt: skip

@@ -68,6 +68,22 @@ class NoiseModel:
         )
         return r / s
 
+    def matrix(self):
+        """:math:`W` as a dense (n, n) array (small n: sensors, not readings)."""
+        return self.whiten(np.eye(self.n))
+
+    def pull_back(self, D):
+        """:math:`DW` for a matrix ``D`` (k, n): a derivative in the whitened data
+        :math:`Wv` written as one in the data :math:`v`."""
+        D = np.asarray(D, dtype=float)
+        if self.kind == "unknown":
+            return D
+        if self.kind == "covariance":  # D L^{-1} = (L^{-T} D^T)^T
+            return scipy.linalg.solve_triangular(
+                self.chol, D.T, lower=True, trans="T", check_finite=False
+            ).T
+        return D / self.scale
+
     def describe(self):
         """A few words for messages."""
         if self.kind == "scalar":
@@ -79,8 +95,12 @@ class NoiseModel:
         return "sigma estimated from the residual"
 
 
-def noise_model(sigma, n):
+def noise_model(sigma, n, unit="observation"):
     """Validate ``sigma`` for ``n`` data values and return its :class:`NoiseModel`.
+
+    A :class:`NoiseModel` of ``n`` values is returned as it is (validated once, its
+    Cholesky factor computed once). ``unit`` names what one of the ``n`` values is, for
+    the message (``"sensor"`` for a time series).
 
     Raises
     ------
@@ -89,9 +109,13 @@ def noise_model(sigma, n):
     """
     if sigma is None:
         return NoiseModel("unknown", n)
+    if isinstance(sigma, NoiseModel):
+        if sigma.n != n:
+            raise ValueError(f"`sigma` is a noise model of {sigma.n} values, the data have {n}")
+        return sigma
     hint = (
         f"`sigma` is the noise of the data: a positive number, {n} positive standard "
-        f"deviations (one per observation) or an ({n}, {n}) positive definite covariance"
+        f"deviations (one per {unit}) or an ({n}, {n}) positive definite covariance"
     )
     if isinstance(sigma, bool):
         raise TypeError(f"{hint}; got {sigma!r}")
@@ -105,7 +129,7 @@ def noise_model(sigma, n):
     except (TypeError, ValueError):
         raise TypeError(f"{hint}; got {type(sigma).__name__}") from None
     if a.ndim == 0:
-        return noise_model(float(a), n)
+        return noise_model(float(a), n, unit)
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{hint}; `sigma` has non-finite entries")
     if a.shape == (n,):

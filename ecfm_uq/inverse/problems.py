@@ -65,6 +65,12 @@ class SteadyProblem(InverseProblem):
     ------
     ValueError, TypeError
         On a misshaped or non-finite ``M_obs``/``v``.
+
+    Notes
+    -----
+    The noise of ``v`` is an argument of :func:`~ecfm_uq.inverse.fit`: ``sigma`` one
+    number, one standard deviation per sensor ``(C,)`` or a covariance ``(C, C)``
+    (whitened once, :mod:`~ecfm_uq.inverse.whitening`).
     """
 
     def __init__(self, system, M_obs, v, *, solve_tol=None, solve_maxiter=None, solver="auto",
