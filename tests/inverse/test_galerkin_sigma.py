@@ -199,7 +199,7 @@ def burgers():
 
 
 def _dynamic(m, M_obs, V):
-    return DynamicInverseProblem(m.system, m.Theta0, m.dt, m.n_steps, M_obs, V, tol=1e-12)
+    return DynamicInverseProblem(m.system, m.Theta0, m.dt, m.n_steps, M_obs, V, solve_tol=1e-12)
 
 
 def test_dynamic_sigma_per_sensor_equals_a_model_problem_of_the_readings(burgers):
