@@ -210,7 +210,7 @@ def fit(
         from .replicated import fit_replicated_problem as fitter
     result = fitter(problem, eps0, settings)
     # what the profile likelihood needs: the likelihood (or why there is none), the bounds
-    if result.likelihood is None:
-        result.likelihood = problem.log_likelihood(settings.formulation, settings.sigma)
-    result.bounds = settings.bounds
-    return result
+    likelihood = result.likelihood
+    if likelihood is None:
+        likelihood = problem.log_likelihood(settings.formulation, settings.sigma)
+    return replace(result, likelihood=likelihood, bounds=settings.bounds)
