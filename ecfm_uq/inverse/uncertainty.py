@@ -20,8 +20,9 @@ while Gauss-Newton drops the residual-curvature term.
 The steady, noisy SLSQP and pseudo-likelihood fits (:func:`~ecfm_uq.inverse.fit` of a
 :class:`~ecfm_uq.inverse.SteadyProblem`: standard, exact-force ECFM, ``"all-at-once"``
 and ``"noisy-ecfm"``; of a :class:`~ecfm_uq.inverse.ReplicatedProblem`) compute their
-``eps_cov`` through :func:`implicit_covariance`; only the optimality condition and the
-data covariance differ. The dynamic (Adam) fits do not carry one yet.
+covariance (``result.uncertainty.cov``) through :func:`implicit_covariance`; only the
+optimality condition and the data covariance differ. The dynamic (Adam) fits do not carry
+one yet.
 """
 
 from __future__ import annotations
