@@ -132,7 +132,7 @@ def main(argv=None):
     for (name, grads), (t, res) in rows.items():
         print(
             f"{name:<11} {grads:<9} {res.extra['n_variables']:>5} {t:8.2f} {res.nit:>5} "
-            f"{res.extra['nfev']:>7} {str(res.success):>8} {res.loss:11.4e}  {res.message}"
+            f"{res.nfev:>7} {str(res.success):>8} {res.loss:11.4e}  {res.message}"
         )
     for name in ("standard", "noisy-ecfm"):
         ea, ef = rows[name, "analytic"][1].eps, rows[name, "fd"][1].eps

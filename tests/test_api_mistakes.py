@@ -384,9 +384,9 @@ def test_ecfm_on_unexplainable_data_says_forces_stayed_large():
     system, M = _heat_system(np.linspace(1.0, 2.0, 8))
     v = np.array([1.0, -2.0, 1.0])  # no diffusion coefficient gives this shape
     res = fit(SteadyProblem(system, M, v), [0.0], formulation="ecfm")
-    verdict = res.extra["verdict"]
-    assert verdict["consistent"] is False
-    assert verdict["force_to_data"] > 0.1
+    verdict = res.verdict
+    assert verdict.consistent is False
+    assert verdict.details["force_to_data"] > 0.1
     assert "NOT consistent" in res.message
 
 
@@ -395,9 +395,9 @@ def test_ecfm_on_consistent_data_is_consistent():
     v = M @ solve_steady(system, [0.3]).Theta[:, 0]
     res = fit(SteadyProblem(system, M, v), [0.0], formulation="ecfm")
     assert res.success
-    verdict = res.extra["verdict"]
-    assert verdict["consistent"] is True, verdict["message"]
-    assert verdict["force_to_data"] < 1e-6
+    verdict = res.verdict
+    assert verdict.consistent is True, verdict.message
+    assert verdict.details["force_to_data"] < 1e-6
     assert abs(res.eps[0] - 0.3) < 1e-6
 
 
@@ -406,21 +406,21 @@ def test_verdict_reports_bound_and_extreme_and_peak():
     v = M @ solve_steady(system, [0.0]).Theta[:, 0]
     v[2] += 1.0
     out = consistency_verdict(system, M, v, [-14.0], lam=[0.0, 0.1, -3.0], bounds=[(-14, 2)])
-    assert out["at_bound"] == [0]
-    assert out["extreme"] and out["extreme"][0][0] == "linear"
-    assert out["peak_force_index"] == 2
-    assert "at a bound" in out["message"] and "extreme" in out["message"]
+    assert out.details["at_bound"] == [0]
+    assert out.details["extreme"] and out.details["extreme"][0][0] == "linear"
+    assert out.details["peak_force_index"] == 2
+    assert "at a bound" in out.message and "extreme" in out.message
     out = consistency_verdict(system, M, v, [0.0])
-    assert out["peak_sensor_index"] == 2
-    assert not out["consistent"]
+    assert out.details["peak_sensor_index"] == 2
+    assert not out.consistent
 
 
 def test_verdict_chi2_for_noisy_data():
     system, M = _heat_system(forces=False)
     v = M @ solve_steady(system, [0.0]).Theta[:, 0]
     noise = np.array([1e-3, -1e-3, 5e-4])
-    assert consistency_verdict(system, M, v + noise, [0.0], sigma=1e-3)["consistent"]
-    assert not consistency_verdict(system, M, v + 100 * noise, [0.0], sigma=1e-3)["consistent"]
+    assert consistency_verdict(system, M, v + noise, [0.0], sigma=1e-3).consistent
+    assert not consistency_verdict(system, M, v + 100 * noise, [0.0], sigma=1e-3).consistent
 
 
 # -- memory: refused before allocating --------------------------------------------------

@@ -80,11 +80,13 @@ def test_uncertainty_page_example_runs_and_reports_intervals():
     ns = {}
     exec(compile(blocks[0], "uncertainty.md", "exec"), ns)
     res = ns["res"]  # the ECFM fit, last in the loop
-    assert res.success and res.noise_model == "known" and res.method == "ecfm"
-    np.testing.assert_allclose(res.eps_stderr, np.sqrt(np.diag(res.eps_cov)), rtol=1e-12)
-    half = 1.959963984540054 * res.eps_stderr  # normal 97.5 % quantile (sigma known)
-    np.testing.assert_allclose(res.eps_ci95[:, 1] - res.eps, half, rtol=1e-12)
-    np.testing.assert_allclose(res.eps - res.eps_ci95[:, 0], half, rtol=1e-12)
+    assert res.success and res.uncertainty.noise_model == "known" and res.method == "ecfm"
+    np.testing.assert_allclose(
+        res.uncertainty.stderr, np.sqrt(np.diag(res.uncertainty.cov)), rtol=1e-12
+    )
+    half = 1.959963984540054 * res.uncertainty.stderr  # normal 97.5 % quantile (sigma known)
+    np.testing.assert_allclose(res.uncertainty.intervals[:, 1] - res.eps, half, rtol=1e-12)
+    np.testing.assert_allclose(res.eps - res.uncertainty.intervals[:, 0], half, rtol=1e-12)
 
 
 def test_calibration_page_example_runs_and_says_the_lower_end_is_open():

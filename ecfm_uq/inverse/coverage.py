@@ -133,11 +133,11 @@ def steady_coverage(
         v = v0 + sigma * rng.normal(size=v0.size)
         problem = SteadyProblem(system, M_obs, v)
         res = fit(problem, eps0, formulation=formulation, sigma=sigma if known_sigma else None)
-        if not res.success or res.eps_ci95 is None:
+        if not res.success or res.uncertainty.intervals is None:
             failed += 1
             continue
         est.append(res.eps)
-        ints.append(res.eps_ci95)
+        ints.append(res.uncertainty.intervals)
     return _summary(true_eps, est, ints, failed)
 
 
@@ -196,12 +196,12 @@ def likelihood_coverage(
         v = sample(np.random.default_rng(child))
         problem = ReplicatedProblem(system, M_obs, v, **dict(problem_options or {}))
         res = fit(problem, eps0, formulation=formulation, **fit_options)
-        if not res.success or res.eps_ci95 is None:
+        if not res.success or res.uncertainty.intervals is None:
             failed += 1
             continue
         est.append(res.eps)
-        ints.append(res.eps_ci95)
-        se.append(res.eps_stderr)
+        ints.append(res.uncertainty.intervals)
+        se.append(res.uncertainty.stderr)
     out = _summary(true_eps, est, ints, failed)
     if se:
         out["stderr"] = np.array(se)
@@ -255,11 +255,11 @@ def interval_coverage(
         # the profile starts from wherever the fit stopped (it re-centres on a better
         # point, and an estimate at infinity gives an open end): every data set has one
         prof.append(profile_likelihood(res).intervals)
-        if not res.success or res.eps_ci95 is None:
+        if not res.success or res.uncertainty.intervals is None:
             failed += 1
             continue
         est.append(res.eps)
-        delta.append(res.eps_ci95)
+        delta.append(res.uncertainty.intervals)
         rejected += res.verdict.consistent is False
     if not est:
         raise ConvergenceError(f"no data set gave an interval: all {failed} fits failed")
@@ -307,8 +307,8 @@ def model_coverage(problem, clean, true_eps, sigma, n_datasets=200, seed=0, *, e
         at_bound += bool(res.verdict.identifiability)
         if not res.success:
             failed += 1
-        if res.eps_ci95 is not None:
-            delta.append(res.eps_ci95)
+        if res.uncertainty.intervals is not None:
+            delta.append(res.uncertainty.intervals)
         if profile:
             regions = profile_likelihood(res).regions
             inside.append(

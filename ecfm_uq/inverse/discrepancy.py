@@ -513,33 +513,32 @@ def fit_random_force(problem, eps0, s):
             )
     T, p_value = model.restricted_test(lin)
     verdict = _verdict(T, p_value, g_hat, lam, lam_sd, s.alpha, hits)
-    like = model.conditional_likelihood(lin, g_hat)
-    result = InverseResult(
-        eps=eps, loss=val, status=status, message=message,
-        nit=standard.nit + res.nit, nfev=standard.nfev + search.nfev,
-        njev=standard.njev + res.njev, optimality=optimality, method="ecfm",
-        optimizer="L-BFGS-B", uncertainty=unc, verdict=verdict,
-        extra={
-            "lam": lam, "lam_stderr": lam_sd, "tau": rms(g_hat),
-            "force_prior": model.prior, "force_tau": np.sqrt(g_hat),
-            "standard": standard, "n_solves": model.n_solves,
-        },
-    )  # fmt: skip
     # the density of the data given eps (sample_posterior) holds the covariance at tau-hat;
     # the intervals and likelihood-ratio tests profile tau out: re-estimated at every eps
-    result.likelihood = like
+    like = model.conditional_likelihood(lin, g_hat)
+    extra = {
+        "force_stderr": lam_sd, "tau": rms(g_hat), "force_prior": model.prior,
+        "force_tau": np.sqrt(g_hat), "standard": standard, "n_solves": model.n_solves,
+    }  # fmt: skip
+    interval_likelihood = None
     if opts["tau_in_intervals"] == "profiled":
         try:
             model.profiled_nll(eps)
-            result.interval_likelihood = model.profiled_likelihood(scale)
+            interval_likelihood = model.profiled_likelihood(scale)
         except _FAILURES as e:
             # an estimate run off to where a parameter has no effect (not converged): its
             # intervals fall back to the held covariance, and say so
-            result.extra["interval_likelihood"] = (
+            extra["interval_likelihood"] = (
                 f"tau cannot be re-estimated at the estimate ({e}); the intervals hold the "
                 "data covariance at tau-hat"
             )
-    return result
+    return InverseResult(
+        eps=eps, loss=val, status=status, message=message,
+        nit=standard.nit + res.nit, nfev=standard.nfev + search.nfev,
+        njev=standard.njev + res.njev, optimality=optimality, method="ecfm",
+        optimizer="L-BFGS-B", forces=lam, uncertainty=unc, verdict=verdict,
+        likelihood=like, interval_likelihood=interval_likelihood, extra=extra,
+    )  # fmt: skip
 
 
 def _uncertainty(p, x, scale, standard, g_hat, model, lin):

@@ -55,7 +55,7 @@ from .drivers import (
 from .gradients import choose_gradient
 from .interface import InverseProblem
 from .optimizers import adam
-from .result import InverseResult, Verdict
+from .result import InverseResult, Uncertainty, Verdict
 from .status import FitStatus
 
 FORMULATIONS = ("standard", "ecfm")
@@ -385,10 +385,9 @@ class DynamicInverseProblem(InverseProblem):
 
         Returns
         -------
-        dict
-            ``InverseResult`` fields: ``eps_cov``, ``eps_stderr``, ``eps_ci95``,
-            ``noise_model``, ``eps_jacobian`` (n_eps, n_steps C), or
-            ``uncertainty_message``.
+        Uncertainty
+            ``cov``, ``stderr``, ``intervals``, ``noise_model``, ``jacobian`` (n_eps,
+            n_steps C), ...; or ``success=False`` and the ``message`` why not.
         """
         import copy
 
@@ -405,7 +404,7 @@ class DynamicInverseProblem(InverseProblem):
                 if s2 <= 0:
                     raise ValueError("the residual is zero (noise-free data): pass `sigma`")
         except (ConvergenceError, ValueError) as e:
-            return {"uncertainty_message": f"uncertainty not computed: {e}"}
+            return Uncertainty.failed(f"uncertainty not computed: {e}")
         if covariance not in ("implicit", "gauss-newton"):
             raise ValueError(
                 f"`covariance` must be 'implicit' or 'gauss-newton', got {covariance!r}"
@@ -427,7 +426,7 @@ class DynamicInverseProblem(InverseProblem):
         try:
             _, J, _ = self.residual(eps, formulation)
         except ConvergenceError as e:
-            return {"uncertainty_message": f"uncertainty not computed: {e}"}
+            return Uncertainty.failed(f"uncertainty not computed: {e}")
         finally:
             self._last = saved
         if formulation == "standard":
@@ -435,7 +434,7 @@ class DynamicInverseProblem(InverseProblem):
             try:
                 D = np.sqrt(self.dt) * least_squares_jacobian(J)
             except NonIdentifiableError as e:
-                return {"uncertainty_message": f"uncertainty not computed: {e}"}
+                return Uncertainty.failed(f"uncertainty not computed: {e}")
             return estimate_uncertainty(None, eps, data, s2, model, dof=dof, deps_dv=D)
         return estimate_uncertainty(grad, eps, data, s2, model, dof=dof, hessian=J.T @ J)
 
@@ -495,7 +494,7 @@ def fit_dynamic_problem(problem, eps0, s):
         )
         traj = None
         if res.status is FitStatus.CONVERGED:  # completed its epochs: at an optimum?
-            _check_adam(problem, res, residual, s.bounds)
+            res = _check_adam(problem, res, residual, s.bounds)
     elif method in ("least-squares", "trf"):
         s.take(dict.fromkeys(LEAST_SQUARES_KEYWORDS))  # by name, before any march
         out = least_squares_scaled(
@@ -525,21 +524,21 @@ def fit_dynamic_problem(problem, eps0, s):
         res = _result(out, formulation, method)
         traj = out.payload
     if traj is None and method != "adam":  # stopped where the model cannot be marched
-        res.verdict = Verdict(False, test="none", message=f"NOT consistent: {res.message}")
-        return res
+        verdict = Verdict(False, test="none", message=f"NOT consistent: {res.message}")
+        return dataclasses.replace(res, verdict=verdict)
     if formulation == "ecfm":
         traj = traj if traj is not None else problem.solve(res.eps, "ecfm")
-        res.extra["lam"] = traj.lam
+        res = dataclasses.replace(res, forces=traj.lam)
     if s.uncertainty and res.success:
         conv = "implicit" if covariance == "sandwich" else covariance
-        for key, value in problem.uncertainty(res.eps, formulation, s.sigma, conv).items():
-            setattr(res, key, value)
+        unc = problem.uncertainty(res.eps, formulation, s.sigma, conv)
     elif s.uncertainty:
-        res.uncertainty_message = "uncertainty not computed: the fit did not succeed"
+        unc = Uncertainty.failed("uncertainty not computed: the fit did not succeed")
     else:
-        res.uncertainty_message = "not computed (uncertainty=False)"
-    res.verdict = _verdict(problem, res, s, traj if formulation == "standard" else None)
-    return res
+        unc = Uncertainty.failed("not computed (uncertainty=False)")
+    res = dataclasses.replace(res, uncertainty=unc)
+    verdict = _verdict(problem, res, s, traj if formulation == "standard" else None)
+    return dataclasses.replace(res, verdict=verdict)
 
 
 def _result(out, formulation, optimizer):
@@ -553,22 +552,26 @@ def _result(out, formulation, optimizer):
 
 def _check_adam(problem, res, residual, bounds):
     """Adam ran its epochs: CONVERGED only if the least-squares optimality conditions
-    hold at its last iterate, else MAX_ITERATIONS (its epochs are a budget, not a test)."""
+    hold at its last iterate, else MAX_ITERATIONS (its epochs are a budget, not a test).
+    Returns the result with that status."""
     saved = dict(problem._last)  # the check must not move the warm starts
     try:
         r, J, _ = residual(res.eps)
     except ConvergenceError as e:
-        res.status = FitStatus.MODEL_FAILURE
-        res.message += f" [the model cannot be marched at the last iterate: {e}]"
-        return
+        return dataclasses.replace(
+            res, status=FitStatus.MODEL_FAILURE,
+            message=f"{res.message} [the model cannot be marched at the last iterate: {e}]",
+        )  # fmt: skip
     finally:
         problem._last = saved
-    res.nfev += 1
     opt = least_squares_optimality(r, J, res.eps, bounds=bounds)
-    res.optimality = opt.value
+    res = dataclasses.replace(res, nfev=res.nfev + 1, optimality=opt.value)
     if not opt.converged:
-        res.status = FitStatus.MAX_ITERATIONS
-        res.message += f" [NOT converged: {opt.message}]"
+        res = dataclasses.replace(
+            res, status=FitStatus.MAX_ITERATIONS,
+            message=f"{res.message} [NOT converged: {opt.message}]",
+        )  # fmt: skip
+    return res
 
 
 _OBJECTIVE = {
@@ -598,10 +601,10 @@ def _verdict(problem, res, s, traj=None):
         problem._last = saved
     e = problem.predictions(traj)[1:] - problem.V[1:]
     details = {}
-    if "lam" in res.extra:
-        lam = res.extra["lam"][1:]
+    if res.forces is not None:
+        lam = res.forces[1:]
         details["peak_force_index"] = int(np.argmax(np.abs(lam).max(axis=0)))
     return residual_verdict(
         e, problem.V[1:], s.sigma, s.alpha, problem.system.n_eps, at_bound=hits,
-        extreme=extreme, details=details, forces="lam" in res.extra,
+        extreme=extreme, details=details, forces=res.forces is not None,
     )  # fmt: skip

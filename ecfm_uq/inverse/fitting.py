@@ -308,12 +308,12 @@ def fit(
         result = fitter(
             whitened_problem(problem, noise), eps0, dataclasses.replace(settings, sigma=1.0)
         )
-        _in_data_units(result, noise)
+        result = _in_data_units(result, noise)
     # what the profile likelihood needs: the likelihood (or why there is none), the bounds
-    if result.likelihood is None:
-        result.likelihood = problem.log_likelihood(settings.formulation, settings.sigma)
-    result.bounds = settings.bounds
-    return result
+    likelihood = result.likelihood
+    if likelihood is None:
+        likelihood = problem.log_likelihood(settings.formulation, settings.sigma)
+    return dataclasses.replace(result, likelihood=likelihood, bounds=settings.bounds)
 
 
 def _in_data_units(result, noise):
@@ -330,15 +330,18 @@ def _in_data_units(result, noise):
         return unit.sub(said, text)
 
     unc = result.uncertainty
-    result.uncertainty = dataclasses.replace(
-        unc, jacobian=jacobian_in_data_units(unc.jacobian, noise), message=restate(unc.message)
-    )
+    changes = {
+        "uncertainty": dataclasses.replace(
+            unc, jacobian=jacobian_in_data_units(unc.jacobian, noise), message=restate(unc.message)
+        ),
+        "message": restate(result.message),
+    }
     for name in ("likelihood", "interval_likelihood"):
         like = getattr(result, name)
         if isinstance(like, LogLikelihood):
-            setattr(result, name, dataclasses.replace(like, description=restate(like.description)))
+            changes[name] = dataclasses.replace(like, description=restate(like.description))
     if result.verdict is not None:
-        result.verdict = dataclasses.replace(
+        changes["verdict"] = dataclasses.replace(
             result.verdict, message=restate(result.verdict.message)
         )
-    result.message = restate(result.message)
+    return dataclasses.replace(result, **changes)

@@ -20,6 +20,8 @@ point reached).
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from .._validation import as_finite_array
@@ -238,7 +240,7 @@ def fit_model_problem(problem, eps0, s):
     from .drivers import least_squares_scaled
     from .loglik import gaussian_likelihood, remember_last_point
     from .noise_model import noise_model
-    from .result import InverseResult
+    from .result import InverseResult, Uncertainty
     from .status import FitStatus
     from .uncertainty import estimate_uncertainty, least_squares_jacobian
     from .verdict import check_bounds, model_verdict
@@ -281,17 +283,16 @@ def fit_model_problem(problem, eps0, s):
                                                                        typical=eps0)),
     )  # fmt: skip
     if out.payload is None:
-        res = InverseResult(
+        return InverseResult(
             eps=out.x, loss=np.inf, message=out.message, nit=out.nit, nfev=out.nfev,
             status=out.status, method="standard", optimizer="least-squares",
             eps_history=out.eps_history, loss_history=out.loss_history,
             verdict=model_verdict(None, None, noise, p, bounds, out.x, failed=out.message),
+            likelihood=likelihood, bounds=bounds, names=problem.names,
         )  # fmt: skip
-        res.likelihood, res.bounds, res.names = likelihood, bounds, problem.names
-        return res
     r, J, y = residual(out.x)
     J = J()
-    unc = {"uncertainty_message": "not computed (uncertainty=False)"}
+    unc = Uncertainty.failed("not computed (uncertainty=False)")
     if s.uncertainty:
         if noise.known:
             s2, how, dof = 1.0, "known", None
@@ -301,14 +302,14 @@ def fit_model_problem(problem, eps0, s):
             try:
                 D = least_squares_jacobian(J, problem.names)
             except ValueError as e:
-                unc = {"uncertainty_message": f"uncertainty not computed: {e}"}
+                unc = Uncertainty.failed(f"uncertainty not computed: {e}")
             else:
                 unc = estimate_uncertainty(None, out.x, r, s2, how, dof=dof, deps_dv=D)
-                if "eps_jacobian" in unc:  # d eps/d(W v) as d eps/dv: in the data's units
-                    unc["eps_jacobian"] = noise.pull_back(unc["eps_jacobian"])
+                if unc.jacobian is not None:  # d eps/d(W v) as d eps/dv: the data's units
+                    unc = dataclasses.replace(unc, jacobian=noise.pull_back(unc.jacobian))
         else:
-            unc = {"uncertainty_message": "uncertainty not computed: as many parameters as "
-                   "data leave no residual to estimate sigma; pass `sigma`"}  # fmt: skip
+            unc = Uncertainty.failed("uncertainty not computed: as many parameters as data "
+                                     "leave no residual to estimate sigma; pass `sigma`")  # fmt: skip
     verdict = model_verdict(r, noise.whiten(problem.v), noise, p, bounds, out.x)
     message = out.message
     if out.status is not FitStatus.CONVERGED and callable(problem.jac):
@@ -316,12 +317,11 @@ def fit_model_problem(problem, eps0, s):
             " (a user-supplied `jac` that disagrees with `model` stalls a fit: check it with "
             "problem.check_derivatives(eps))"
         )
-    res = InverseResult(
-        **unc, eps=out.x, loss=out.loss, status=out.status, message=message, nit=out.nit,
+    return InverseResult(
+        eps=out.x, loss=out.loss, status=out.status, message=message, nit=out.nit,
         nfev=out.nfev, njev=out.nit, optimality=out.optimality, method="standard",
         optimizer="least-squares", eps_history=out.eps_history,
         loss_history=out.loss_history, extra={"prediction": y.reshape(problem.shape)},
-        verdict=verdict,
+        uncertainty=unc, verdict=verdict, likelihood=likelihood, bounds=bounds,
+        names=problem.names,
     )  # fmt: skip
-    res.likelihood, res.bounds, res.names = likelihood, bounds, problem.names
-    return res

@@ -38,6 +38,7 @@ ECFM problem needs its ``Gamma``.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 import scipy.optimize as sopt
@@ -46,7 +47,7 @@ from .._validation import as_dense_rows, as_finite_array, check_positive
 from ..system import solve_steady
 from .convergence import KKT_TOL, decide_status, kkt_optimality
 from .noise import noise_bounds, sample_moments
-from .result import InverseResult
+from .result import InverseResult, Uncertainty
 
 _GRADIENTS = ("analytic", "fd")
 
@@ -277,17 +278,13 @@ def _solve(problem, z0, note, gradients, maxiter, ftol, tol, method_name):
     e = problem.discrepancy(z)
     mean, var = sample_moments(e) if e.size >= 2 else (float(e.mean()), 0.0)
     extra = {
-        "theta": theta.copy(),
-        "lam": lam.copy(),
         "discrepancy": e,
         "mean_discrepancy": mean,
         "var_discrepancy": var,
         "residual_norm": float(np.linalg.norm(problem.equality(z))),
         "inequality": problem.inequality(z),
-        "bounds": problem.bounds,
-        "nfev": int(res.nfev),
-        "njev": int(getattr(res, "njev", 0) or 0),
-        "status": int(res.status),
+        "moment_bounds": problem.bounds,
+        "slsqp_status": int(res.status),
         "start": note,
         "gradients": gradients,
         "wall_time_s": wall,
@@ -311,9 +308,13 @@ def _solve(problem, z0, note, gradients, maxiter, ftol, tol, method_name):
         optimizer="SLSQP",
         message=f"SLSQP: {res.message} [{opt.message}]",
         nit=int(res.nit),
+        nfev=int(res.nfev),
+        njev=int(getattr(res, "njev", 0) or 0),
         method=method_name,
         eps_history=np.array(hist_eps),
         loss_history=np.array(hist_loss),
+        state=theta.copy(),
+        forces=lam.copy() if problem.n_lam else None,
         extra=extra,
     )
 
@@ -366,40 +367,37 @@ def fit_all_at_once(problem, eps0, s):
     z0, note = _start(inverse, eps0, opts["theta0"], opts.get("lam0"), problem.solve_options)
     res = _solve(inverse, z0, note, opts["jac"], maxiter, ftol, tol, label)
     if not res.success:
-        res.uncertainty_message = "uncertainty not computed: the fit did not succeed"
+        unc = Uncertainty.failed("uncertainty not computed: the fit did not succeed")
     elif not s.uncertainty:
-        res.uncertainty_message = "not computed (uncertainty=False)"
+        unc = Uncertainty.failed("not computed (uncertainty=False)")
     elif s.formulation == "standard":
         # the all-at-once optimum is the reduced one: same optimality condition
         # grad z^INV(eps) = 0, hence the same covariance code path as the reduced fit
         from .steady import _uncertainty
 
-        for k, val in _uncertainty(
+        unc = _uncertainty(
             system, inverse.M_obs, inverse.v, res.eps, "standard",
             dict(problem.solve_options), s.sigma,
-        ).items():  # fmt: skip
-            setattr(res, k, val)
+        )  # fmt: skip
     else:
-        for k, val in _kkt_uncertainty(inverse, res.extra["z"], s.sigma).items():
-            setattr(res, k, val)
-    _attach_verdict(res, inverse, s.sigma, s.alpha)
-    return res
+        unc = _kkt_uncertainty(inverse, res.extra["z"], s.sigma)
+    return replace(res, uncertainty=unc, verdict=_verdict(res, inverse, s.sigma, s.alpha))
 
 
 #: a scaled moment inequality within this of zero is active at the optimum
 ACTIVE_TOL = 1e-6
 
 
-def _attach_verdict(res, problem, sigma, alpha):
+def _verdict(res, problem, sigma, alpha):
     """The paper's z / chi-squared test of the discrepancy (Eq. ecfm_noise) when the noise
-    is modelled, as the fit's :class:`~.result.Verdict`."""
+    is modelled, as the fit's :class:`~.result.Verdict` (``None`` without sigma)."""
     if sigma is None:
-        return
+        return None
     from .noise import consistency_test
     from .verdict import moments_bounds_verdict
 
     test = consistency_test(res.extra["discrepancy"], sigma, alpha)
-    res.verdict = moments_bounds_verdict(test, sigma, alpha)
+    return moments_bounds_verdict(test, sigma, alpha)
 
 
 def _kkt_uncertainty(problem, z, sigma):

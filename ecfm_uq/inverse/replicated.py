@@ -69,7 +69,7 @@ from .moments import (  # noqa: F401  (moment_verdict, replicate_statistics: v0.
     moment_verdict,
     replicate_statistics,
 )
-from .result import InverseResult
+from .result import InverseResult, Uncertainty
 from .status import FitStatus
 
 __all__ = [
@@ -469,13 +469,11 @@ def fit_replicated_problem(problem, eps0, s):
     if tr.failures:
         msg += f" ({len(tr.failures)} evaluations failed; first: {tr.failures[0]})"
     extra.update(
-        lam=lam,
         force_norm=float(np.linalg.norm(lam)),
         neg_log_likelihood=p.value,
         grad_eps=p.grad_eps,
         mu=p.mu,
         var=p.var,
-        Theta=p.Theta,
         n_solves=like.n_solves - solves_before - extra.get("optimality_solves", 0),
         n_failures=len(tr.failures),
     )
@@ -484,12 +482,12 @@ def fit_replicated_problem(problem, eps0, s):
     if verdict.consistent is False or verdict.identifiability:
         msg += f" [{verdict.message}]"
     if not s.uncertainty:
-        unc = {"uncertainty_message": "not computed (uncertainty=False)"}
+        unc = Uncertainty.failed("not computed (uncertainty=False)")
     else:
         unc = _likelihood_uncertainty(like, formulation, eps_hat, lam)
     nfev = int(getattr(res, "nfev", 0) or 0)
     return InverseResult(
-        **unc,
+        uncertainty=unc,
         eps=eps_hat,
         loss=float(loss),
         status=_status(ok, final_ok, res, maxiter),
@@ -502,6 +500,8 @@ def fit_replicated_problem(problem, eps0, s):
         optimizer=method,
         eps_history=np.array(tr.eps).reshape(-1, system.n_eps),
         loss_history=np.array(tr.loss),
+        state=p.Theta,
+        forces=lam,
         extra=extra,
         verdict=verdict,
     )
@@ -535,7 +535,7 @@ _UNCERTAINTY_INNER_TOL = 1e-24
 
 
 def _likelihood_uncertainty(like, formulation, eps, lam):
-    """``InverseResult`` uncertainty fields of a pseudo-likelihood estimate.
+    """The :class:`~.result.Uncertainty` of a pseudo-likelihood estimate.
 
     The optimality condition is differentiated implicitly
     (:func:`~ecfm_uq.inverse.uncertainty.implicit_covariance`) in the replicate statistics
@@ -547,11 +547,11 @@ def _likelihood_uncertainty(like, formulation, eps, lam):
     from .uncertainty import estimate_uncertainty
 
     if formulation == "penalty":
-        return {
-            "uncertainty_message": "uncertainty not computed: the penalty objective has no "
-            "minimizer (it is unbounded below as lam -> 0), so no optimality condition "
-            "defines the estimate; use formulation='inner-outer' or 'standard'"
-        }
+        return Uncertainty.failed(
+            "uncertainty not computed: the penalty objective has no minimizer (it is "
+            "unbounded below as lam -> 0), so no optimality condition defines the estimate; "
+            "use formulation='inner-outer' or 'standard'"
+        )
     if formulation == "standard":
 
         def grad(e, w):

@@ -8,28 +8,42 @@ standard, ECFM, noisy, pseudo-likelihood, steady or dynamic — returns an
 * how the optimizer ended: ``success``, ``status`` (:class:`~.status.FitStatus`, decided
   from the optimality conditions at the returned point), ``message``, ``nit``, ``nfev``,
   ``njev``, ``optimality``;
-* the estimate: ``eps``, ``loss``, histories, formulation-specific arrays in ``extra``;
+* the estimate: ``eps``, ``loss``, histories; the formulation's ``state``
+  (:math:`\\Theta`) and constraint ``forces`` (:math:`\\lambda`) where it has them;
+  further formulation-specific outputs in ``extra`` (each key documented on
+  :class:`InverseResult`);
 * ``uncertainty``: an :class:`Uncertainty` (covariance, standard errors, intervals, how
   they were computed, or why not);
 * ``verdict``: a :class:`Verdict`, the answer to "can this model explain these data?"
   as a test of stated size.
 
-The v0.2 spellings (``eps_cov``, ``eps_stderr``, ``eps_ci95``, ``noise_model``,
-``uncertainty_message``, ``eps_jacobian``, ``extra["verdict"][...]``) still read (and
-write) the same information.
+A result is frozen: a fitter builds it once, with :func:`dataclasses.replace` where a
+later step (the uncertainty, the verdict, the likelihood) adds to it.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+from scipy import special
 
 from .status import FitStatus
 
 __all__ = ["InverseResult", "Uncertainty", "Verdict"]
+
+
+def interval_quantile(level, dof=None):
+    """The two-sided ``level`` quantile of every delta-method interval: normal, or
+    Student-t with ``dof`` degrees of freedom when sigma was estimated (n - p).
+
+    scipy.special's inverse CDFs: the quantiles of ``stats.norm.ppf``/``stats.t.ppf`` at a
+    tenth of their per-call cost (a fit of a small model computes one).
+    """
+    q = 0.5 + level / 2
+    return float(special.ndtri(q) if dof is None else special.stdtrit(dof, q))
 
 
 @dataclass(frozen=True)
@@ -81,19 +95,14 @@ class Uncertainty:
         """No uncertainty, and why."""
         return cls(False, str(message))
 
-
-_UNCERTAINTY_ALIASES = {
-    "eps_cov": "cov",
-    "eps_stderr": "stderr",
-    "eps_ci95": "intervals",
-    "noise_model": "noise_model",
-    "eps_jacobian": "jacobian",
-    "covariance_method": "method",
-}
+    def quantile(self, level):
+        """The two-sided ``level`` quantile of these intervals (:func:`interval_quantile`
+        with :attr:`dof`)."""
+        return interval_quantile(level, self.dof)
 
 
 @dataclass(frozen=True)
-class Verdict(Mapping):
+class Verdict:
     """Whether the fitted model explains the data: a test of stated size, one rule for all.
 
     ``consistent`` is ``p_value >= alpha`` (the data are compatible with the model plus
@@ -124,11 +133,6 @@ class Verdict(Mapping):
         Parameters at a bound (which side) or coefficients at an extreme value: a finding
         about what the data determine, reported beside the test, never folded into
         ``consistent``; empty when there is none.
-
-    Notes
-    -----
-    Reads as a mapping too (``verdict["consistent"]``, ``verdict["force_to_data"]``), the
-    v0.2 dict form.
     """
 
     consistent: bool | None
@@ -140,27 +144,6 @@ class Verdict(Mapping):
     details: dict = field(default_factory=dict)
     identifiability: str = ""
 
-    def _view(self):
-        out = {
-            "consistent": self.consistent,
-            "message": self.message,
-            "p_value": self.p_value,
-            "alpha": self.alpha,
-            "test": self.test,
-            "statistic": self.statistic,
-        }
-        out.update(self.details)
-        return out
-
-    def __getitem__(self, key):
-        return self._view()[key]
-
-    def __iter__(self):
-        return iter(self._view())
-
-    def __len__(self):
-        return len(self._view())
-
     def __eq__(self, other):
         if isinstance(other, Verdict):
             return dataclasses.astuple(self) == dataclasses.astuple(other)
@@ -169,8 +152,16 @@ class Verdict(Mapping):
     __hash__ = None
 
 
+def _empty_history():
+    return np.zeros((0, 0))
+
+
+@dataclass(frozen=True, repr=False, eq=False)
 class InverseResult:
     """Outcome of an inverse fit (every formulation, every optimizer).
+
+    Frozen: built once by the fitter; a step that adds to a result (the uncertainty, the
+    verdict, the likelihood) builds a new one with :func:`dataclasses.replace`.
 
     Attributes
     ----------
@@ -178,9 +169,9 @@ class InverseResult:
         The estimate (the optimizer's final point).
     loss : float
         Objective at ``eps``.
-    success : bool
-        ``status == FitStatus.CONVERGED``: the optimality conditions hold at ``eps``.
     status : FitStatus
+        Decided from the optimality conditions at ``eps``; ``success`` is
+        ``status == FitStatus.CONVERGED``.
     message : str
     nit : int
         Optimizer iterations (epochs for Adam).
@@ -196,9 +187,19 @@ class InverseResult:
         The optimizer that ran (``"BFGS"``, ``"adam"``, ``"SLSQP"``, ...).
     eps_history : (nit + 1, n_eps) ndarray
     loss_history : (nit + 1,) ndarray
-    extra : dict
-        Formulation-specific outputs (state, forces, diagnostics); ``extra["verdict"]``
-        is :attr:`verdict`.
+    state : ndarray or None
+        The solution :math:`\\Theta` at the estimate (with the forces where the
+        formulation has them): ``(N, P)`` for the steady least-squares and minimize fits
+        and the replicated fits, the stacked unknowns ``theta`` of the all-at-once SLSQP
+        fits; ``None`` for a :class:`~.model_problem.ModelProblem`, the random-force ECFM
+        and the dynamic fits (whose trajectory is ``problem.solve(result.eps,
+        formulation)``; not kept, it is large).
+    forces : ndarray or None
+        The constraint forces :math:`\\lambda` at the estimate: ``(C,)`` for the steady
+        and replicated ECFM fits (the posterior mean for the random-force ECFM; zeros for
+        the replicated ``"standard"`` pseudo-likelihood, which holds them at zero),
+        ``(n_steps + 1, C)`` for the dynamic ECFM; ``None`` where the formulation has no
+        forces (``"standard"``, a :class:`~.model_problem.ModelProblem`).
     uncertainty : Uncertainty
     verdict : Verdict or None
     likelihood : LogLikelihood, str or None
@@ -213,118 +214,125 @@ class InverseResult:
         :math:`\\epsilon`, what :func:`~ecfm_uq.inverse.sample_posterior` samples).
     bounds : list of (lo, hi) or None
         The bounds the fit ran with.
+    names : list of str or None
+        Parameter names, where the problem has them.
+    extra : dict
+        Formulation-specific outputs, each key below (and no other):
 
-    Notes
-    -----
-    The v0.2 names ``eps_cov``, ``eps_stderr``, ``eps_ci95``, ``noise_model``,
-    ``eps_jacobian`` and ``uncertainty_message`` (and ``covariance_method``, the
-    uncertainty's ``method``) read and write :attr:`uncertainty`.
+        ============================  ========================  =========================
+        key                           formulation               meaning
+        ============================  ========================  =========================
+        ``prediction``                ModelProblem              the model at ``eps``, in
+                                                                the data's shape
+        ``discrepancy``               all-at-once (SLSQP)       model minus data at the
+                                                                optimum, ``(C,)``
+        ``mean_discrepancy``,         all-at-once               its sample mean and
+        ``var_discrepancy``                                     variance
+        ``residual_norm``             all-at-once               norm of the model
+                                                                equations' residual
+        ``inequality``                all-at-once               the scaled moment
+                                                                inequalities (>= 0 when
+                                                                met)
+        ``moment_bounds``             all-at-once               the z / chi-squared bounds
+                                                                (dict)
+        ``z``                         all-at-once               the stacked unknowns
+                                                                (theta, eps, lam)
+        ``n_variables``               all-at-once               ``z.size``
+        ``start``                     all-at-once               how the start was built
+        ``gradients``                 all-at-once               ``"analytic"`` or ``"fd"``
+        ``wall_time_s``               all-at-once               SLSQP's wall time
+        ``slsqp_status``              all-at-once, ``penalty``  SLSQP's exit mode
+        ``tau``                       random-force ECFM         rms of the forces'
+                                                                standard deviations
+        ``force_tau``                 random-force ECFM         each force's standard
+                                                                deviation, ``(C,)``
+        ``force_stderr``              random-force ECFM         posterior standard
+                                                                deviations of ``forces``
+        ``force_prior``               random-force ECFM         ``"shared"`` or
+                                                                ``"sparse"``
+        ``standard``                  random-force ECFM         the standard fit it
+                                                                started from (a result)
+        ``interval_likelihood``       random-force ECFM         why ``interval_likelihood``
+                                                                is ``None`` (when it is)
+        ``n_solves``                  random-force ECFM,        forward solves
+                                      replicated
+        ``force_norm``                replicated                :math:`\\|\\lambda\\|`
+        ``neg_log_likelihood``        replicated                the pseudo-likelihood
+        ``grad_eps``                  replicated                its gradient in eps
+        ``mu``, ``var``               replicated                the model's mean and
+                                                                variance at the sensors
+        ``n_failures``                replicated                failed evaluations
+        ``inner_message``,            ``inner-outer``           the last inner solve:
+        ``inner_nit``,                                          message, iterations (all),
+        ``hess_lam_min_eig``,                                   Hessian in lam (smallest
+        ``hess_lam_cond``,                                      eigenvalue, condition),
+        ``dlam_deps``                                           :math:`d\\lambda/d\\epsilon`
+        ``penalty``,                  ``penalty``               the weight, the log force
+        ``log_force_term``,                                     term, the norm of the
+        ``grad_lam_norm``,                                      gradient in lam, the
+        ``force_scaling_slope``,                                slope in log force scale
+        ``optimality_solves``                                   (0 at a minimum), solves
+                                                                of the optimality check
+        ``grad``, ``grad_history``    Adam (dynamic)            final gradient, all
+                                                                gradients
+        ``profile``                   any                       the last
+                                                                :class:`~.profile.
+                                                                ProfileSummary`, written
+                                                                by :func:`~ecfm_uq.
+                                                                inverse.profile_likelihood`
+                                                                (read by :meth:`summary`)
+        ============================  ========================  =========================
     """
 
-    def __init__(
-        self,
-        eps,
-        loss,
-        success=None,
-        message="",
-        nit=0,
-        method="",
-        eps_history=None,
-        loss_history=None,
-        extra=None,
-        *,
-        status=None,
-        nfev=0,
-        njev=0,
-        optimality=None,
-        optimizer="",
-        uncertainty=None,
-        verdict=None,
-        eps_cov=None,
-        eps_stderr=None,
-        eps_ci95=None,
-        noise_model="none",
-        uncertainty_message="",
-        eps_jacobian=None,
-        covariance_method=None,
-        dof=None,
-    ):
-        self.eps = np.asarray(eps, dtype=float)
-        self.loss = float(loss)
-        if status is None:
-            status = FitStatus.CONVERGED if success else FitStatus.STALLED
-        self.status = FitStatus(status)
-        if success is not None and bool(success) != self.status.success:
-            raise ValueError(f"`success`={success} contradicts `status`={self.status.name}")
-        self.message = str(message)
-        self.nit = int(nit)
-        self.nfev, self.njev = int(nfev), int(njev)
-        self.optimality = None if optimality is None else float(optimality)
-        self.method = method
-        self.optimizer = optimizer
-        self.eps_history = np.zeros((0, 0)) if eps_history is None else np.asarray(eps_history)
-        self.loss_history = np.zeros(0) if loss_history is None else np.asarray(loss_history)
-        self.extra = {} if extra is None else dict(extra)
-        if uncertainty is None:
-            computed = eps_cov is not None
-            uncertainty = Uncertainty(
-                computed,
-                uncertainty_message,
-                eps_cov,
-                eps_stderr,
-                eps_ci95,
-                noise_model=noise_model,
-                dof=dof,
-                jacobian=eps_jacobian,
-                method=(covariance_method or "implicit") if computed else "",
-            )
-        self.uncertainty = uncertainty
-        if verdict is None and "verdict" in self.extra:
-            verdict = self.extra["verdict"]
-        self.verdict = verdict
-        self.likelihood = None  # set by fit: a LogLikelihood, or why there is none
-        self.interval_likelihood = None  # set by fit where the intervals use another one
-        self.bounds = None  # the bounds the fit ran with
-        self.names = None  # parameter names, where the problem has them
+    eps: np.ndarray
+    loss: float
+    status: FitStatus = FitStatus.STALLED
+    message: str = ""
+    nit: int = 0
+    nfev: int = 0
+    njev: int = 0
+    optimality: float | None = None
+    method: str = ""
+    optimizer: str = ""
+    eps_history: np.ndarray = field(default_factory=_empty_history)
+    loss_history: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    state: np.ndarray | None = None
+    forces: np.ndarray | None = None
+    uncertainty: Uncertainty = field(default_factory=lambda: Uncertainty(False))
+    verdict: Verdict | None = None
+    likelihood: Any = None
+    interval_likelihood: Any = None
+    bounds: list | None = None
+    names: list | None = None
+    extra: dict = field(default_factory=dict)
 
-    # -- status ---------------------------------------------------------------------------
+    def __post_init__(self):
+        def put(name, value):
+            object.__setattr__(self, name, value)
+
+        put("eps", np.asarray(self.eps, dtype=float))
+        put("loss", float(self.loss))
+        put("status", FitStatus(self.status))
+        put("message", str(self.message))
+        put("nit", int(self.nit))
+        put("nfev", int(self.nfev))
+        put("njev", int(self.njev))
+        if self.optimality is not None:
+            put("optimality", float(self.optimality))
+        put("eps_history", np.asarray(self.eps_history))
+        put("loss_history", np.asarray(self.loss_history))
+        if not isinstance(self.uncertainty, Uncertainty):
+            raise TypeError(
+                f"`uncertainty` must be an Uncertainty, got {type(self.uncertainty).__name__}"
+            )
+        if self.verdict is not None and not isinstance(self.verdict, Verdict):
+            raise TypeError(f"`verdict` must be a Verdict, got {type(self.verdict).__name__}")
+        put("extra", dict(self.extra))
+
     @property
     def success(self):
         """Whether the fit converged (``status == FitStatus.CONVERGED``)."""
         return self.status.success
-
-    @success.setter
-    def success(self, value):
-        if bool(value):
-            self.status = FitStatus.CONVERGED
-        elif self.status.success:
-            self.status = FitStatus.STALLED
-
-    # -- verdict (also extra["verdict"]) --------------------------------------------------
-    @property
-    def verdict(self):
-        """The :class:`Verdict` (``None`` when the formulation has no noise model yet)."""
-        return self._verdict
-
-    @verdict.setter
-    def verdict(self, value):
-        if isinstance(value, Mapping) and not isinstance(value, Verdict):
-            value = _verdict_from_dict(value)
-        self._verdict = value
-        if value is None:
-            self.extra.pop("verdict", None)
-        else:
-            self.extra["verdict"] = value
-
-    # -- v0.2 names of the uncertainty ----------------------------------------------------
-    @property
-    def uncertainty_message(self):
-        """Why the uncertainty is missing (empty when it was computed)."""
-        return self.uncertainty.message
-
-    @uncertainty_message.setter
-    def uncertainty_message(self, value):
-        self.uncertainty = dataclasses.replace(self.uncertainty, message=str(value))
 
     def __repr__(self):
         consistent = None if self.verdict is None else self.verdict.consistent
@@ -348,29 +356,3 @@ class InverseResult:
         from .summary_table import summary_table
 
         return summary_table(self, level)
-
-
-def _alias_property(old, new):
-    def get(self):
-        return getattr(self.uncertainty, new)
-
-    def set_(self, value):
-        changes = {new: value}
-        if new == "cov":
-            changes["success"] = value is not None
-        self.uncertainty = dataclasses.replace(self.uncertainty, **changes)
-
-    return property(get, set_, doc=f"v0.2 name of ``uncertainty.{new}``.")
-
-
-for _old, _new in _UNCERTAINTY_ALIASES.items():
-    setattr(InverseResult, _old, _alias_property(_old, _new))
-
-
-def _verdict_from_dict(d):
-    """A :class:`Verdict` from the v0.2 dict form (``consistent``, ``message``, details)."""
-    d = dict(d)
-    keys = ("consistent", "p_value", "alpha", "test", "statistic", "message")
-    fields = {k: d.pop(k) for k in keys if k in d}
-    fields.setdefault("consistent", False)
-    return Verdict(**fields, details=d)

@@ -29,7 +29,7 @@ from .drivers import (
     verify_least_squares,
 )
 from .gradients import choose_gradient
-from .result import InverseResult, Verdict
+from .result import InverseResult, Uncertainty, Verdict
 from .status import FitStatus
 from .verdict import consistency_verdict
 
@@ -226,7 +226,7 @@ def fit_steady_problem(problem, eps0, s):
             system, M_obs, v, np.asarray(res.x), s.formulation, solve_kw, sigma, free, covariance
         )
     else:
-        unc = {"uncertainty_message": "not computed (uncertainty=False)"}
+        unc = Uncertainty.failed("not computed (uncertainty=False)")
     lam = sol.lam if s.formulation == "ecfm" else np.zeros(0)
     verdict = consistency_verdict(
         system, M_obs, v, res.x, lam, bounds, sigma=sigma, alpha=s.alpha,
@@ -235,7 +235,7 @@ def fit_steady_problem(problem, eps0, s):
     if verdict.consistent is False or verdict.identifiability:
         msg += f" [{verdict.message}]"
     return InverseResult(
-        **unc,
+        uncertainty=unc,
         eps=np.asarray(res.x),
         loss=z,
         status=out.status,
@@ -248,7 +248,8 @@ def fit_steady_problem(problem, eps0, s):
         optimizer=method,
         eps_history=out.eps_history,
         loss_history=out.loss_history,
-        extra={"Theta": sol.Theta, "lam": lam},
+        state=sol.Theta,
+        forces=lam if s.formulation == "ecfm" else None,
         verdict=verdict,
     )
 
@@ -292,13 +293,13 @@ def _uncertainty(
             _, Jr, _ = _RESIDUALS[formulation](system, M_obs, v, eps, **opts)
             hessian = Jr.T @ Jr
     except (ConvergenceError, ValueError) as e:
-        return {"uncertainty_message": f"uncertainty not computed: {e}"}
+        return Uncertainty.failed(f"uncertainty not computed: {e}")
     if covariance == "gauss-newton" and formulation == "standard":
         # d eps_hat / dv = J^+ exactly (g = J^T (M theta - v)), by the SVD of J
         try:
             D = least_squares_jacobian(Jr)
         except NonIdentifiableError as e:
-            return {"uncertainty_message": f"uncertainty not computed: {e}"}
+            return Uncertainty.failed(f"uncertainty not computed: {e}")
         return estimate_uncertainty(None, eps, v, s2, model, dof=dof, deps_dv=D)
     return estimate_uncertainty(
         lambda e, w: objective(system, M_obs, w, e, **solve_kw)[1], eps, v, s2, model,

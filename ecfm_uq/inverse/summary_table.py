@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .uncertainty import interval_quantile
-
 __all__ = ["summary_table"]
 
 
@@ -23,7 +21,7 @@ def _interval(result, level, j):
     unc = result.uncertainty
     if unc is None or unc.stderr is None:
         return np.nan, np.nan, ""
-    k = interval_quantile(level, unc.dof)
+    k = unc.quantile(level)
     se = unc.stderr[j]
     return (
         result.eps[j] - k * se,

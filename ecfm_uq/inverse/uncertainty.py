@@ -20,18 +20,19 @@ while Gauss-Newton drops the residual-curvature term.
 The steady, noisy SLSQP and pseudo-likelihood fits (:func:`~ecfm_uq.inverse.fit` of a
 :class:`~ecfm_uq.inverse.SteadyProblem`: standard, exact-force ECFM, ``"all-at-once"``
 and ``"noisy-ecfm"``; of a :class:`~ecfm_uq.inverse.ReplicatedProblem`) compute their
-``eps_cov`` through :func:`implicit_covariance`; only the optimality condition and the
-data covariance differ. The dynamic (Adam) fits do not carry one yet.
+covariance (``result.uncertainty.cov``) through :func:`implicit_covariance`; only the
+optimality condition and the data covariance differ. The dynamic (Adam) fits do not carry
+one yet.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy import special
 
 from .._validation import as_finite_array
 from ..errors import ConvergenceError, NonIdentifiableError
 from .finite_differences import fd_jacobian
+from .result import Uncertainty, interval_quantile
 
 #: an information matrix whose smallest/largest singular value is below this is singular
 #: (its finite-difference entries carry ~1e-10 relative round-off)
@@ -240,17 +241,6 @@ def residual_variance(r, n_eps):
     return float(r @ r) / (r.size - n_eps)
 
 
-def interval_quantile(level, dof=None):
-    """The two-sided ``level`` quantile of every delta-method interval: normal, or
-    Student-t with ``dof`` degrees of freedom when sigma was estimated (n - p).
-
-    scipy.special's inverse CDFs: the quantiles of ``stats.norm.ppf``/``stats.t.ppf`` at a
-    tenth of their per-call cost (a fit of a small model computes one).
-    """
-    q = 0.5 + level / 2
-    return float(special.ndtri(q) if dof is None else special.stdtrit(dof, q))
-
-
 def confidence_intervals(eps, eps_cov, level=0.95, dof=None):
     """Standard errors and ``level`` intervals: normal quantile, or Student-t with
     ``dof`` degrees of freedom when sigma was estimated from the residual (C - n_eps).
@@ -328,7 +318,7 @@ def estimate_uncertainty(
     deps_dv=None,
     **fd_options,
 ):
-    """The uncertainty fields of an :class:`~ecfm_uq.inverse.InverseResult`, or why not.
+    """The :class:`~ecfm_uq.inverse.Uncertainty` of an estimate, or why there is none.
 
     Every fit reports its uncertainty through here: :func:`implicit_covariance` of the
     estimate defined by ``grad(eps, data) = 0``, then :func:`confidence_intervals`.
@@ -354,7 +344,7 @@ def estimate_uncertainty(
     hessian : (n, n) ndarray, optional
         The condition's derivative in ``x`` to use instead of differencing ``grad``:
         :math:`J^TJ` for the Gauss-Newton convention of a sum of squares (labelled
-        ``covariance_method="gauss-newton"``; without it the full Hessian by finite
+        ``method="gauss-newton"``; without it the full Hessian by finite
         differences, the sandwich :math:`H^{-1}J^TJH^{-1}s^2` for least squares,
         labelled ``"implicit"``).
     dg_dv : (n, m) ndarray, optional
@@ -368,9 +358,10 @@ def estimate_uncertainty(
 
     Returns
     -------
-    dict
-        ``eps_cov``, ``eps_stderr``, ``eps_ci95``, ``noise_model``, ``eps_jacobian``; or
-        ``uncertainty_message`` when the covariance cannot be computed (never NaN).
+    Uncertainty
+        ``cov``, ``stderr``, ``intervals``, ``noise_model``, ``dof``, ``jacobian`` and
+        ``method``; or ``success=False`` with the ``message`` why when the covariance
+        cannot be computed (never NaN).
     """
     try:
         if deps_dv is not None:
@@ -393,24 +384,23 @@ def estimate_uncertainty(
             cov = delta_method_covariance(D, Sigma)
     except NonIdentifiableError as e:
         where = f" ({hint})" if hint else ""
-        return {"uncertainty_message": f"uncertainty not computed{where}: {e}"}
+        return Uncertainty.failed(f"uncertainty not computed{where}: {e}")
     except (ConvergenceError, ValueError) as e:
-        return {"uncertainty_message": f"uncertainty not computed: {e}"}
+        return Uncertainty.failed(f"uncertainty not computed: {e}")
     eps = np.asarray(eps, dtype=float)
     if block is not None:
         cov, D, eps = cov[block, block], D[block], eps[block]
     se, ci = confidence_intervals(eps, cov, dof=dof)
-    return {
-        "eps_cov": cov,
-        "eps_stderr": se,
-        "eps_ci95": ci,
-        "noise_model": noise_model,
-        "eps_jacobian": D,
-        "dof": dof,
-        "covariance_method": (
-            "implicit" if hessian is None and deps_dv is None else "gauss-newton"
-        ),
-    }
+    return Uncertainty(
+        True,
+        cov=cov,
+        stderr=se,
+        intervals=ci,
+        method="implicit" if hessian is None and deps_dv is None else "gauss-newton",
+        noise_model=noise_model,
+        dof=dof,
+        jacobian=D,
+    )
 
 
 def _fd_jacobian(f, x, rel_step=1e-6, stencil=2):

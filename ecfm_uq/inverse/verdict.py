@@ -217,7 +217,7 @@ def consistency_verdict(
     Returns
     -------
     Verdict
-        ``details`` (also readable as ``verdict[key]``): ``force_to_data``
+        ``details`` (``verdict.details["force_to_data"]``, ...): ``force_to_data``
         (:math:`\\|e\\|/\\|v\\|` with :math:`e = v - \\mathcal M\\,\\mathbb E[\\theta(\\epsilon,
         \\lambda=0)]`, what the forces must add to the unforced model's observations;
         ``inf`` when the model cannot be solved at ``eps``), ``peak_sensor_index`` (where

@@ -189,7 +189,7 @@ def _fit_all(model, v, s, bounds, uncertainty=True):
 
 def _describe(model, res, Theta_true, s):
     """JSON block of one estimate, with its expected relative error (Section 3.3)."""
-    eps, lam = float(res.eps[0]), np.asarray(res.extra["lam"])
+    eps, lam = float(res.eps[0]), np.asarray(res.forces)
     n_quad = s["error_quadrature_points"]
     Theta_hat = model.solve(eps, lam, strict=True, tol=s["solve_tol"]).Theta
     Theta_free = model.solve(eps, strict=True, tol=s["solve_tol"]).Theta
@@ -305,10 +305,10 @@ def run(settings, out_dir, progress):
 
     result["uncertainty"] = {
         key: {
-            "eps_stderr": res.eps_stderr,
-            "eps_ci95": res.eps_ci95,
-            "noise_model": res.noise_model,
-            "message": res.uncertainty_message,
+            "eps_stderr": res.uncertainty.stderr,
+            "eps_ci95": res.uncertainty.intervals,
+            "noise_model": res.uncertainty.noise_model,
+            "message": res.uncertainty.message,
         }
         for key, res in fits.items()
     }
@@ -363,7 +363,7 @@ def _seed_study(model, s, bounds, progress):
                 rec[key]["force_norm"].append(res.extra["force_norm"])
                 rec[key]["success"].append(res.success)
                 Theta_hat = model.solve(
-                    res.eps[0], res.extra["lam"], strict=True, tol=s["solve_tol"]
+                    res.eps[0], res.forces, strict=True, tol=s["solve_tol"]
                 ).Theta
                 rec[key]["expected_rel_error"].append(
                     expected_relative_error(

@@ -151,7 +151,7 @@ def fit_both(problem, v, start, method, true_eps):
             "nit": r.nit,
         }
         if form == "ecfm":
-            lam = r.extra["lam"]
+            lam = r.forces
             entry["force_norm"] = float(np.linalg.norm(lam))
             entry["force_norm_start"] = float(np.sqrt(2.0 * r.loss_history[0]))
             entry["lam"] = lam
@@ -240,7 +240,7 @@ def run(settings, out_dir, progress):
             bar.update()
 
     grid = np.linspace(0.0, 1.0, 401)
-    lam_mis = fits["misspecified"]["ecfm"].extra["lam"]
+    lam_mis = fits["misspecified"]["ecfm"].forces
     dens, peak = force_pattern(model, lam_mis, grid)
     spacing = float(model.force_width)
     consistent_norm = summaries["consistent"]["ecfm"]["force_norm"]
@@ -282,7 +282,7 @@ def _figures(model, truth_miss, data, fits, true_eps, extra_s, grid, dens, out_d
         )
         ax.plot(
             grid,
-            model.field(r_ec.extra["Theta"][:, 0], grid),
+            model.field(r_ec.state[:, 0], grid),
             "C3-",
             lw=1,
             alpha=0.7,
@@ -298,7 +298,7 @@ def _figures(model, truth_miss, data, fits, true_eps, extra_s, grid, dens, out_d
     # forces against the missing physics
     fig, ax = plt.subplots(figsize=(7, 4))
     ax.plot(grid, dens, "C3-", label="ECFM force density sum_j lam_j Gamma_j(x)")
-    lam_c = fits["consistent"]["ecfm"].extra["lam"]
+    lam_c = fits["consistent"]["ecfm"].forces
     ax.plot(grid, model.force_density(lam_c, grid), "C2-", label="same, consistent data")
     ax.set_xlabel("x")
     ax.set_ylabel("force density")

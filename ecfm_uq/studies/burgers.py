@@ -242,7 +242,7 @@ def run(settings, out_dir, progress):
             "fit_time_s": fit_time,
         }
         if formulation == "ecfm":
-            lam = res.extra["lam"]
+            lam = res.forces
             entry["max_abs_force"] = float(np.abs(lam).max())
         result[key] = entry
     result["ecfm_better_conditioned"] = bool(

@@ -188,7 +188,7 @@ def _run_interval(cs, st, out_dir, progress):
             bar.update()
     grid = np.linspace(0.0, 1.0, 401)
     eps_mis = fits["misspecified"]["ecfm"].eps
-    lam_mis = fits["misspecified"]["ecfm"].extra["lam"]
+    lam_mis = fits["misspecified"]["ecfm"].forces
     dens, peak_ref = force_pattern(model, lam_mis, grid, eps_mis)
     # the force shapes move with the estimated domain: peak in physical units
     peak = float(peak_ref * eps_mis[0])
@@ -223,7 +223,7 @@ def _run_rectangle(cs, st, out_dir, progress):
     XI, ETA = np.meshgrid(g, g, indexing="ij")
     pts = np.column_stack([XI.ravel(), ETA.ravel()])
     eps_mis = fits["misspecified"]["ecfm"].eps
-    lam_mis = fits["misspecified"]["ecfm"].extra["lam"]
+    lam_mis = fits["misspecified"]["ecfm"].forces
     dens, peak_ref = force_pattern(model, lam_mis, pts, eps_mis)
     peak = peak_ref * eps_mis
     spacing = float(np.max(eps_mis) / (st["sensors"] + 1))
@@ -279,7 +279,7 @@ def _interval_figures(model, truth_miss, data, fits, true_eps, sink, grid, dens,
         r_ec = fits[key]["ecfm"]
         ax.plot(
             r_ec.eps[0] * grid,
-            model.field(r_ec.extra["Theta"][:, 0], grid),
+            model.field(r_ec.state[:, 0], grid),
             "C3-",
             lw=1,
             alpha=0.7,

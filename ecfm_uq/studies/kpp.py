@@ -143,7 +143,7 @@ def _fit_entry(problem, data, res, sigma, alpha, rtol):
     test = consistency_test(res.extra["discrepancy"], sigma, alpha, rtol=rtol)
     return {
         "eps": res.eps,
-        "rel_error": relative_l1_error(problem, data.theta_true, res.extra["theta"]),
+        "rel_error": relative_l1_error(problem, data.theta_true, res.state),
         "mean_discrepancy": test.mean,
         "var_discrepancy": test.var,
         "mean_test_rejects": test.mean_rejects,
@@ -151,8 +151,8 @@ def _fit_entry(problem, data, res, sigma, alpha, rtol):
         "success": res.success,
         "message": res.message,
         "nit": res.nit,
-        "nfev": res.extra["nfev"],
-        "njev": res.extra["njev"],
+        "nfev": res.nfev,
+        "njev": res.njev,
         "loss": res.loss,
         "residual_norm": res.extra["residual_norm"],
         "start": res.extra["start"],
@@ -189,7 +189,7 @@ def run(settings, out_dir, progress):
         # SLSQP's feasibility tolerance, hence the tiny relative slack
         inv_entry = _fit_entry(problem, data, inv, sigma, alpha, 0.0)
         ecfm_entry = _fit_entry(problem, data, ecfm, sigma, alpha, rtol)
-        lam = ecfm.extra["lam"]
+        lam = ecfm.forces
         ecfm_entry.update(
             {
                 "force_norm": float(np.linalg.norm(lam)),
@@ -301,12 +301,12 @@ def _figures(problem, data, inv, ecfm, out_dir, s):
     # Figure `kpp_inv_fig`: standard solution, source, discrepancy histogram
     fig, ax = plt.subplots(1, 3, figsize=(16, 4.4))
     e_inv = inv.extra["discrepancy"]
-    err = relative_l1_error(problem, data.theta_true, inv.extra["theta"])
+    err = relative_l1_error(problem, data.theta_true, inv.state)
     _image(
         fig,
         ax[0],
         x,
-        _field(problem, inv.extra["theta"], x),
+        _field(problem, inv.state, x),
         f"standard $w^{{INV}}$, $\\mathcal{{E}}$ = {err:.2e}",
     )
     _image(
@@ -322,14 +322,14 @@ def _figures(problem, data, inv, ecfm, out_dir, s):
     names.append("standard.png")
 
     # Figure `ecfm_results`: ECFM solution, source, forces, discrepancy histogram
-    lam = ecfm.extra["lam"]
+    lam = ecfm.forces
     fig, ax = plt.subplots(1, 4, figsize=(21, 4.4))
-    err = relative_l1_error(problem, data.theta_true, ecfm.extra["theta"])
+    err = relative_l1_error(problem, data.theta_true, ecfm.state)
     _image(
         fig,
         ax[0],
         x,
-        _field(problem, ecfm.extra["theta"], x),
+        _field(problem, ecfm.state, x),
         f"ECFM $w^{{ECFM}}$, $\\mathcal{{E}}$ = {err:.2e}",
     )
     _image(

@@ -131,11 +131,11 @@ def run(settings, out_dir, progress):
             "p_value": res.verdict.p_value,
             "test": res.verdict.test,
         }
-        if np.size(res.extra.get("lam", ())):  # the fits with constraint forces
+        if res.forces is not None and np.size(res.forces):  # the fits with constraint forces
             blk.update(_force_map(res))
         if "tau" in res.extra:
             blk["tau"] = float(res.extra["tau"])
-            z = np.abs(res.verdict["force_z"])
+            z = np.abs(res.verdict.details["force_z"])
             blk["peak_force_z"] = float(z.max())
             blk["n_forces_used"] = int(np.count_nonzero(res.extra["force_tau"]))
         result[name] = blk
@@ -148,7 +148,7 @@ def run(settings, out_dir, progress):
 def _force_map(res):
     """Where the largest force sits and how it compares with the median force (``None``
     where the median force is zero: no forces, or more than half switched off)."""
-    a = np.abs(np.asarray(res.extra["lam"]))
+    a = np.abs(np.asarray(res.forces))
     med = float(np.median(a))
     return {
         "peak_sensor": int(np.argmax(a)),
@@ -216,9 +216,9 @@ def _figure(fem, src, fits, nearest, s, out_dir):
     )
     for ax, name, title in panels:
         res = fits[name]
-        lam = np.abs(res.extra["lam"])
+        lam = np.abs(res.forces)
         if name != "paper_ecfm":
-            lam = np.abs(res.verdict["force_z"])
+            lam = np.abs(res.verdict.details["force_z"])
         size = 400 * lam / max(lam.max(), 1e-300) + 4
         sc = ax.scatter(*fem.sensors.T, s=size, c=lam, cmap="viridis")
         fig.colorbar(sc, ax=ax, shrink=0.8)

@@ -153,10 +153,12 @@ def test_gauss_newton_standard_errors_are_s2_inverse_jtj():
     J = np.column_stack([(pred(res.eps + h) - pred(res.eps - h)) / 2e-6 for h in 1e-6 * np.eye(2)])
     r = pred(res.eps) - v
     s2 = r @ r / (v.size - 2)
-    np.testing.assert_allclose(res.eps_cov, s2 * np.linalg.inv(J.T @ J), rtol=1e-6)
+    np.testing.assert_allclose(res.uncertainty.cov, s2 * np.linalg.inv(J.T @ J), rtol=1e-6)
     sand = fit(SteadyProblem(system, M, v), [0.0, 1.0], options={"covariance": "sandwich"})
     assert sand.uncertainty.method == "implicit"
-    assert not np.allclose(sand.eps_cov, res.eps_cov, rtol=1e-3)  # a nonlinear model
+    assert not np.allclose(
+        sand.uncertainty.cov, res.uncertainty.cov, rtol=1e-3
+    )  # a nonlinear model
     with pytest.raises(ValueError, match="covariance"):
         fit(SteadyProblem(system, M, v), [0.0, 1.0], options={"covariance": "hessian"})
 
@@ -230,7 +232,7 @@ def test_dynamic_gauss_newton_covariance_is_sigma2_inverse_gtg(burgers):
 
     h = 1e-6
     G = np.column_stack([(pred(res.eps + d) - pred(res.eps - d)) / (2 * h) for d in h * np.eye(2)])
-    np.testing.assert_allclose(res.eps_cov, 0.01**2 * np.linalg.inv(G.T @ G), rtol=1e-5)
+    np.testing.assert_allclose(res.uncertainty.cov, 0.01**2 * np.linalg.inv(G.T @ G), rtol=1e-5)
     sand = fit(p, [1.6, 0.8], sigma=0.01, options={"covariance": "sandwich"})
     assert sand.uncertainty.method == "implicit"
 

@@ -1,6 +1,8 @@
 """One inverse API (issue 23): ``fit(problem, eps0, ...)`` for every problem kind, one
 result class with status and a Verdict, one verdict rule, options checked by name."""
 
+import re
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -37,6 +39,18 @@ def data(sigma=0.0, seed=0):
     return system, v + sigma * np.random.default_rng(seed).standard_normal(v.size)
 
 
+def documented_extra_keys():
+    """The keys of the ``extra`` table in the InverseResult docstring (first column)."""
+    doc = InverseResult.__doc__
+    table = doc[doc.index("extra : dict") :].split("=====")
+    rows = "".join(table[2:-1])  # between the header's rule and the closing rule
+    return {m for line in rows.splitlines() for m in re.findall(r"``(\w+)``", line[:38])}
+
+
+def check_extra_documented(res):
+    assert set(res.extra) <= documented_extra_keys(), set(res.extra) - documented_extra_keys()
+
+
 @pytest.mark.parametrize("formulation", ["standard", "ecfm-random"])
 def test_steady_fit_reports_status_counts_uncertainty_and_verdict(formulation):
     system, v = data(0.01)
@@ -45,8 +59,13 @@ def test_steady_fit_reports_status_counts_uncertainty_and_verdict(formulation):
     assert res.success and res.status is FitStatus.CONVERGED, res.message
     assert res.nfev >= res.nit >= 1
     assert isinstance(res.uncertainty, Uncertainty) and res.uncertainty.success
-    np.testing.assert_array_equal(res.eps_cov, res.uncertainty.cov)  # the v0.2 name
-    assert isinstance(res.verdict, Verdict) and res.extra["verdict"] is res.verdict
+    assert res.uncertainty.cov.shape == (2, 2) and not hasattr(res, "eps_cov")  # v0.2 name gone
+    assert isinstance(res.verdict, Verdict) and "verdict" not in res.extra
+    check_extra_documented(res)
+    if formulation == "standard":
+        assert res.state.shape == (system.N, 1) and res.forces is None
+    else:  # with sigma the random-force ECFM: posterior-mean forces, no state
+        assert res.state is None and res.forces.shape == SENS.shape
     # the random-force ECFM is a marginal likelihood: its verdict is the
     # likelihood-ratio test of tau = 0 (issue 20 item 3); the standard fit's the chi2 test
     test = "chi2" if formulation == "standard" else "likelihood-ratio tau=0"
@@ -63,7 +82,7 @@ def test_chi2_verdict_is_the_chi2_test_at_the_stated_size():
     e = v - M_OBS @ solve_steady(system, res.eps).Theta[:, 0]
     p = stats.chi2.sf(e @ e / 0.01**2, v.size - 2)
     assert res.verdict.p_value == pytest.approx(p, rel=1e-9)
-    assert res.verdict["dof"] == v.size - 2
+    assert res.verdict.details["dof"] == v.size - 2
     for alpha in (p / 2, 2 * p):
         r = fit(problem, [1.0, 1.0], sigma=0.01, alpha=alpha)
         assert r.verdict.consistent == (p >= alpha)
@@ -74,7 +93,8 @@ def test_noise_free_data_use_the_force_to_data_rule_without_a_size():
     system, v = data()
     res = fit(SteadyProblem(system, M_OBS, v), [1.0, 1.0], formulation="ecfm")
     assert res.verdict.consistent and res.verdict.p_value is None and res.verdict.alpha is None
-    assert res.verdict["force_to_data"] < 1e-8
+    assert res.verdict.details["force_to_data"] < 1e-8
+    assert res.state.shape == (system.N, 1) and res.forces.shape == SENS.shape  # exact ECFM
 
 
 def test_one_call_shape_for_dynamic_and_replicated_problems():
@@ -88,8 +108,11 @@ def test_one_call_shape_for_dynamic_and_replicated_problems():
     assert res.success, res.message
     np.testing.assert_allclose(res.eps, [1.75, 1.0], atol=1e-6)
     assert res.verdict.consistent and res.verdict.test.startswith("force-to-data")
+    assert res.forces.shape == (m.n_steps + 1, m.M_obs.shape[0]) and res.state is None
+    check_extra_documented(res)
     adam = fit(dyn, [1.6, 0.8], method="adam", maxiter=3, options={"lr": 1e-2})
     assert adam.optimizer == "adam" and adam.nit == 3
+    check_extra_documented(adam)
 
     beam = BeamModel()
     v = beam.sample_data(1.0, 25, rng=np.random.default_rng(0))
@@ -97,6 +120,8 @@ def test_one_call_shape_for_dynamic_and_replicated_problems():
     res = fit(rep, [0.5], formulation="standard", bounds=[(0.0, 2.0)])
     assert res.success and res.verdict.alpha == 0.05
     assert res.verdict.test == "moments z (Bonferroni)" and 0 <= res.verdict.p_value <= 1
+    np.testing.assert_array_equal(res.forces, 0.0)  # the standard pseudo-likelihood: lam = 0
+    check_extra_documented(res)
 
 
 def test_dynamic_verdict_flags_data_the_model_cannot_explain():
@@ -219,3 +244,27 @@ def test_an_unknown_option_of_a_dynamic_fit_is_refused_before_any_march():
         with pytest.raises(TypeError, match="no_such_option"):
             fit(dyn, [1.7, 1.0], method=method, options={"no_such_option": 1})
     assert marched == []
+
+
+def test_every_formulation_fills_the_typed_fields_and_documents_its_extra_keys():
+    """state, forces and the extra table of the InverseResult docstring: the all-at-once
+    SLSQP fits, the random-force ECFM and a model function."""
+    from ecfm_uq.inverse import ModelProblem, profile_likelihood
+
+    system, v = data(0.01)
+    problem = SteadyProblem(system, M_OBS, v)
+    noisy = fit(problem, [1.0, 1.0], formulation="noisy-ecfm", sigma=0.01)
+    assert noisy.state.shape == (system.N,) and noisy.forces.shape == SENS.shape
+    assert noisy.nfev > 0 and "nfev" not in noisy.extra
+    std = fit(problem, [1.0, 1.0], method="all-at-once")
+    assert std.state.shape == (system.N,) and std.forces is None
+    random = fit(problem, [1.0, 1.0], formulation="ecfm-random", sigma=0.01)
+    assert random.state is None and random.forces.shape == SENS.shape
+    assert random.extra["force_stderr"].shape == SENS.shape
+    model = fit(ModelProblem(lambda e: M_OBS @ solve_steady(system, e).Theta[:, 0], v),
+                [1.0, 1.0], sigma=0.01)  # fmt: skip
+    assert model.state is None and model.forces is None
+    profile_likelihood(model, which=[0])
+    for res in (noisy, std, random, model):
+        check_extra_documented(res)
+    assert {"profile", "prediction"} <= set(model.extra)

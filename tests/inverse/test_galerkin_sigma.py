@@ -143,7 +143,7 @@ def test_steady_ecfm_estimate_ignores_sigma_its_uncertainty_and_verdict_follow_i
     hand = fit(SteadyProblem(SYSTEM, W @ M_OBS, W @ v), EPS0, formulation="ecfm", sigma=1.0)
     assert res.success, res.message
     np.testing.assert_allclose(res.eps, plain.eps, rtol=1e-7)
-    np.testing.assert_allclose(res.extra["lam"], plain.extra["lam"], rtol=1e-6, atol=1e-10)
+    np.testing.assert_allclose(res.forces, plain.forces, rtol=1e-6, atol=1e-10)
     np.testing.assert_allclose(res.uncertainty.cov, hand.uncertainty.cov, rtol=1e-6)
     # delta method by hand: d eps / dv of the ECFM estimate (from the fit without sigma,
     # in data units) with the data covariance Sigma
@@ -165,7 +165,7 @@ def test_random_force_ecfm_with_equal_sigmas_is_the_scalar_fit():
     # central differences of the profiled likelihood (steps in its own units)
     np.testing.assert_allclose(arr.uncertainty.stderr, one.uncertainty.stderr, rtol=2e-3)
     assert arr.verdict.p_value == pytest.approx(one.verdict.p_value)
-    np.testing.assert_allclose(arr.extra["lam"], one.extra["lam"], rtol=1e-4, atol=1e-8)
+    np.testing.assert_allclose(arr.forces, one.forces, rtol=1e-4, atol=1e-8)
 
 
 def test_random_force_ecfm_likelihood_is_that_of_sigma_plus_forces():

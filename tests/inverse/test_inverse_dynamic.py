@@ -322,7 +322,7 @@ def test_dynamic_uncertainty_derivative_equals_tight_refits(formulation):
 
     eps, p = refit(V, np.array([1.75, 1.0]))
     unc = p.uncertainty(eps, formulation, sigma=0.01)
-    D = unc["eps_jacobian"]  # (2, n_steps C), data row-major from t = 1
+    D = unc.jacobian  # (2, n_steps C), data row-major from t = 1
     assert D.shape == (2, 15 * m.M_obs.shape[0])
     h = 1e-4
     for t, c in [(1, 0), (8, 2), (15, 3)]:
@@ -332,5 +332,5 @@ def test_dynamic_uncertainty_derivative_equals_tight_refits(formulation):
         k = (t - 1) * V.shape[1] + c
         np.testing.assert_allclose(D[:, k], fd, rtol=1e-4, atol=1e-6 * np.abs(D).max())
     # sigma given: normal intervals of half-width 1.96 standard errors
-    np.testing.assert_allclose(unc["eps_stderr"], np.sqrt(np.diag(unc["eps_cov"])))
-    assert unc["noise_model"] == "known"
+    np.testing.assert_allclose(unc.stderr, np.sqrt(np.diag(unc.cov)))
+    assert unc.noise_model == "known"

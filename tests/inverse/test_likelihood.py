@@ -229,7 +229,7 @@ def test_inner_outer_estimate_minimizes_the_optimal_force_norm(linear):
     assert res.extra["hess_lam_min_eig"] > 0
     # the returned forces really maximize the pseudo-likelihood at the estimate
     fs = optimal_forces(like, res.eps)
-    np.testing.assert_allclose(res.extra["lam"], fs.lam, atol=1e-8)
+    np.testing.assert_allclose(res.forces, fs.lam, atol=1e-8)
     # the model is consistent with the data, so the estimate is near the truth
     assert abs(res.eps[0] - TRUE_EPS) < 0.1
 

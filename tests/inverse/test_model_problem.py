@@ -48,7 +48,9 @@ def test_estimates_and_standard_errors_equal_scipy_least_squares(jac):
     assert res.uncertainty.dof == y.size - 3
     # the intervals use the same rule as the dof says: Student-t
     t = stats.t.ppf(0.975, y.size - 3)
-    np.testing.assert_allclose(res.uncertainty.intervals[:, 1], res.eps + t * res.eps_stderr)
+    np.testing.assert_allclose(
+        res.uncertainty.intervals[:, 1], res.eps + t * res.uncertainty.stderr
+    )
 
 
 def test_a_user_jacobian_is_used_and_checked():
@@ -343,3 +345,37 @@ def test_the_v02_names_are_gone():
     for module in ("ecfm_uq.inverse.likelihood", "ecfm_uq.system.solvers"):
         with pytest.raises(ModuleNotFoundError):
             importlib.import_module(module)
+
+
+def test_the_v02_result_names_are_gone():
+    """One frozen result: no alias properties or constructor arguments of the uncertainty,
+    no dict-like verdict, no ``extra["verdict"]``, no assignment after the fit."""
+    import dataclasses
+    import inspect
+
+    from ecfm_uq.inverse import InverseResult, Verdict
+    from ecfm_uq.inverse import result as result_module
+
+    y = data(0)
+    res = fit(ModelProblem(decay, y), [1.0, 1.0, 0.0], sigma=0.05)
+    aliases = ("eps_cov", "eps_stderr", "eps_ci95", "noise_model", "uncertainty_message",
+               "eps_jacobian", "covariance_method", "dof")  # fmt: skip
+    for name in aliases:
+        assert not hasattr(res, name), name
+        assert name not in inspect.signature(InverseResult).parameters, name
+    assert not hasattr(result_module, "_verdict_from_dict")
+    assert dataclasses.is_dataclass(res) and isinstance(res.verdict, Verdict)
+    with pytest.raises(TypeError):
+        res.verdict["consistent"]
+    assert not hasattr(res.verdict, "keys")
+    assert "verdict" not in res.extra
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        res.eps = np.zeros(3)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        res.success = False  # derived from `status`, read-only
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        res.likelihood = None
+    # a later step builds a new result
+    new = dataclasses.replace(res, message="replaced")
+    assert new.message == "replaced" and res.message != "replaced"
+    np.testing.assert_array_equal(new.eps, res.eps)

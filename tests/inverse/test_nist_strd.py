@@ -88,7 +88,7 @@ def test_certified_values_or_an_honest_failure(name, start, route):
         assert res.status is not FitStatus.CONVERGED
         pytest.xfail(f"{name} start {start + 1}: {res.status.name}: {res.message}")
     np.testing.assert_allclose(res.eps, P.certified, rtol=1e-6, atol=0)
-    assert res.uncertainty.success, res.uncertainty_message
+    assert res.uncertainty.success, res.uncertainty.message
     assert res.uncertainty.method == "gauss-newton"
-    np.testing.assert_allclose(res.eps_stderr, P.certified_sd, rtol=1e-3, atol=0)
+    np.testing.assert_allclose(res.uncertainty.stderr, P.certified_sd, rtol=1e-3, atol=0)
     assert res.optimality is not None and res.optimality <= 1e-6

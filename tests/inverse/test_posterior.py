@@ -48,7 +48,7 @@ def test_posterior_mean_and_cov_match_laplace_on_a_linear_model(runs):
     assert np.all(np.abs(post.mean - lap.eps) < 0.1 * sd), (post.mean, lap.eps, sd)
     # covariance: sampling error of a variance is ~ sqrt(2/ESS)
     rel = np.sqrt(2 / post.ess.min())
-    np.testing.assert_allclose(np.diag(post.cov), np.diag(lap.eps_cov), rtol=4 * rel)
+    np.testing.assert_allclose(np.diag(post.cov), np.diag(lap.uncertainty.cov), rtol=4 * rel)
 
 
 def test_diagnostics_and_refused_convergence(runs):
@@ -77,7 +77,7 @@ def test_pair_plot(runs, tmp_path):
     from ecfm_uq.plotting import pair_plot, save_figure
 
     lap, post = runs
-    fig = pair_plot(post.samples, laplace=(lap.eps, lap.eps_cov), truth=[3.0, -2.0])
+    fig = pair_plot(post.samples, laplace=(lap.eps, lap.uncertainty.cov), truth=[3.0, -2.0])
     save_figure(fig, tmp_path / "pair.png")
     assert (tmp_path / "pair.png").stat().st_size > 0
 

@@ -44,10 +44,10 @@ def test_on_consistent_data_it_is_the_standard_estimate():
     std = res.extra["standard"]
     assert res.success and res.extra["tau"] == 0.0
     np.testing.assert_array_equal(res.eps, std.eps)
-    np.testing.assert_array_equal(res.eps_stderr, std.eps_stderr)
+    np.testing.assert_array_equal(res.uncertainty.stderr, std.uncertainty.stderr)
     assert res.verdict.consistent and res.verdict.p_value == 1.0
     assert res.verdict.test == "likelihood-ratio tau=0" and res.verdict.alpha == 0.05
-    np.testing.assert_array_equal(res.extra["lam"], 0.0)
+    np.testing.assert_array_equal(res.forces, 0.0)
 
 
 @pytest.mark.parametrize("amplitude", [10.0, 60.0])
@@ -57,12 +57,12 @@ def test_a_missing_source_is_flagged_and_mapped_and_the_estimate_is_not_worse(am
     std = res.extra["standard"]
     assert res.success, res.message
     assert not res.verdict.consistent and res.verdict.p_value < 1e-3  # MC resolution 1/4001
-    lam = np.abs(res.extra["lam"])
+    lam = np.abs(res.forces)
     assert np.argmax(lam) == np.argmin(np.abs(SENS - SOURCE_AT))  # the sensor nearest it
     assert lam.max() > 4 * np.median(lam)
     # the discrepancy absorbs the source instead of the reaction rate absorbing it
     assert np.all(np.abs(res.eps - TRUE) <= np.abs(std.eps - TRUE))
-    z = res.verdict["force_z"]
+    z = res.verdict.details["force_z"]
     assert abs(z[np.argmax(lam)]) > 3
 
 
@@ -118,6 +118,6 @@ def test_equations_in_other_units_give_the_same_fits_intervals_and_force_map(sca
         assert np.all(np.abs(res.eps - ref.eps) <= 2e-3 * width)
         assert np.all(np.abs(ci - ci_ref) <= 2e-3 * width[:, None])
         # the force map to the same accuracy, relative to its largest entry
-        for key, a, b in (("lam", res.extra["lam"], ref.extra["lam"]),
-                          ("z", res.verdict["force_z"], ref.verdict["force_z"])):  # fmt: skip
+        for key, a, b in (("lam", res.forces, ref.forces),
+                          ("z", res.verdict.details["force_z"], ref.verdict.details["force_z"])):  # fmt: skip
             assert np.max(np.abs(a - b)) <= 1e-3 * max(np.max(np.abs(b)), 1e-12), key

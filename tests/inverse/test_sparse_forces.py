@@ -97,7 +97,7 @@ def test_the_forces_concentrate_at_the_missing_source_and_the_parameters_are_rec
     assert res.success, res.message
     assert res.extra["force_prior"] == "sparse"
     assert not res.verdict.consistent and res.verdict.p_value < 1e-3
-    lam = np.abs(res.extra["lam"])
+    lam = np.abs(res.forces)
     assert np.argmax(lam) == np.argmin(np.abs(SENS - SOURCE_AT))
     assert np.count_nonzero(res.extra["force_tau"]) < SENS.size  # forces switched off
     # the source goes into the forces, not into the parameters: closer to the truth than
@@ -117,9 +117,9 @@ def test_the_forces_concentrate_at_the_missing_source_and_the_parameters_are_rec
     S = sigma**2 * np.eye(v.size) + A @ G @ A.T
     post = G @ A.T @ np.linalg.solve(S, v - m0)
     cov = G - G @ A.T @ np.linalg.solve(S, A @ G)
-    np.testing.assert_allclose(res.extra["lam"], post, rtol=1e-6, atol=1e-9 * np.abs(post).max())
+    np.testing.assert_allclose(res.forces, post, rtol=1e-6, atol=1e-9 * np.abs(post).max())
     np.testing.assert_allclose(
-        res.extra["lam_stderr"], np.sqrt(np.maximum(np.diag(cov), 0)), rtol=1e-5,
+        res.extra["force_stderr"], np.sqrt(np.maximum(np.diag(cov), 0)), rtol=1e-5,
         atol=1e-9 * np.abs(post).max(),
     )  # fmt: skip
 
@@ -164,7 +164,7 @@ def test_a_stochastic_fe_model_with_a_missing_source():
               options={"force_prior": "sparse"})  # fmt: skip
     std = res.extra["standard"]
     assert res.success and not res.verdict.consistent
-    lam = np.abs(res.extra["lam"])
+    lam = np.abs(res.forces)
     nearest = int(np.argmin(np.linalg.norm(sensors - [0.62, 0.37], axis=1)))
     assert np.argmax(lam) == nearest and lam.max() >= 10 * np.median(lam)
     assert abs(res.eps[0] - 0.2) < 0.25 * abs(std.eps[0] - 0.2)

@@ -82,8 +82,8 @@ def test_steady_standard_covariance_is_gauss_newton():
     system, M_obs, v0, true, J = _heat_case()
     v = v0 + 0.01 * np.random.default_rng(0).normal(size=v0.size)
     res = fit(SteadyProblem(system, M_obs, v), [1.0, 1.0], sigma=0.01)
-    assert res.success and res.noise_model == "known"
-    np.testing.assert_allclose(res.eps_cov, gauss_newton_covariance(J, 1e-4), rtol=1e-5)
+    assert res.success and res.uncertainty.noise_model == "known"
+    np.testing.assert_allclose(res.uncertainty.cov, gauss_newton_covariance(J, 1e-4), rtol=1e-5)
 
 
 @pytest.mark.parametrize("formulation", ["standard", "ecfm"])
@@ -101,7 +101,7 @@ def test_steady_covariance_equals_refit_jacobian(formulation):
         em = fit(SteadyProblem(system, M_obs, v - h * e), res.eps, **kw).eps
         cols.append((ep - em) / (2 * h))
     D = np.column_stack(cols)
-    np.testing.assert_allclose(res.eps_cov, 1e-4 * D @ D.T, rtol=1e-5)
+    np.testing.assert_allclose(res.uncertainty.cov, 1e-4 * D @ D.T, rtol=1e-5)
 
 
 @pytest.mark.parametrize("formulation", ["standard", "ecfm"])
@@ -153,7 +153,7 @@ def test_standard_slsqp_covariance_equals_refit_jacobian():
     res = fit(
         SteadyProblem(system, M_obs, v), np.zeros(system.n_eps), method="all-at-once", sigma=sigma
     )
-    assert res.noise_model == "known" and "verdict" in res.extra
+    assert res.uncertainty.noise_model == "known" and res.verdict is not None
 
     def refit(w):
         return fit(SteadyProblem(system, M_obs, w), res.eps, method="all-at-once", tol=1e-16).eps
@@ -161,7 +161,7 @@ def test_standard_slsqp_covariance_equals_refit_jacobian():
     # the model is linear in eps, so eps_hat(v) is linear: a unit step has no truncation
     D = np.column_stack([(refit(v + e) - refit(v - e)) / 2 for e in np.eye(v.size)])
     cov_fd = sigma**2 * D @ D.T
-    assert np.abs(res.eps_cov - cov_fd).max() <= 1e-5 * np.abs(cov_fd).max()
+    assert np.abs(res.uncertainty.cov - cov_fd).max() <= 1e-5 * np.abs(cov_fd).max()
 
 
 def test_noisy_ecfm_covariance_equals_refit_jacobian():
@@ -174,7 +174,7 @@ def test_noisy_ecfm_covariance_equals_refit_jacobian():
         formulation="noisy-ecfm",
         sigma=sigma,
     )
-    assert res.success and res.eps_cov is not None, res.uncertainty_message
+    assert res.success and res.uncertainty.cov is not None, res.uncertainty.message
     # the data enter through the active moment bounds (here the lower mean bound and the
     # upper variance bound); the refits stay on the same active set
     assert np.sum(np.abs(res.extra["inequality"]) < 1e-8) == 2
@@ -185,12 +185,12 @@ def test_noisy_ecfm_covariance_equals_refit_jacobian():
             res.eps,
             formulation="noisy-ecfm",
             sigma=sigma,
-            options={"theta0": res.extra["theta"], "ftol": 1e-16},
+            options={"theta0": res.state, "ftol": 1e-16},
         ).eps
 
     D = _fd4(refit, v, 3e-2)  # SLSQP resolves eps to ~1e-9: a large step, O(h^4) stencil
     cov_fd = sigma**2 * D @ D.T
-    assert np.abs(res.eps_cov - cov_fd).max() <= 1e-5 * np.abs(cov_fd).max()
+    assert np.abs(res.uncertainty.cov - cov_fd).max() <= 1e-5 * np.abs(cov_fd).max()
 
 
 def _beam_data():
@@ -220,7 +220,7 @@ def test_pseudo_likelihood_covariance_equals_refit_jacobian(formulation):
     res = fit(
         ReplicatedProblem(m.system, m.M_obs, v), [0.5], formulation=formulation, bounds=bounds
     )
-    assert res.success and res.noise_model == "replicates", res.uncertainty_message
+    assert res.success and res.uncertainty.noise_model == "replicates", res.uncertainty.message
     w, Sigma_w = replicate_statistics(v)
     C = v.shape[0]
     # refit at data with one statistic moved (4-point stencil); a tight inner solve so
@@ -250,7 +250,7 @@ def test_pseudo_likelihood_covariance_equals_refit_jacobian(formulation):
 
         cols.append((8 * (f(1) - f(-1)) - (f(2) - f(-2))) / (12 * h))
     D = np.column_stack(cols)
-    np.testing.assert_allclose(res.eps_cov, D @ Sigma_w @ D.T, rtol=1e-5)
+    np.testing.assert_allclose(res.uncertainty.cov, D @ Sigma_w @ D.T, rtol=1e-5)
 
 
 def test_replicate_statistics_covariance_is_the_sample_covariance():
@@ -320,9 +320,9 @@ def test_non_identifiable_combination_is_named_not_nan():
 
     system, M_obs, v = _ratio_case()
     res = fit(SteadyProblem(system, M_obs, v), [2.0, 1.0], sigma=0.01)
-    assert res.eps_cov is None and res.eps_ci95 is None
+    assert res.uncertainty.cov is None and res.uncertainty.intervals is None
     # the null vector (2, 1)/sqrt(5) = (0.894, 0.447), named in the message
-    assert "0.894*eps[0] + 0.447*eps[1]" in res.uncertainty_message, res.uncertainty_message
+    assert "0.894*eps[0] + 0.447*eps[1]" in res.uncertainty.message, res.uncertainty.message
     with pytest.raises(NonIdentifiableError, match=r"0\.707\*eps\[0\] - 0\.707\*eps\[1\]"):
         check_identifiable([[1.0, 1.0], [1.0, 1.0]])
     with pytest.raises(NonIdentifiableError, match=r"parameter combination 1\*eps\[2\]"):

@@ -92,7 +92,7 @@ def test_standard_estimate_is_close_and_inner_outer_near_the_truth(beam):
     # both reproduce the displacement field to the paper's order (E = 7e-3)
     Theta_true = model.solve(1.0).Theta
     for res in (std, io):
-        Theta = model.solve(res.eps[0], res.extra["lam"]).Theta
+        Theta = model.solve(res.eps[0], res.forces).Theta
         assert expected_relative_error(model.basis, model.chaos, Theta_true, Theta) < 2.1e-2
 
 
@@ -118,7 +118,7 @@ def test_penalty_form_stops_at_a_stationary_point_of_an_unbounded_objective(beam
     pen = fit(problem, [0.5], formulation="penalty", bounds=bounds, options={"penalty": alpha})
     io = fit(problem, [0.5], formulation="inner-outer", bounds=bounds)
     std = fit(problem, [0.5], formulation="standard", bounds=bounds)
-    lam = pen.extra["lam"]
+    lam = pen.forces
     p = like.evaluate(pen.eps, lam)
     # first-order conditions of log(0.5|lam|^2) + alpha Lambda hold at SLSQP's answer ...
     assert abs(p.grad_eps[0]) < 1e-3 * abs(like.evaluate([0.5]).grad_eps[0])

@@ -66,7 +66,7 @@ def test_calibration_recovers_the_conductivity(problem, formulation):
     np.testing.assert_allclose(res.eps, EPS_TRUE, atol=1e-6)
     if formulation == "ecfm":
         # consistent data: the forces vanish at the answer
-        assert np.linalg.norm(res.extra["lam"]) < 1e-6 * np.linalg.norm(v)
+        assert np.linalg.norm(res.forces) < 1e-6 * np.linalg.norm(v)
 
 
 def test_ecfm_forces_locate_an_unmodelled_source(problem):
@@ -81,7 +81,7 @@ def test_ecfm_forces_locate_an_unmodelled_source(problem):
     shift = spla.spsolve(K.tocsc(), extra)  # mean-field response to the missing load
     v = problem.M_obs @ (base + shift)
     res = fit(SteadyProblem(system, problem.M_obs, v), [0.0, 0.0], formulation="ecfm")
-    lam = res.extra["lam"]
+    lam = res.forces
     assert np.argmax(np.abs(lam)) == 2
 
 
