@@ -173,7 +173,7 @@ def likelihood_coverage(
     formulation : {"standard", "inner-outer"}
         The penalty form has no uncertainty (no optimality condition defines it).
     problem_options : dict, optional
-        Passed to :class:`~ecfm_uq.inverse.ReplicatedProblem` (e.g. ``tol`` of the solves).
+        Passed to :class:`~ecfm_uq.inverse.ReplicatedProblem` (e.g. ``solve_tol`` of the solves).
     **fit_options
         Passed to :func:`~ecfm_uq.inverse.fit` (``bounds``, ``options``, ...).
 

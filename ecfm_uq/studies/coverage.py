@@ -204,7 +204,7 @@ def run(settings, out_dir, progress):
     beam = BeamModel(n_basis=bm["n_basis"], order=bm["order"], sensors=bm["sensors"])
     beam_fit = {
         "bounds": [(0.0, bm["eps_upper_bound_fraction"] * beam.beta_min)],
-        "problem_options": {"tol": bm["solve_tol"]},
+        "problem_options": {"solve_tol": bm["solve_tol"]},
     }
 
     def sample(gen):

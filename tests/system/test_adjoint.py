@@ -101,7 +101,7 @@ def test_dynamic_adjoint_burgers_viscosity_in_20_cells(formulation, chaos_order)
     rng = np.random.default_rng(4)
     eps_true = np.concatenate([1.5 + 0.3 * rng.standard_normal(20), [1.0]])
     V = model.solve(eps_true).Theta @ model.system.E1 @ model.M_obs.T
-    kw = {"tol": 1e-12}
+    kw = {"solve_tol": 1e-12}
     fwd = DynamicInverseProblem(
         model.system,
         model.Theta0,
