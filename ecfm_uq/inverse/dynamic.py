@@ -43,7 +43,8 @@ import numpy as np
 from .._validation import as_dense_rows, as_finite_array, check_choice, check_int, check_positive
 from ..errors import ConvergenceError
 from ..system import march
-from ..system.schemes import check_scheme
+from ..system.schemes import SCHEMES
+from ..system.step_control import check_steps, check_tolerances, choose_steps
 from .convergence import least_squares_optimality
 from .drivers import (
     check_minimize_method,
@@ -57,6 +58,8 @@ from .result import InverseResult, Verdict
 from .status import FitStatus
 
 FORMULATIONS = ("standard", "ecfm")
+#: the time schemes of a dynamic problem: the fixed-step ones and the frozen adaptive grid
+DYNAMIC_SCHEMES = (*SCHEMES, "adaptive")
 
 
 class DynamicInverseProblem:
@@ -95,16 +98,25 @@ class DynamicInverseProblem:
         Start each step's Newton iteration from the last trajectory of the same
         formulation (the previous optimizer iterate's) instead of the previous step: fewer
         Newton iterations, the same solution to ``tol``.
-    scheme : {"euler", "bdf2"}
+    scheme : {"euler", "bdf2", "adaptive"}
         Time scheme of the march (:mod:`ecfm_uq.system.schemes`): backward Euler (the
-        paper's, the default) or the second-order BDF2; sensitivities and adjoint
-        gradients are exact for the scheme that runs.
+        paper's, the default) or the second-order BDF2 with the step ``dt``; or
+        ``"adaptive"``: the variable-step BDF2 on a grid through the data times chosen
+        to meet ``rtol``/``atol`` (:func:`ecfm_uq.system.step_control.choose_steps`) at
+        the first parameters marched (a fit: ``eps0``) and then *frozen*, so that every
+        gradient is the exact derivative of the discrete objective being minimized
+        (:meth:`freeze_steps`, :attr:`steps`; a fit re-checks the grid at its estimate).
+        Sensitivities and adjoint gradients are exact for the scheme that runs.
+    rtol, atol : float, optional
+        ``scheme="adaptive"`` only: the local error tolerances of every step (default
+        ``rtol=1e-6``; ``atol`` ``rtol * max|Theta0|``, ``rtol`` when ``Theta0 = 0``).
 
     Raises
     ------
     ValueError
-        On misshaped or non-finite data, a system without mass matrix, or a
-        non-positive ``dt``/``tol``.
+        On misshaped or non-finite data, a system without mass matrix, a
+        non-positive ``dt``/``tol``/``rtol``, an unknown ``scheme``, or ``rtol``/``atol``
+        with a fixed-step scheme.
     """
 
     def __init__(
@@ -123,6 +135,8 @@ class DynamicInverseProblem:
         solver="auto",
         warm_start=True,
         scheme="euler",
+        rtol=None,
+        atol=None,
     ):
         if getattr(system, "M", None) is None:
             raise ValueError("`system` needs a mass matrix M for time stepping (build it with M=)")
@@ -135,7 +149,19 @@ class DynamicInverseProblem:
         self.gradient = choose_gradient(gradient, system.n_eps)
         self.solver = solver
         self.warm_start = bool(warm_start)
-        self.scheme = check_scheme(scheme)
+        if not isinstance(scheme, str) or scheme not in DYNAMIC_SCHEMES:
+            raise ValueError(
+                f"`scheme` must be one of {DYNAMIC_SCHEMES}, got {scheme!r} ('adaptive': "
+                "steps chosen to meet rtol/atol, then frozen)"
+            )
+        self.scheme = scheme
+        if scheme != "adaptive" and (rtol is not None or atol is not None):
+            raise ValueError(
+                f"`rtol`/`atol` set the steps of scheme='adaptive'; scheme={scheme!r} marches "
+                "the fixed step `dt` (pass scheme='adaptive', or drop rtol/atol)"
+            )
+        self.rtol, self.atol = check_tolerances(1e-6 if rtol is None else rtol, atol)
+        self.steps = None  # the frozen StepSequence of scheme="adaptive"
         self._last = {}  # formulation -> last trajectory (the warm start)
         N, P = system.shape
         Theta0 = as_finite_array("Theta0", Theta0)
@@ -149,6 +175,56 @@ class DynamicInverseProblem:
             raise ValueError(f"`M_obs` must have N = {N} columns, got shape {self.M_obs.shape}")
         C = self.M_obs.shape[0]
         self.V = as_finite_array("V", V, shape=(self.n_steps + 1, C))
+        self._rows = np.arange(self.n_steps + 1)  # the data times' rows of a trajectory
+
+    @property
+    def adaptive(self):
+        """True for ``scheme="adaptive"`` (a frozen error-controlled grid)."""
+        return self.scheme == "adaptive"
+
+    def freeze_steps(self, eps, refine=False):
+        """Choose the step sequence at ``eps`` to meet ``rtol``/``atol`` and freeze it
+        (``scheme="adaptive"``): every later march, gradient and fit uses this grid until
+        the next call (``refine=True``: by splitting the frozen grid's steps instead of
+        starting from the data times). Returns the
+        :class:`~ecfm_uq.system.step_control.StepSequence`.
+
+        Raises
+        ------
+        ConvergenceError
+            The model cannot be marched at ``eps`` (the message names the time reached),
+            or no grid within the limits meets the tolerance.
+        """
+        if not self.adaptive:
+            raise ValueError(f"freeze_steps is for scheme='adaptive', not {self.scheme!r}")
+        eps = self.system.check_eps(eps)
+        at = f"choosing the steps at eps={np.array2string(eps)} failed"
+        t_data = self.t0 + self.dt * np.arange(self.n_steps + 1)  # the rows of V
+        try:
+            seq = choose_steps(
+                self.system, eps, self.Theta0, t_data, rtol=self.rtol, atol=self.atol,
+                tol=self.tol, maxiter=self.maxiter, solver=self.solver,
+                start=self.steps.times if refine and self.steps is not None else None,
+            )  # fmt: skip
+        except ConvergenceError as e:
+            raise ConvergenceError(f"{at}: {e}") from e
+        if not seq.met:
+            raise ConvergenceError(f"{at}: {seq.message}")
+        self.steps, self._rows, self._last = seq, seq.data_index, {}
+        return seq
+
+    def check_steps(self, eps):
+        """The local errors of the frozen grid marched at ``eps`` against ``rtol``/``atol``
+        (a :class:`~ecfm_uq.system.step_control.StepSequence`; ``met`` says whether every
+        step meets them)."""
+        if self.steps is None:
+            raise ValueError("no frozen steps: scheme='adaptive' and freeze_steps(eps) first")
+        saved = dict(self._last)  # a check must not move the optimizer's warm starts
+        try:
+            traj = self.solve(eps, "standard")
+        finally:
+            self._last = saved
+        return check_steps(traj, self._rows, self.steps.rtol, self.steps.atol)
 
     @property
     def n_sensors(self):
@@ -178,15 +254,24 @@ class DynamicInverseProblem:
                     f"has {self.system.n_forces} (Gamma), the data {self.n_sensors} sensors"
                 )
             constraint = (self.M_obs, self.V)
+            if self.adaptive:
+                raise ValueError(
+                    "the ECFM formulation constrains the state to the data at every step, "
+                    "but the steps of scheme='adaptive' between data times have no data: "
+                    "use formulation='standard', or a fixed-step scheme ('euler', 'bdf2')"
+                )
         eps = self.system.check_eps(eps)
+        if self.adaptive and self.steps is None:
+            self.freeze_steps(eps)
+        grid = dict(dt=self.dt, n_steps=self.n_steps, t0=self.t0)
+        if self.adaptive:
+            grid = dict(times=self.steps.times)
         try:
             traj = march(
                 self.system,
                 eps,
                 self.Theta0,
-                self.dt,
-                self.n_steps,
-                t0=self.t0,
+                **grid,
                 constraint=constraint,
                 sensitivities=sensitivities,
                 tol=self.tol,
@@ -195,7 +280,7 @@ class DynamicInverseProblem:
                 solver=self.solver,
                 keep_factors=keep_factors,
                 guess=self._last.get(formulation) if self.warm_start else None,
-                scheme=self.scheme,
+                scheme="bdf2" if self.adaptive else self.scheme,
             )
         except ConvergenceError as e:
             if self.warm_start and formulation in self._last:
@@ -210,13 +295,14 @@ class DynamicInverseProblem:
         return traj
 
     def predictions(self, trajectory):
-        """Sensor readings of the mean state, :math:`\\mathcal M\\,\\Theta_i\\mathbb E[\\Psi]`.
+        """Sensor readings of the mean state, :math:`\\mathcal M\\,\\Theta_i\\mathbb E[\\Psi]`,
+        at the data times (the rows of ``V``).
 
         Returns
         -------
-        (n_times, C) ndarray
+        (n_steps + 1, C) ndarray
         """
-        return trajectory.Theta @ self.system.E1 @ self.M_obs.T
+        return trajectory.Theta[self._rows] @ self.system.E1 @ self.M_obs.T
 
     # -- objectives ------------------------------------------------------------------------
     def standard_objective(self, eps, gradient=True):
@@ -244,9 +330,9 @@ class DynamicInverseProblem:
             return z, None, traj
         if adjoint:
             g = np.zeros(traj.Theta.shape)
-            g[1:] = self.dt * np.einsum("tc,cj,k->tjk", e, self.M_obs, self.system.E1)
+            g[self._rows[1:]] = self.dt * np.einsum("tc,cj,k->tjk", e, self.M_obs, self.system.E1)
             return z, traj.adjoint_gradient(g), traj
-        dmean = np.einsum("tikm,k->tim", traj.dTheta[1:], self.system.E1)  # (P, N, n_eps)
+        dmean = np.einsum("tikm,k->tim", traj.dTheta[self._rows[1:]], self.system.E1)
         de = np.einsum("cj,tjm->tcm", self.M_obs, dmean)  # (P, C, n_eps)
         return z, self.dt * np.einsum("tc,tcm->m", e, de), traj
 
@@ -295,7 +381,7 @@ class DynamicInverseProblem:
         if formulation == "ecfm":
             return h * traj.lam[1:].ravel(), h * traj.dlam[1:].reshape(-1, n_eps), traj
         e = self.predictions(traj)[1:] - self.V[1:]
-        dmean = np.einsum("tikm,k->tim", traj.dTheta[1:], self.system.E1)
+        dmean = np.einsum("tikm,k->tim", traj.dTheta[self._rows[1:]], self.system.E1)
         de = np.einsum("cj,tjm->tcm", self.M_obs, dmean)
         return h * e.ravel(), h * de.reshape(-1, n_eps), traj
 
@@ -426,6 +512,40 @@ _LSQ_MAX_EPS = 16
 
 def fit_dynamic_problem(problem, eps0, s):
     """:func:`~ecfm_uq.inverse.fit` for a :class:`DynamicInverseProblem`.
+
+    With ``scheme="adaptive"`` the step sequence is chosen at ``eps0`` (unless one is
+    frozen already) and frozen for the optimization; at the estimate it is checked
+    against ``rtol``/``atol``, and if a step misses them the grid is refined there and
+    the fit polished from the estimate on the refined grid (once). ``extra["steps"]``
+    reports the grid: ``n_steps``, ``n_data``, ``rtol``, ``atol``, ``max_error`` (the
+    largest step error norm at the estimate, ``<= 1`` when met), ``met``, ``refrozen``
+    and ``times``. The fit itself is :func:`_fit_dynamic`.
+    """
+    if not problem.adaptive:
+        return _fit_dynamic(problem, eps0, s)
+    if problem.steps is None:
+        problem.freeze_steps(eps0)
+    res = _fit_dynamic(problem, eps0, s)
+    refrozen = False
+    try:
+        check = problem.check_steps(res.eps)
+        if not check.met:
+            problem.freeze_steps(res.eps, refine=True)
+            res, refrozen = _fit_dynamic(problem, res.eps, s), True
+            check = problem.check_steps(res.eps)
+    except ConvergenceError as e:  # the estimate cannot be marched or no grid meets rtol
+        res.extra["steps"] = dict(n_steps=problem.steps.n_steps, met=False, message=str(e))
+        return res
+    res.extra["steps"] = dict(
+        n_steps=check.n_steps, n_data=problem.n_steps, rtol=check.rtol, atol=check.atol,
+        max_error=check.max_error, met=check.met, refrozen=refrozen, times=check.times,
+        message=check.message,
+    )  # fmt: skip
+    return res
+
+
+def _fit_dynamic(problem, eps0, s):
+    """The fit of :func:`fit_dynamic_problem` on the problem's current time grid.
 
     ``method``: ``"auto"`` (trust-region least squares on the stacked trajectory
     residual with its forward-sensitivity Jacobian, :meth:`DynamicInverseProblem.residual`;

@@ -51,6 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validation import as_finite_array, check_int, check_positive
+from ..errors import ConvergenceError
 from .schemes import check_scheme, check_times
 from .stepping import march
 
@@ -212,7 +213,8 @@ def choose_steps(
     rtol=1e-6,
     atol=None,
     scheme="bdf2",
-    max_rounds=12,
+    start=None,
+    max_rounds=20,
     max_steps=100_000,
     tol=1e-10,
     maxiter=30,
@@ -240,6 +242,9 @@ def choose_steps(
         Absolute tolerance; default ``rtol * max|Theta0|`` (``rtol`` when ``Theta0 = 0``).
     scheme : {"bdf2", "euler"}
         The scheme the grid is for (variable-step forms, :mod:`.schemes`).
+    start : (n,) array_like, optional
+        The grid to refine (e.g. one frozen at other parameters); it must hold every
+        data time. Default: the data times.
     max_rounds : int
         Marches allowed before giving up.
     max_steps : int
@@ -258,7 +263,9 @@ def choose_steps(
     ValueError
         ``rtol <= 0``, ``atol < 0``, ``t_data`` not increasing, an unknown ``scheme``.
     ConvergenceError
-        A march failed; the message names the step and the time it reached.
+        A march failed even on steps split ``max_rounds`` times (when a step's Newton
+        solve fails, the steps before it are halved, it is split in four, and the march
+        runs again); the message names the step and the time the march reached.
     """
     rtol, atol = check_tolerances(rtol, atol)
     scheme = check_scheme(scheme)
@@ -272,12 +279,30 @@ def choose_steps(
         Theta0 = np.outer(Theta0, np.eye(P)[0])
     atol = default_atol(rtol, Theta0) if atol is None else atol
     times = t_data.copy()
+    if start is not None:
+        times = check_times(start)
+        missing = ~np.isin(t_data, times)
+        if missing.any():
+            raise ValueError(
+                f"`start` must hold every data time; t_data[{int(np.argmax(missing))}] = "
+                f"{t_data[np.argmax(missing)]:g} is not in it"
+            )
     while times.size - 1 < MIN_STEPS:  # too few points for an estimate: halve every step
         times = np.sort(np.concatenate([times, 0.5 * (times[1:] + times[:-1])]))
     message = ""
     for rounds in range(1, max_rounds + 1):
         traj = march(system, eps, Theta0, times=times, scheme=scheme, tol=tol, maxiter=maxiter,
-                     solver=solver, strict=True)  # fmt: skip
+                     solver=solver)  # fmt: skip
+        if not traj.success:
+            # Newton failed, likely after steps too long for the model took it off the
+            # solution: halve every step before, split the failed one in four
+            if rounds == max_rounds:
+                raise ConvergenceError(f"{traj.message} (after {rounds} marches)")
+            errors = np.zeros(times.size - 1)
+            errors[: traj.failed_step] = (2 * SAFETY) ** 2
+            errors[traj.failed_step - 1] = (4 * SAFETY) ** 2
+            times = _refine(times, errors, "euler")
+            continue
         errors = step_errors(traj, rtol, atol)
         if errors.max() <= 1.0:
             message = f"every step meets rtol={rtol:g}, atol={atol:g} ({times.size - 1} steps)"
