@@ -248,18 +248,18 @@ class DynamicInverseProblem:
         formulation = check_choice("formulation", formulation, FORMULATIONS)
         constraint = None
         if formulation == "ecfm":
-            if self.system.n_forces != self.n_sensors:
-                raise ValueError(
-                    f"the ECFM formulation needs one constraint force per sensor: the system "
-                    f"has {self.system.n_forces} (Gamma), the data {self.n_sensors} sensors"
-                )
-            constraint = (self.M_obs, self.V)
             if self.adaptive:
                 raise ValueError(
                     "the ECFM formulation constrains the state to the data at every step, "
                     "but the steps of scheme='adaptive' between data times have no data: "
                     "use formulation='standard', or a fixed-step scheme ('euler', 'bdf2')"
                 )
+            if self.system.n_forces != self.n_sensors:
+                raise ValueError(
+                    f"the ECFM formulation needs one constraint force per sensor: the system "
+                    f"has {self.system.n_forces} (Gamma), the data {self.n_sensors} sensors"
+                )
+            constraint = (self.M_obs, self.V)
         eps = self.system.check_eps(eps)
         if self.adaptive and self.steps is None:
             self.freeze_steps(eps)
