@@ -43,22 +43,15 @@ import numpy as np
 from .._validation import as_dense_rows, as_finite_array, check_choice, check_int, check_positive
 from ..errors import ConvergenceError
 from ..system import march
-from ..system.schemes import check_scheme
-from .convergence import OFFSET_TOL, least_squares_optimality
-from .drivers import (
-    LEAST_SQUARES_KEYWORDS,
-    check_minimize_method,
-    least_squares_scaled,
-    minimize_scaled,
-    verify_least_squares,
-)
+from ..system.schemes import SCHEMES
+from ..system.step_control import check_steps, check_tolerances, choose_steps
 from .gradients import choose_gradient
 from .interface import InverseProblem
-from .optimizers import adam
-from .result import InverseResult, Uncertainty, Verdict
-from .status import FitStatus
+from .result import Uncertainty
 
 FORMULATIONS = ("standard", "ecfm")
+#: the time schemes of a dynamic problem: the fixed-step ones and the frozen adaptive grid
+DYNAMIC_SCHEMES = (*SCHEMES, "adaptive")
 
 
 class DynamicInverseProblem(InverseProblem):
@@ -100,16 +93,25 @@ class DynamicInverseProblem(InverseProblem):
         Start each step's Newton iteration from the last trajectory of the same
         formulation (the previous optimizer iterate's) instead of the previous step: fewer
         Newton iterations, the same solution to ``solve_tol``.
-    scheme : {"euler", "bdf2"}
+    scheme : {"euler", "bdf2", "adaptive"}
         Time scheme of the march (:mod:`ecfm_uq.system.schemes`): backward Euler (the
-        paper's, the default) or the second-order BDF2; sensitivities and adjoint
-        gradients are exact for the scheme that runs.
+        paper's, the default) or the second-order BDF2 with the step ``dt``; or
+        ``"adaptive"``: the variable-step BDF2 on a grid through the data times chosen
+        to meet ``rtol``/``atol`` (:func:`ecfm_uq.system.step_control.choose_steps`) at
+        the first parameters marched (a fit: ``eps0``) and then *frozen*, so that every
+        gradient is the exact derivative of the discrete objective being minimized
+        (:meth:`freeze_steps`, :attr:`steps`; a fit re-checks the grid at its estimate).
+        Sensitivities and adjoint gradients are exact for the scheme that runs.
+    rtol, atol : float, optional
+        ``scheme="adaptive"`` only: the local error tolerances of every step (default
+        ``rtol=1e-6``; ``atol`` ``rtol * max|Theta0|``, ``rtol`` when ``Theta0 = 0``).
 
     Raises
     ------
     ValueError
-        On misshaped or non-finite data, a system without mass matrix, or a
-        non-positive ``dt``/``solve_tol``.
+        On misshaped or non-finite data, a system without mass matrix, a
+        non-positive ``dt``/``solve_tol``/``rtol``, an unknown ``scheme``, or ``rtol``/``atol``
+        with a fixed-step scheme.
     """
 
     def __init__(
@@ -128,6 +130,8 @@ class DynamicInverseProblem(InverseProblem):
         solver="auto",
         warm_start=True,
         scheme="euler",
+        rtol=None,
+        atol=None,
     ):
         if getattr(system, "M", None) is None:
             raise ValueError("`system` needs a mass matrix M for time stepping (build it with M=)")
@@ -140,7 +144,19 @@ class DynamicInverseProblem(InverseProblem):
         self.gradient = choose_gradient(gradient, system.n_eps)
         self.solver = solver
         self.warm_start = bool(warm_start)
-        self.scheme = check_scheme(scheme)
+        if not isinstance(scheme, str) or scheme not in DYNAMIC_SCHEMES:
+            raise ValueError(
+                f"`scheme` must be one of {DYNAMIC_SCHEMES}, got {scheme!r} ('adaptive': "
+                "steps chosen to meet rtol/atol, then frozen)"
+            )
+        self.scheme = scheme
+        if scheme != "adaptive" and (rtol is not None or atol is not None):
+            raise ValueError(
+                f"`rtol`/`atol` set the steps of scheme='adaptive'; scheme={scheme!r} marches "
+                "the fixed step `dt` (pass scheme='adaptive', or drop rtol/atol)"
+            )
+        self.rtol, self.atol = check_tolerances(1e-6 if rtol is None else rtol, atol)
+        self.steps = None  # the frozen StepSequence of scheme="adaptive"
         self._last = {}  # formulation -> last trajectory (the warm start)
         N, P = system.shape
         Theta0 = as_finite_array("Theta0", Theta0)
@@ -154,6 +170,56 @@ class DynamicInverseProblem(InverseProblem):
             raise ValueError(f"`M_obs` must have N = {N} columns, got shape {self.M_obs.shape}")
         C = self.M_obs.shape[0]
         self.V = as_finite_array("V", V, shape=(self.n_steps + 1, C))
+        self._rows = np.arange(self.n_steps + 1)  # the data times' rows of a trajectory
+
+    @property
+    def adaptive(self):
+        """True for ``scheme="adaptive"`` (a frozen error-controlled grid)."""
+        return self.scheme == "adaptive"
+
+    def freeze_steps(self, eps, refine=False):
+        """Choose the step sequence at ``eps`` to meet ``rtol``/``atol`` and freeze it
+        (``scheme="adaptive"``): every later march, gradient and fit uses this grid until
+        the next call (``refine=True``: by splitting the frozen grid's steps instead of
+        starting from the data times). Returns the
+        :class:`~ecfm_uq.system.step_control.StepSequence`.
+
+        Raises
+        ------
+        ConvergenceError
+            The model cannot be marched at ``eps`` (the message names the time reached),
+            or no grid within the limits meets the tolerance.
+        """
+        if not self.adaptive:
+            raise ValueError(f"freeze_steps is for scheme='adaptive', not {self.scheme!r}")
+        eps = self.system.check_eps(eps)
+        at = f"choosing the steps at eps={np.array2string(eps)} failed"
+        t_data = self.t0 + self.dt * np.arange(self.n_steps + 1)  # the rows of V
+        try:
+            seq = choose_steps(
+                self.system, eps, self.Theta0, t_data, rtol=self.rtol, atol=self.atol,
+                tol=self.solve_tol, maxiter=self.solve_maxiter, solver=self.solver,
+                start=self.steps.times if refine and self.steps is not None else None,
+            )  # fmt: skip
+        except ConvergenceError as e:
+            raise ConvergenceError(f"{at}: {e}") from e
+        if not seq.met:
+            raise ConvergenceError(f"{at}: {seq.message}")
+        self.steps, self._rows, self._last = seq, seq.data_index, {}
+        return seq
+
+    def check_steps(self, eps):
+        """The local errors of the frozen grid marched at ``eps`` against ``rtol``/``atol``
+        (a :class:`~ecfm_uq.system.step_control.StepSequence`; ``met`` says whether every
+        step meets them)."""
+        if self.steps is None:
+            raise ValueError("no frozen steps: scheme='adaptive' and freeze_steps(eps) first")
+        saved = dict(self._last)  # a check must not move the optimizer's warm starts
+        try:
+            traj = self.solve(eps, "standard")
+        finally:
+            self._last = saved
+        return check_steps(traj, self._rows, self.steps.rtol, self.steps.atol)
 
     data_attribute = "V"
 
@@ -188,6 +254,12 @@ class DynamicInverseProblem(InverseProblem):
         formulation = check_choice("formulation", formulation, FORMULATIONS)
         constraint = None
         if formulation == "ecfm":
+            if self.adaptive:
+                raise ValueError(
+                    "the ECFM formulation constrains the state to the data at every step, "
+                    "but the steps of scheme='adaptive' between data times have no data: "
+                    "use formulation='standard', or a fixed-step scheme ('euler', 'bdf2')"
+                )
             if self.system.n_forces != self.n_sensors:
                 raise ValueError(
                     f"the ECFM formulation needs one constraint force per sensor: the system "
@@ -195,14 +267,17 @@ class DynamicInverseProblem(InverseProblem):
                 )
             constraint = (self.M_obs, self.V)
         eps = self.system.check_eps(eps)
+        if self.adaptive and self.steps is None:
+            self.freeze_steps(eps)
+        grid = dict(dt=self.dt, n_steps=self.n_steps, t0=self.t0)
+        if self.adaptive:
+            grid = dict(times=self.steps.times)
         try:
             traj = march(
                 self.system,
                 eps,
                 self.Theta0,
-                self.dt,
-                self.n_steps,
-                t0=self.t0,
+                **grid,
                 constraint=constraint,
                 sensitivities=sensitivities,
                 tol=self.solve_tol,
@@ -211,7 +286,7 @@ class DynamicInverseProblem(InverseProblem):
                 solver=self.solver,
                 keep_factors=keep_factors,
                 guess=self._last.get(formulation) if self.warm_start else None,
-                scheme=self.scheme,
+                scheme="bdf2" if self.adaptive else self.scheme,
             )
         except ConvergenceError as e:
             if self.warm_start and formulation in self._last:
@@ -226,13 +301,14 @@ class DynamicInverseProblem(InverseProblem):
         return traj
 
     def predictions(self, trajectory):
-        """Sensor readings of the mean state, :math:`\\mathcal M\\,\\Theta_i\\mathbb E[\\Psi]`.
+        """Sensor readings of the mean state, :math:`\\mathcal M\\,\\Theta_i\\mathbb E[\\Psi]`,
+        at the data times (the rows of ``V``).
 
         Returns
         -------
-        (n_times, C) ndarray
+        (n_steps + 1, C) ndarray
         """
-        return trajectory.Theta @ self.system.E1 @ self.M_obs.T
+        return trajectory.Theta[self._rows] @ self.system.E1 @ self.M_obs.T
 
     # -- objectives ------------------------------------------------------------------------
     def standard_objective(self, eps, gradient=True):
@@ -260,9 +336,9 @@ class DynamicInverseProblem(InverseProblem):
             return z, None, traj
         if adjoint:
             g = np.zeros(traj.Theta.shape)
-            g[1:] = self.dt * np.einsum("tc,cj,k->tjk", e, self.M_obs, self.system.E1)
+            g[self._rows[1:]] = self.dt * np.einsum("tc,cj,k->tjk", e, self.M_obs, self.system.E1)
             return z, traj.adjoint_gradient(g), traj
-        dmean = np.einsum("tikm,k->tim", traj.dTheta[1:], self.system.E1)  # (P, N, n_eps)
+        dmean = np.einsum("tikm,k->tim", traj.dTheta[self._rows[1:]], self.system.E1)
         de = np.einsum("cj,tjm->tcm", self.M_obs, dmean)  # (P, C, n_eps)
         return z, self.dt * np.einsum("tc,tcm->m", e, de), traj
 
@@ -311,7 +387,7 @@ class DynamicInverseProblem(InverseProblem):
         if formulation == "ecfm":
             return h * traj.lam[1:].ravel(), h * traj.dlam[1:].reshape(-1, n_eps), traj
         e = self.predictions(traj)[1:] - self.V[1:]
-        dmean = np.einsum("tikm,k->tim", traj.dTheta[1:], self.system.E1)
+        dmean = np.einsum("tikm,k->tim", traj.dTheta[self._rows[1:]], self.system.E1)
         de = np.einsum("cj,tjm->tcm", self.M_obs, dmean)
         return h * e.ravel(), h * de.reshape(-1, n_eps), traj
 
@@ -437,174 +513,3 @@ class DynamicInverseProblem(InverseProblem):
                 return Uncertainty.failed(f"uncertainty not computed: {e}")
             return estimate_uncertainty(None, eps, data, s2, model, dof=dof, deps_dv=D)
         return estimate_uncertainty(grad, eps, data, s2, model, dof=dof, hessian=J.T @ J)
-
-
-#: defaults of the dynamic fits: Adam's epochs (the paper's 250), the relative gradient
-#: tolerance and iterations of the quasi-Newton methods, the residual evaluations of the
-#: least-squares method, and the largest n_eps for which the least-squares method's
-#: forward sensitivities count as cheap (beyond: L-BFGS-B with the adjoint gradient)
-_ADAM_EPOCHS = 250
-_DEFAULT_TOL = 1e-10
-_DEFAULT_MAXITER = 500
-_DEFAULT_MAX_NFEV = 500
-_LSQ_MAX_EPS = 16
-
-
-def fit_dynamic_problem(problem, eps0, s):
-    """:func:`~ecfm_uq.inverse.fit` for a :class:`DynamicInverseProblem`.
-
-    ``method``: ``"auto"`` (trust-region least squares on the stacked trajectory
-    residual with its forward-sensitivity Jacobian, :meth:`DynamicInverseProblem.residual`;
-    L-BFGS-B with the adjoint gradient when ``n_eps > 16``), ``"adam"`` (the paper's
-    optimizer; ``maxiter`` epochs, ``options`` ``lr``, ``betas``, ``eps_hat``,
-    ``callback``) or a gradient method of ``scipy.optimize.minimize`` on the objective
-    scaled by its value at ``eps0``. Whatever ran, the status is decided from the
-    least-squares optimality conditions at the returned point
-    (:mod:`~ecfm_uq.inverse.convergence`): Adam's fixed epochs are ``MAX_ITERATIONS``
-    unless the conditions hold there. The verdict tests the unforced model's trajectory
-    residual (chi2 with ``sigma``, the noise-free rule without).
-    """
-    formulation = check_choice("formulation", s.formulation, FORMULATIONS)
-    eps0 = problem.system.check_eps(eps0)
-    n_eps = problem.system.n_eps
-    method = s.method
-    covariance = s.options.get("covariance", "gauss-newton")
-    if covariance not in ("gauss-newton", "sandwich"):
-        raise ValueError(
-            f"options['covariance'] must be 'gauss-newton' or 'sandwich', got {covariance!r}"
-        )
-    s = dataclasses.replace(s, options={k: w for k, w in s.options.items() if k != "covariance"})
-    if method == "auto":
-        method = "least-squares" if n_eps <= _LSQ_MAX_EPS else "L-BFGS-B"
-
-    def residual(eps):
-        return problem.residual(eps, formulation)
-
-    if method == "adam":
-        opts = s.take({"lr": 1e-2, "betas": (0.9, 0.999), "eps_hat": 1e-8, "callback": None})
-        res = adam(
-            problem.objective(formulation),
-            eps0,
-            lr=opts["lr"],
-            epochs=_ADAM_EPOCHS if s.maxiter is None else s.maxiter,
-            betas=opts["betas"],
-            eps_hat=opts["eps_hat"],
-            method=formulation,
-            callback=opts["callback"],
-        )
-        traj = None
-        if res.status is FitStatus.CONVERGED:  # completed its epochs: at an optimum?
-            res = _check_adam(problem, res, residual, s.bounds)
-    elif method in ("least-squares", "trf"):
-        s.take(dict.fromkeys(LEAST_SQUARES_KEYWORDS))  # by name, before any march
-        out = least_squares_scaled(
-            residual, eps0, s.bounds, s.tol,
-            _DEFAULT_MAX_NFEV if s.maxiter is None else s.maxiter, s.options,
-        )  # fmt: skip
-        res = _result(out, formulation, "least-squares")
-        traj = out.payload
-    else:
-        check_minimize_method(method)
-        options = dict(s.options)
-        polish = options.pop("polish", False)
-
-        def evaluate(eps):
-            z, g, traj = _OBJECTIVE[formulation](problem, eps, gradient=True)
-            return z, g, traj
-
-        out = minimize_scaled(
-            evaluate, eps0, method, s.bounds, _DEFAULT_TOL,
-            _DEFAULT_MAXITER if s.maxiter is None else s.maxiter, options,
-        )  # fmt: skip
-        if n_eps <= _LSQ_MAX_EPS:
-            out = verify_least_squares(
-                out, residual, s.bounds, out.status is FitStatus.MAX_ITERATIONS, polish=polish,
-                tol=OFFSET_TOL if s.tol is None else s.tol,
-            )  # fmt: skip
-        res = _result(out, formulation, method)
-        traj = out.payload
-    if traj is None and method != "adam":  # stopped where the model cannot be marched
-        verdict = Verdict(False, test="none", message=f"NOT consistent: {res.message}")
-        return dataclasses.replace(res, verdict=verdict)
-    if formulation == "ecfm":
-        traj = traj if traj is not None else problem.solve(res.eps, "ecfm")
-        res = dataclasses.replace(res, forces=traj.lam)
-    if s.uncertainty and res.success:
-        conv = "implicit" if covariance == "sandwich" else covariance
-        unc = problem.uncertainty(res.eps, formulation, s.sigma, conv)
-    elif s.uncertainty:
-        unc = Uncertainty.failed("uncertainty not computed: the fit did not succeed")
-    else:
-        unc = Uncertainty.failed("not computed (uncertainty=False)")
-    res = dataclasses.replace(res, uncertainty=unc)
-    verdict = _verdict(problem, res, s, traj if formulation == "standard" else None)
-    return dataclasses.replace(res, verdict=verdict)
-
-
-def _result(out, formulation, optimizer):
-    return InverseResult(
-        eps=out.x, loss=out.loss, status=out.status, message=out.message, nit=out.nit,
-        nfev=out.nfev, njev=out.nfev, method=formulation, optimizer=optimizer,
-        eps_history=out.eps_history, loss_history=out.loss_history,
-        optimality=out.optimality,
-    )  # fmt: skip
-
-
-def _check_adam(problem, res, residual, bounds):
-    """Adam ran its epochs: CONVERGED only if the least-squares optimality conditions
-    hold at its last iterate, else MAX_ITERATIONS (its epochs are a budget, not a test).
-    Returns the result with that status."""
-    saved = dict(problem._last)  # the check must not move the warm starts
-    try:
-        r, J, _ = residual(res.eps)
-    except ConvergenceError as e:
-        return dataclasses.replace(
-            res, status=FitStatus.MODEL_FAILURE,
-            message=f"{res.message} [the model cannot be marched at the last iterate: {e}]",
-        )  # fmt: skip
-    finally:
-        problem._last = saved
-    opt = least_squares_optimality(r, J, res.eps, bounds=bounds)
-    res = dataclasses.replace(res, nfev=res.nfev + 1, optimality=opt.value)
-    if not opt.converged:
-        res = dataclasses.replace(
-            res, status=FitStatus.MAX_ITERATIONS,
-            message=f"{res.message} [NOT converged: {opt.message}]",
-        )  # fmt: skip
-    return res
-
-
-_OBJECTIVE = {
-    "standard": DynamicInverseProblem.standard_objective,
-    "ecfm": DynamicInverseProblem.ecfm_objective,
-}
-
-
-def _verdict(problem, res, s, traj=None):
-    """Whether the unforced model's trajectory at the estimate explains the data
-    (``traj``: that trajectory if the caller has it)."""
-    from .verdict import EXTREME_DECADES, FORCE_RULE, _extreme, at_bound, decide, residual_verdict
-
-    hits = at_bound(res.eps, s.bounds)
-    extreme = _extreme(problem.system, res.eps, EXTREME_DECADES)
-    saved = dict(problem._last)  # the check must not move the optimizer's warm starts
-    try:
-        traj = problem.solve(res.eps, "standard") if traj is None else traj
-    except ConvergenceError as e:
-        return decide(
-            "chi2" if s.sigma is not None else FORCE_RULE,
-            None if s.sigma is None else 0.0, s.alpha,
-            [f"the unforced model cannot be marched at the estimate: {e}"],
-            explained=False, at_bound=hits, extreme=extreme,
-        )  # fmt: skip
-    finally:
-        problem._last = saved
-    e = problem.predictions(traj)[1:] - problem.V[1:]
-    details = {}
-    if res.forces is not None:
-        lam = res.forces[1:]
-        details["peak_force_index"] = int(np.argmax(np.abs(lam).max(axis=0)))
-    return residual_verdict(
-        e, problem.V[1:], s.sigma, s.alpha, problem.system.n_eps, at_bound=hits,
-        extreme=extreme, details=details, forces=res.forces is not None,
-    )  # fmt: skip

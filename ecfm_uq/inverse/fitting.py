@@ -296,7 +296,7 @@ def fit(
     elif kind == "steady":
         from .steady import fit_steady_problem as fitter
     elif kind == "dynamic":
-        from .dynamic import fit_dynamic_problem as fitter
+        from .dynamic_fit import fit_dynamic_problem as fitter
     else:
         from .replicated import fit_replicated_problem as fitter
     noise = settings.sigma if isinstance(settings.sigma, NoiseModel) else None

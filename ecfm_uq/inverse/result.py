@@ -275,6 +275,10 @@ class InverseResult:
                                                                 of the optimality check
         ``grad``, ``grad_history``    Adam (dynamic)            final gradient, all
                                                                 gradients
+        ``steps``                     dynamic, ``scheme=        the frozen time grid
+                                      "adaptive"``              (dict: ``n_steps``,
+                                                                ``met``, ``max_error``,
+                                                                ``times``, ...)
         ``profile``                   any                       the last
                                                                 :class:`~.profile.
                                                                 ProfileSummary`, written

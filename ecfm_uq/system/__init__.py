@@ -1,8 +1,10 @@
 """The stochastic Galerkin system R(Theta; eps, lam) and its solvers (paper Eqs.
 backward_euler, ecfm_solve, discrete_sens, discrete_sens_ecfm, pce, stochastic_sens).
 
-Transients: ``march`` (fixed steps, ``scheme="euler"`` or ``"bdf2"``, sensitivities and the
-exact discrete adjoint) and ``integrate`` (variable-order BDF with error control)."""
+Transients: ``march`` (fixed steps or a given grid ``times=``, ``scheme="euler"`` or
+``"bdf2"``, sensitivities and the exact discrete adjoint), ``choose_steps`` (a grid through
+the data times meeting rtol/atol, to be frozen for a calibration) and ``integrate``
+(variable-order BDF with error control)."""
 
 from .adaptive import integrate
 from .galerkin import GalerkinSystem
@@ -13,6 +15,7 @@ from .operator import AugmentedOperator, GalerkinOperator
 from .options import SOLVERS, SolverOptions, solver_options
 from .schemes import SCHEMES
 from .steady import SteadySolution, solve_continuation, solve_steady
+from .step_control import StepSequence, choose_steps
 from .stepping import march
 from .terms import Coefficient, DenseQuadraticForm, LinearTerm, LoadTerm, QuadraticTerm
 from .trajectory import Trajectory
@@ -33,7 +36,9 @@ __all__ = [
     "QuadraticTerm",
     "SolverOptions",
     "SteadySolution",
+    "StepSequence",
     "Trajectory",
+    "choose_steps",
     "integrate",
     "march",
     "newton",

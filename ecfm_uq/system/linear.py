@@ -90,6 +90,8 @@ class LinearSolver:
         The caller keeps every factorization (a march for an adjoint).
     scheme : str
         The march's time scheme (:mod:`.schemes`).
+    uniform : bool
+        The march's steps are uniform (``False``: a given time grid).
 
     Attributes
     ----------
@@ -99,12 +101,12 @@ class LinearSolver:
 
     def __init__(
         self, system, options, *, constrained=False, steady=True, keep_factors=False,
-        scheme="euler",
+        scheme="euler", uniform=True,
     ):  # fmt: skip
         self.system, self.options = system, options
         self.plan = _plan.plan_solve(
             system, options, constrained=constrained, steady=steady,
-            keep_factors=keep_factors, scheme=scheme,
+            keep_factors=keep_factors, scheme=scheme, uniform=uniform,
         )  # fmt: skip
         self.name = self.plan.solver
         self.record = LinearSolveRecord(self.plan.label)

@@ -269,8 +269,9 @@ class SolvePlan:
 
 
 def plan_solve(
-    system, options, *, constrained=False, steady=True, keep_factors=False, scheme="euler"
-):
+    system, options, *, constrained=False, steady=True, keep_factors=False, scheme="euler",
+    uniform=True,
+):  # fmt: skip
     """The :class:`SolvePlan` of a solve of ``system`` with ``options``.
 
     Parameters
@@ -287,6 +288,9 @@ def plan_solve(
         The march's time scheme (:mod:`.schemes`): the compiled kernels march the
         fixed-step schemes (``"euler"``, ``"bdf2"``); ``integrate``'s variable steps
         (``"bdf"``) run on the generic path.
+    uniform : bool
+        The march's steps are uniform (``False``: a given grid, ``march(..., times=...)``,
+        which runs on the generic path).
 
     Raises
     ------
@@ -302,7 +306,7 @@ def plan_solve(
     path, reason = "generic", ""
     if not steady:
         path, reason = _march_path(
-            system, options, solver, precond, constrained, keep_factors, scheme
+            system, options, solver, precond, constrained, keep_factors, scheme, uniform
         )
     return SolvePlan(path, solver, precond, options, reason)
 
@@ -396,11 +400,15 @@ def _nodal_march_refusal(system):
     return None
 
 
-def _march_refusal(system, solver, precond, constrained, keep_factors, scheme="euler"):
+def _march_refusal(
+    system, solver, precond, constrained, keep_factors, scheme="euler", uniform=True
+):
     """Why no compiled march takes this solve (``None``: one can)."""
     N, P = system.shape
     if scheme not in ("euler", "bdf2"):
         return f"the compiled kernels march fixed-step schemes only (scheme={scheme!r})"
+    if not uniform:
+        return "the compiled kernels march uniform steps only (a grid was given: times=)"
     if P == 1:
         if solver != "dense":
             return f"the P = 1 kernel factorizes densely, but the solver is {solver!r}"
@@ -420,13 +428,13 @@ def _march_refusal(system, solver, precond, constrained, keep_factors, scheme="e
     return _nodal_march_refusal(system)
 
 
-def _march_path(system, options, solver, precond, constrained, keep_factors, scheme):
+def _march_path(system, options, solver, precond, constrained, keep_factors, scheme, uniform):
     """``(path, reason)`` of a march: a compiled kernel's path, or ``"generic"`` and why."""
     if options.compiled is False:
         return "generic", "compiled=False asks for the generic march"
     from .compiled import compiled_kernels  # the kernels' loader (numba, on first use)
 
-    refusal = _march_refusal(system, solver, precond, constrained, keep_factors, scheme)
+    refusal = _march_refusal(system, solver, precond, constrained, keep_factors, scheme, uniform)
     if refusal is None and compiled_kernels() is None:
         refusal = "the compiled kernels do not load with this numba"
     if refusal is not None:

@@ -34,6 +34,24 @@ right) and the discrete adjoint (:func:`.trajectory._generic_adjoint`, which car
     starts with one backward-Euler step, whose local error :math:`O(\\Delta t^2)` keeps the
     global error second order.
 
+On a given, non-uniform grid :math:`t_0 < t_1 < \\dots` (``march(..., times=...)``)
+the same two schemes take their variable-step forms (:func:`grid_rules`): backward Euler
+with :math:`h_s = t_{s+1} - t_s`, and the variable-step BDF2 (Hairer & Wanner II, Sec.
+III.5; :math:`p'(t_{s+1}) = f` for the quadratic :math:`p` through the last three states),
+with :math:`\\omega_s = h_s/h_{s-1}`,
+
+.. math::
+
+    \\frac{1 + 2\\omega_s}{1 + \\omega_s}\\Theta_{s+1} - (1 + \\omega_s)\\Theta_s
+        + \\frac{\\omega_s^2}{1 + \\omega_s}\\Theta_{s-1}
+        = -h_s M^{-1}R(\\Theta_{s+1}),
+
+i.e. an effective length :math:`h_s(1 + \\omega_s)/(1 + 2\\omega_s)` and
+:math:`\\psi_s = ((1 + \\omega_s)^2\\Theta_s - \\omega_s^2\\Theta_{s-1})/(1 + 2\\omega_s)`
+(:math:`\\omega_s = 1`: the fixed-step BDF2). It is zero-stable for step ratios
+:math:`\\omega_s < 1 + \\sqrt 2` (Grigorieff 1983); the grids of :mod:`.step_control`
+keep :math:`\\omega_s \\le 2`. The adjoint is the same generic one: only the rules differ.
+
 Crank-Nicolson is not offered: it is A- but not L-stable (stiff modes of the heat and
 finite-element models would ring from step to step instead of decaying), and under the
 ECFM constraint its forces would act at two times per step.
@@ -41,9 +59,13 @@ ECFM constraint its forces would act at two times per step.
 
 from __future__ import annotations
 
+import numpy as np
+
+from .._validation import as_finite_array
+
 SCHEMES = ("euler", "bdf2")
 
-__all__ = ["SCHEMES", "check_scheme", "scheme_order", "step_rule"]
+__all__ = ["SCHEMES", "check_scheme", "check_times", "grid_rules", "scheme_order", "step_rule"]
 
 _ORDER = {"euler": 1, "bdf2": 2}
 
@@ -71,3 +93,42 @@ def step_rule(scheme, s, dt):
     if scheme == "euler" or s == 0:
         return dt, (1.0,)
     return 2.0 * dt / 3.0, (4.0 / 3.0, -1.0 / 3.0)
+
+
+def check_times(times):
+    """``times`` as a strictly increasing float array of at least two points, else a
+    ``ValueError`` naming ``times`` and the first offending entry."""
+    times = as_finite_array("times", times, ndim=1)
+    if times.size < 2:
+        raise ValueError(f"`times` must hold at least two times (start and end), got {times.size}")
+    bad = np.nonzero(np.diff(times) <= 0)[0]
+    if bad.size:
+        k = int(bad[0])
+        raise ValueError(
+            f"`times` must be strictly increasing, but times[{k + 1}] = {times[k + 1]:g} <= "
+            f"times[{k}] = {times[k]:g}; sort it (np.unique) before marching"
+        )
+    return times
+
+
+def grid_rules(scheme, times):
+    """``[(h_s, w_s)]`` of every step of ``scheme`` on the grid ``times`` (variable steps).
+
+    Step ``s`` goes from ``times[s]`` to ``times[s + 1]``; ``w_s[j]`` multiplies
+    :math:`\\Theta_{s-j}` (module notes). The first BDF2 step is backward Euler, as on
+    a uniform grid.
+    """
+    h = np.diff(np.asarray(times, dtype=float))
+    rules = []
+    for s, hs in enumerate(h):
+        if scheme == "euler" or s == 0:
+            rules.append((float(hs), (1.0,)))
+            continue
+        om = hs / h[s - 1]
+        rules.append(
+            (
+                float(hs * (1.0 + om) / (1.0 + 2.0 * om)),
+                ((1.0 + om) ** 2 / (1.0 + 2.0 * om), -(om**2) / (1.0 + 2.0 * om)),
+            )
+        )
+    return rules

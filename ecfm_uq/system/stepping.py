@@ -31,7 +31,7 @@ from .linear import LinearSolver
 from .nonlinear import Bordered, _check_constraint, _constraint_scale, newton
 from .options import solver_options
 from .plan import WARM_START_STATES, dense_unknowns
-from .schemes import check_scheme, step_rule
+from .schemes import check_scheme, check_times, grid_rules, step_rule
 from .trajectory import Trajectory, _generic_adjoint
 
 
@@ -58,15 +58,35 @@ def _warm_start(fun, states):
     return last + D @ c, (r + JD @ c, J)
 
 
+def _time_grid(times, dt, n_steps, t0):
+    """``(times, dt, n_steps, t0)`` of a march: ``times`` ``None`` for fixed steps, ``dt``
+    ``None`` for a given grid; a ``ValueError`` names what is missing or contradictory."""
+    if times is None:
+        if dt is None or n_steps is None:
+            raise ValueError("pass `dt` and `n_steps` (fixed steps) or `times` (a time grid)")
+        dt = check_positive("dt", dt)
+        n_steps = check_int("n_steps", n_steps, minimum=1)
+        t0 = 0.0 if t0 is None else float(as_finite_array("t0", t0, ndim=0))
+        return None, dt, n_steps, t0
+    if dt is not None or n_steps is not None or t0 is not None:
+        raise ValueError(
+            "pass either `times` (the grid; it starts at the time of Theta0) or `dt`, "
+            "`n_steps` and `t0`, not both"
+        )
+    times = check_times(times)
+    return times, None, times.size - 1, float(times[0])
+
+
 @library_threads(size=dense_unknowns)
 def march(
     system,
     eps,
     Theta0,
-    dt,
-    n_steps,
+    dt=None,
+    n_steps=None,
     *,
-    t0=0.0,
+    times=None,
+    t0=None,
     constraint=None,
     sensitivities=False,
     tol=1e-10,
@@ -77,7 +97,8 @@ def march(
     guess=None,
     scheme="euler",
 ):
-    """Integrate :math:`M\\dot\\Theta + R(\\Theta; \\epsilon, \\lambda, t) = 0` with fixed steps.
+    """Integrate :math:`M\\dot\\Theta + R(\\Theta; \\epsilon, \\lambda, t) = 0` with fixed steps
+    (``dt``, ``n_steps``) or on a given grid (``times``).
 
     Parameters
     ----------
@@ -88,10 +109,17 @@ def march(
         Initial state (independent of :math:`\\epsilon`).
     dt : float
     n_steps : int
+    times : (n_steps + 1,) array_like, optional
+        Instead of ``dt`` and ``n_steps``: the step points :math:`t_0 < t_1 < \\dots`, any
+        spacing; ``Theta0`` is the state at ``times[0]`` and step ``s`` goes from
+        ``times[s]`` to ``times[s + 1]`` by the variable-step form of ``scheme``
+        (:func:`.schemes.grid_rules`). Keep the step ratios below :math:`1 + \\sqrt 2`
+        for BDF2 (:func:`.step_control.choose_steps` makes such grids).
     t0 : float
+        Time of ``Theta0`` (default 0; with ``times``, ``times[0]``).
     constraint : (M_obs, V), optional
         Data constraint at every step, ``V`` of shape (n_steps + 1, C) with row ``t`` the
-        data at time ``t0 + t dt`` (row 0 unused). :math:`\\lambda_t` become unknowns
+        data at time ``t0 + t dt`` (or ``times[t]``; row 0 unused). :math:`\\lambda_t` become unknowns
         (Eq. ecfm_solve).
     sensitivities : bool
         Also integrate :math:`\\partial\\Theta/\\partial\\epsilon` (and
@@ -130,8 +158,8 @@ def march(
     Trajectory
     """
     eps = system.check_eps(eps)
-    dt = check_positive("dt", dt)
-    n_steps = check_int("n_steps", n_steps, minimum=1)
+    times, dt, n_steps, t0 = _time_grid(times, dt, n_steps, t0)
+    uniform = dt is not None
     tol = check_positive("tol", tol)
     maxiter = check_int("maxiter", maxiter, minimum=1)
     scheme = check_scheme(scheme)
@@ -148,7 +176,10 @@ def march(
     if system.M is None:
         system.mass_matrix()  # raises the "no mass matrix" error
     opts = solver_options(solver)
-    plan = dict(constrained=constrained, steady=False, keep_factors=keep_factors, scheme=scheme)
+    plan = dict(
+        constrained=constrained, steady=False, keep_factors=keep_factors, scheme=scheme,
+        uniform=uniform,
+    )  # fmt: skip
     linear = LinearSolver(system, opts, **plan)
     if guess is not None:
         if not isinstance(guess, Trajectory) or guess.Theta.shape != (n_steps + 1, N, P):
@@ -168,8 +199,19 @@ def march(
         # the kernel did not compile with this numba: the same solve on the generic path
         linear = LinearSolver(system, solver_options(opts, compiled=False), **plan)
     # every step of every scheme is a backward-Euler-like solve of effective length h
-    rules = [step_rule(scheme, s, dt) for s in range(n_steps)]
-    if linear.name == "dense":
+    if uniform:
+        rules = [step_rule(scheme, s, dt) for s in range(n_steps)]
+    else:
+        rules = grid_rules(scheme, times)
+    if linear.name == "dense" and not uniform:
+        M_full = system.mass_matrix()  # one matrix, not one per distinct step length
+
+        def mass(X, h):
+            return (M_full @ X) / h
+
+        def mass_T(x, h):
+            return (M_full.T @ x) / h
+    elif linear.name == "dense":
         Mh = {h: system.mass_matrix() / h for h in {h for h, _ in rules}}
 
         def mass(X, h):  # (NP,) or (NP, m)
@@ -194,7 +236,8 @@ def march(
     # a Krylov solve of a linear step starts from the best combination of the last states
     warm = system.is_linear and linear.iterative
 
-    times = t0 + dt * np.arange(n_steps + 1)
+    if uniform:
+        times = t0 + dt * np.arange(n_steps + 1)
     Th = np.zeros((n_steps + 1, N, P))
     Th[0] = Theta0
     lam = np.zeros((n_steps + 1, C))
