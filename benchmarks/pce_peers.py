@@ -67,14 +67,20 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import functools  # noqa: E402
 import math  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
 import warnings  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 from scipy import stats  # noqa: E402
 from scipy.stats import qmc  # noqa: E402
 
 from ecfm_uq.chaos import Inputs, fit_pce, smolyak_rule  # noqa: E402
+
+# the truncated Gumbel of --part mixed is the user's own law the tests check (tests/_laws.py)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from _laws import TRUNC_GUMBEL  # noqa: E402
 
 PI = np.pi
 BUDGETS = (100, 500, 1000)
@@ -513,26 +519,9 @@ def warm_up(have):
 # eight inputs of mixed laws (issue 30): a truncated Gumbel written as an rv_continuous
 # subclass, a normal truncated below, uniforms, triangulars and a lognormal
 # --------------------------------------------------------------------------------------
-class TruncGumbel(stats.rv_continuous):
-    """Gumbel (max) law, location 10, scale 2, truncated to [5, 25]: a user's own law."""
-
-    def _g(self, x):
-        return np.exp(-np.exp(-(x - 10.0) / 2.0))
-
-    def _pdf(self, x):
-        z = (x - 10.0) / 2.0
-        return np.exp(-z - np.exp(-z)) / 2.0 / (self._g(25.0) - self._g(5.0))
-
-    def _cdf(self, x):
-        return (self._g(x) - self._g(5.0)) / (self._g(25.0) - self._g(5.0))
-
-    def _ppf(self, u):
-        return 10.0 - 2.0 * np.log(-np.log(self._g(5.0) + u * (self._g(25.0) - self._g(5.0))))
-
-
 def mixed_marginals():
     return [
-        TruncGumbel(a=5.0, b=25.0, name="truncgumbel")(),
+        TRUNC_GUMBEL(),
         stats.truncnorm(-4.0, np.inf, loc=30.0, scale=7.5),
         stats.uniform(0.0, 1.0),
         stats.uniform(-1.0, 2.0),

@@ -111,10 +111,24 @@ def _sparse_select(Psi, y, candidates, n, solver, first_steps=None):
         def path(steps):
             return _path_order(Xc, y - y.mean(), steps, solver)
 
+    return _grow_path(path, Psi, candidates, y, steps, max_steps)
+
+
+def _grow_path(path, design, positions, y, steps, max_steps):
+    """Run ``path`` in growing pieces and refit the best nested set: (columns, coef, LOO).
+
+    ``path(steps)`` returns the entry order (indices into ``positions``) of its first
+    ``steps`` columns; ``positions`` maps them to columns of ``design``, whose column 0 is
+    the constant. Each piece's nested active sets are refitted by OLS (one QR) and scored
+    by the corrected LOO error; the path grows, twice as many steps up to ``max_steps``,
+    while the best set lies in the last quarter of the steps run. Shared by the
+    fixed-candidate selection (:func:`_sparse_select`) and the adaptive one
+    (:mod:`ecfm_uq.chaos.adaptive`).
+    """
     while True:
         active = path(steps)
-        cols = [0] + [int(candidates[j]) for j in active]
-        Q, R = sla.qr(Psi[:, cols], mode="economic")
+        cols = [0] + [int(positions[j]) for j in active]
+        Q, R = sla.qr(design[:, cols], mode="economic")
         d = np.abs(np.diag(R))
         # stop at the first column that is numerically dependent on the earlier ones
         bad = np.flatnonzero(d < 1e-10 * d[0])
@@ -122,6 +136,7 @@ def _sparse_select(Psi, y, candidates, n, solver, first_steps=None):
         Q, R, cols = Q[:, :s], R[:s, :s], cols[:s]
         _, corrected = _loo_nested(Q, R, y)
         k = int(np.argmin(corrected)) + 1
+        # grow the path while the best set lies in the last quarter of the steps run
         if steps >= max_steps or len(active) < steps or s < len(cols) or 4 * k <= 3 * s:
             break
         steps = min(2 * steps, max_steps)

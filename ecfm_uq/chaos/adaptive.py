@@ -17,13 +17,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.linalg as sla
 
 from ..memory import check_allocation, memory_budget
 from ._paths import (
     _SELECTION_SHARE,
+    _grow_path,
     _lar_order_gram,
-    _loo_nested,
     _sparse_select,
 )
 
@@ -169,23 +168,9 @@ class _GrowingDesign:
         # beyond n / 2 terms the LOO correction factor exceeds 2: such fits never win
         max_steps = min(len(pos), max(n // 2, 2))
         steps = min(max_steps, max(int(first_steps), 8))
-        while True:
-            active = _lar_order_gram(Gc, c, steps)
-            cols = [0] + [int(pos[a]) for a in active]
-            Q, R = sla.qr(self.B[:, cols], mode="economic")
-            d = np.abs(np.diag(R))
-            # stop at the first column that is numerically dependent on the earlier ones
-            bad = np.flatnonzero(d < 1e-10 * d[0])
-            s = int(bad[0]) if bad.size else len(cols)
-            Q, R, cols = Q[:, :s], R[:s, :s], cols[:s]
-            _, corrected = _loo_nested(Q, R, y)
-            k = int(np.argmin(corrected)) + 1
-            # grow the path while the best set lies in the last quarter of the steps run
-            if steps >= max_steps or len(active) < steps or s < len(cols) or 4 * k <= 3 * s:
-                break
-            steps = min(2 * steps, max_steps)
-        coef = sla.solve_triangular(R[:k, :k], Q[:, :k].T @ y)
-        return cols[:k], coef, float(corrected[k - 1])
+        return _grow_path(
+            lambda steps: _lar_order_gram(Gc, c, steps), self.B, pos, y, steps, max_steps
+        )
 
 
 def _select_adaptive_column(design, j, solver, early_stop, max_degree):

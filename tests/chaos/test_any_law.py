@@ -9,31 +9,12 @@ import time
 
 import numpy as np
 import pytest
+from _laws import TRUNC_GUMBEL
 from scipy import stats
 
 from ecfm_uq.chaos import ChaosBasis, Inputs, fit_pce
 from ecfm_uq.chaos.adaptive import hyperbolic_indices
 from ecfm_uq.chaos.ownlaw import OwnGerm
-
-
-class _TruncGumbel(stats.rv_continuous):
-    """Gumbel (max) law, location 10, scale 2, truncated to [5, 25]: a user's own law."""
-
-    def _g(self, x):
-        return np.exp(-np.exp(-(x - 10.0) / 2.0))
-
-    def _pdf(self, x):
-        z = (x - 10.0) / 2.0
-        return np.exp(-z - np.exp(-z)) / 2.0 / (self._g(25.0) - self._g(5.0))
-
-    def _cdf(self, x):
-        return (self._g(x) - self._g(5.0)) / (self._g(25.0) - self._g(5.0))
-
-    def _ppf(self, u):
-        return 10.0 - 2.0 * np.log(-np.log(self._g(5.0) + u * (self._g(25.0) - self._g(5.0))))
-
-
-TRUNC_GUMBEL = _TruncGumbel(a=5.0, b=25.0, name="truncgumbel")
 
 
 def _raw_moments(law):
