@@ -68,10 +68,10 @@ def test_steady_per_observation_sigma_equals_a_model_problem_and_curve_fit(heter
     np.testing.assert_allclose(res.eps, mp.eps, rtol=1e-6)
     np.testing.assert_allclose(res.uncertainty.stderr, mp.uncertainty.stderr, rtol=1e-3)
     assert res.uncertainty.noise_model == "known" and res.uncertainty.dof is None
-    assert res.verdict.test == "chi2" and res.verdict["dof"] == S.size - 2
-    assert res.verdict["chi2"] == pytest.approx(mp.verdict["chi2"], rel=1e-6)
+    assert res.verdict.test == "chi2" and res.verdict.details["dof"] == S.size - 2
+    assert res.verdict.details["chi2"] == pytest.approx(mp.verdict.details["chi2"], rel=1e-6)
     e = (v - predict(res.eps)) / S
-    assert res.verdict["chi2"] == pytest.approx(e @ e, rel=1e-9)
+    assert res.verdict.details["chi2"] == pytest.approx(e @ e, rel=1e-9)
 
     # d eps/dv in the data's units: Gauss-Newton's J^+ W as the ModelProblem's, and the
     # exact one (implicit, full Hessian) against refits at perturbed data
@@ -115,7 +115,7 @@ def test_steady_covariance_equals_whitening_by_hand_with_sigma_one():
     assert res.success and hand.success
     np.testing.assert_allclose(res.eps, hand.eps, rtol=1e-9)
     np.testing.assert_allclose(res.uncertainty.cov, hand.uncertainty.cov, rtol=1e-8)
-    assert res.verdict["chi2"] == pytest.approx(hand.verdict["chi2"], rel=1e-9)
+    assert res.verdict.details["chi2"] == pytest.approx(hand.verdict.details["chi2"], rel=1e-9)
     assert res.verdict.p_value == pytest.approx(hand.verdict.p_value, rel=1e-8)
     # the estimate's derivative in the data given (v, not W v)
     np.testing.assert_allclose(res.uncertainty.jacobian, hand.uncertainty.jacobian @ W, rtol=1e-8)
@@ -151,7 +151,7 @@ def test_steady_ecfm_estimate_ignores_sigma_its_uncertainty_and_verdict_follow_i
     np.testing.assert_allclose(res.uncertainty.cov, D @ Sig @ D.T, rtol=1e-10)
     e = W @ (v - predict(res.eps))
     assert res.verdict.test == "chi2"
-    assert res.verdict["chi2"] == pytest.approx(e @ e, rel=1e-6)
+    assert res.verdict.details["chi2"] == pytest.approx(e @ e, rel=1e-6)
 
 
 def test_random_force_ecfm_with_equal_sigmas_is_the_scalar_fit():
@@ -216,8 +216,8 @@ def test_dynamic_sigma_per_sensor_equals_a_model_problem_of_the_readings(burgers
     mp = fit(ModelProblem(readings, V[1:], jac="3-point"), [1.5, 0.5], sigma=np.tile(s, m.n_steps))
     np.testing.assert_allclose(res.eps, mp.eps, rtol=1e-6)
     np.testing.assert_allclose(res.uncertainty.stderr, mp.uncertainty.stderr, rtol=1e-3)
-    assert res.verdict["chi2"] == pytest.approx(mp.verdict["chi2"], rel=1e-6)
-    assert res.verdict["dof"] == m.n_steps * 4 - 2
+    assert res.verdict.details["chi2"] == pytest.approx(mp.verdict.details["chi2"], rel=1e-6)
+    assert res.verdict.details["dof"] == m.n_steps * 4 - 2
 
 
 def test_dynamic_sensor_covariance_equals_whitening_by_hand(burgers):
@@ -233,7 +233,7 @@ def test_dynamic_sensor_covariance_equals_whitening_by_hand(burgers):
         assert res.success and hand.success, res.message
         np.testing.assert_allclose(res.eps, hand.eps, rtol=1e-8)
         np.testing.assert_allclose(res.uncertainty.cov, hand.uncertainty.cov, rtol=1e-6)
-        assert res.verdict["chi2"] == pytest.approx(hand.verdict["chi2"], rel=1e-8)
+        assert res.verdict.details["chi2"] == pytest.approx(hand.verdict.details["chi2"], rel=1e-8)
         if formulation == "standard":  # the profile likelihood follows
             np.testing.assert_allclose(profile_intervals(res), profile_intervals(hand), rtol=1e-8)
     # independent: the readings' covariance kron(I, Sigma) given to a ModelProblem
@@ -245,7 +245,7 @@ def test_dynamic_sensor_covariance_equals_whitening_by_hand(burgers):
     )  # fmt: skip
     np.testing.assert_allclose(std.eps, mp.eps, rtol=1e-6)
     np.testing.assert_allclose(std.uncertainty.stderr, mp.uncertainty.stderr, rtol=1e-3)
-    assert std.verdict["chi2"] == pytest.approx(mp.verdict["chi2"], rel=1e-6)
+    assert std.verdict.details["chi2"] == pytest.approx(mp.verdict.details["chi2"], rel=1e-6)
     assert "covariance" in p.log_likelihood("standard", Sig).description
 
 
