@@ -100,16 +100,16 @@ def _check_sigma(sigma, kind, formulation, problem):
     if kind == "model":
         noise = noise_model(sigma, problem.n_data)  # raises naming `sigma` and its shapes
         return sigma if noise.kind == "scalar" else noise
+    if kind == "replicated":  # never silently ignored
+        raise ValueError(
+            f"`sigma` is not taken by a ReplicatedProblem (formulation={formulation!r}): the "
+            "noise is estimated from the replicates; omit `sigma`"
+        )
     if isinstance(sigma, numbers.Real) or np.ndim(sigma) == 0:
         try:
             return check_positive("sigma", sigma)
         except (TypeError, ValueError) as e:
             raise type(e)(f"{e}; `sigma` is the known sensor noise standard deviation") from e
-    if kind == "replicated":
-        raise ValueError(
-            f"`sigma` for a ReplicatedProblem (formulation={formulation!r}) cannot be an "
-            "array: the noise is estimated from the replicates; omit `sigma`"
-        )
     if (kind, formulation) in _SCALAR_SIGMA_ONLY:
         raise ValueError(
             f"formulation={formulation!r} takes `sigma` as one number (the same noise "

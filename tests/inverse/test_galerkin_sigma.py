@@ -264,8 +264,9 @@ def test_formulations_without_a_whitened_form_refuse_an_array_sigma_by_name(burg
     rep = ReplicatedProblem(
         beam.system, beam.M_obs, beam.sample_data(1.0, 5, rng=np.random.default_rng(0))
     )
-    with pytest.raises(ValueError, match="ReplicatedProblem.*estimated from the replicates"):
-        fit(rep, [0.5], sigma=np.ones(beam.M_obs.shape[0]))
+    for given in (np.ones(beam.M_obs.shape[0]), 0.1):  # an array, and a number: not ignored
+        with pytest.raises(ValueError, match="ReplicatedProblem.*estimated from the replicates"):
+            fit(rep, [0.5], sigma=given)
     m, VB = burgers
     dyn = _dynamic(m, m.M_obs, VB)
     with pytest.raises(ValueError, match=r"one value per reading.*\(4,\).*\(4, 4\)"):
