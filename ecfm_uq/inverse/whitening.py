@@ -44,8 +44,6 @@ of the data the user gave: :func:`jacobian_in_data_units`.
 
 from __future__ import annotations
 
-import copy
-
 import numpy as np
 import scipy.sparse as sp
 
@@ -74,16 +72,14 @@ def whitened_problem(problem, noise):
     Returns
     -------
     SteadyProblem or DynamicInverseProblem
-        A shallow copy: sensor matrix :math:`W\\mathcal M`, data :math:`Wv` (``V`` rows
+        A copy (:meth:`~.interface.InverseProblem.with_data`): sensor matrix :math:`W\\mathcal M`, data :math:`Wv` (``V`` rows
         :math:`Wv_i`), the rest shared. Fit it with ``sigma=1``.
     """
-    new = copy.copy(problem)
+    data = problem.data
+    # a time series (rows = times) is whitened time by time, one reading vector per row
+    white = noise.whiten(data.T).T if data.ndim == 2 else noise.whiten(data)
+    new = problem.with_data(white)  # the problems' one copy (it starts cold)
     new.M_obs = _whiten_rows(problem.M_obs, noise)
-    if hasattr(problem, "V"):  # a time series: whiten every time's readings
-        new.V = noise.whiten(problem.V.T).T
-        new._last = dict(problem._last)  # its own warm starts (the states are the same)
-    else:
-        new.v = noise.whiten(problem.v)
     return new
 
 
