@@ -236,17 +236,28 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
     return Optimality(False, value, test, t, msg)
 
 
-def gradient_optimality(z, g, H, *, tol=DECREMENT_TOL):
+def gradient_optimality(z, g, H, *, x=None, bounds=None, tol=DECREMENT_TOL):
     """Whether a point with gradient ``g`` and Hessian ``H`` minimizes a general ``z``.
 
     The Newton decrement :math:`\\tfrac12 g^TH^{-1}g \\le` ``tol`` :math:`\\max(|z|, 1)`
-    with :math:`H` positive definite.
+    with :math:`H` positive definite. With ``x`` and ``bounds``, the components held at a
+    bound by a gradient pointing out of the box (a KKT multiplier of the right sign) are
+    dropped first: the test is that of the problem projected on the free parameters, and
+    an estimate with every parameter held at a bound is optimal (an identifiability
+    finding for the verdict, not a convergence failure).
 
     Returns
     -------
     Optimality
     """
     g = np.asarray(g, dtype=float).ravel()
+    if x is not None and bounds is not None:
+        free = ~_active_bounds(np.asarray(x, dtype=float).ravel(), g, bounds)
+        H = np.asarray(H, dtype=float).reshape(g.size, g.size)[np.ix_(free, free)]
+        g = g[free]
+        if g.size == 0:
+            return Optimality(True, 0.0, "newton decrement", tol,
+                              "every parameter is held at a bound by the gradient")  # fmt: skip
     H = np.asarray(H, dtype=float).reshape(g.size, g.size)
     if not (np.isfinite(z) and np.all(np.isfinite(g)) and np.all(np.isfinite(H))):
         return Optimality(False, np.inf, "newton decrement", tol, "non-finite objective")

@@ -233,7 +233,7 @@ def replicate_statistics(v):
     return np.concatenate([vbar, (dev**2).mean(axis=1)]), np.atleast_2d(np.cov(y, ddof=1)) / D
 
 
-def moment_verdict(mu, var, v, alpha=DEFAULT_ALPHA):
+def moment_verdict(mu, var, v, alpha=DEFAULT_ALPHA, at_bound=()):
     """Whether the fitted model's sensor means agree with the replicated data.
 
     z-scores :math:`z_i = (\\bar v_i - \\mu_i)/\\sqrt{\\sigma_i^2/D}` of the sample means
@@ -248,6 +248,9 @@ def moment_verdict(mu, var, v, alpha=DEFAULT_ALPHA):
     v : (C, D) array_like
         Replicated data.
     alpha : float
+    at_bound : sequence of (int, str)
+        The estimate's parameters at a bound (:func:`~.verdict.at_bound`): reported as an
+        identifiability finding, not folded into the test.
 
     Returns
     -------
@@ -272,6 +275,6 @@ def moment_verdict(mu, var, v, alpha=DEFAULT_ALPHA):
         f"{p_value:.3g}, size {alpha:g})"
     ]
     return decide(
-        "moments z (Bonferroni)", p_value, alpha, parts, statistic=abs(z[peak]),
+        "moments z (Bonferroni)", p_value, alpha, parts, statistic=abs(z[peak]), at_bound=at_bound,
         details={"z": z, "z_limit": limit, "peak_sensor_index": peak},
     )  # fmt: skip

@@ -62,21 +62,15 @@ import scipy.optimize as sopt
 
 from .._validation import check_positive
 from ..errors import ConvergenceError
+from .convergence import DECREMENT_TOL, Optimality, decide_status, gradient_optimality
+from .finite_differences import fd_jacobian
 from .forces import optimal_forces
-from .moments import (  # noqa: F401  (moment_verdict, replicate_statistics: v0.2 home)
-    DegenerateVarianceError,
-    _check_data,
-    moment_verdict,
-    replicate_statistics,
-)
+from .moments import DegenerateVarianceError, moment_verdict, replicate_statistics
 from .result import InverseResult, Uncertainty
 from .status import FitStatus
+from .verdict import at_bound
 
-__all__ = [
-    "fit_replicated_problem",
-    "moment_verdict",
-    "replicate_statistics",
-]
+__all__ = ["fit_replicated_problem"]
 
 FORMULATIONS = ("inner-outer", "penalty", "standard")
 
@@ -137,14 +131,17 @@ def _trust_region(fun, eps0, bounds, gtol, maxiter, trust_radius):
     from eps0 = 0.5 straight to the upper bound). ``gtol`` is relative to the gradient
     at the start.
 
-    trust-constr also stops, with ``success=True``, when the trust radius falls below
-    ``xtol``. That is what happens when trial points keep failing (``fun`` returns
-    ``inf`` where the forward or inner solve fails): the radius shrinks onto the edge
-    of the solvable region while the gradient there is large. A step-length stop next to
-    a failed trial (within 1e-6 of the answer, relative) whose optimality misses
-    ``gtol`` is reported as ``success=False`` (a step-length stop amid finite values is
-    round-off in the objective near its minimum and stays a success). Which trial came
-    last is the radius' accident: the failures around the answer decide.
+    trust-constr also stops when the trust radius falls below ``xtol``. That is what
+    happens when trial points keep failing (``fun`` returns ``inf`` where the forward or
+    inner solve fails): the radius shrinks onto the edge of the solvable region. Such a
+    stop next to a failed trial (within 1e-6 of the answer, relative) is said in the
+    message; whether the point is an optimum is decided by :func:`_eps_optimality`, never
+    by trust-constr's own flag.
+
+    With bounds, trust-constr is an interior-point method: an estimate held at a bound is
+    returned a barrier's distance inside it (1e-4 of the box on a test problem), where the
+    gradient still points out of the box and no optimality test can hold. Such a point is
+    moved onto the bound (:func:`_onto_bounds`) when that does not raise the objective.
     """
     failed = []  # the trial points where the objective could not be evaluated
 
@@ -187,18 +184,49 @@ def _trust_region(fun, eps0, bounds, gtol, maxiter, trust_radius):
             },
         )
     near = 1e-6 * max(1.0, float(np.linalg.norm(res.x)))
-    at_edge = any(np.linalg.norm(x - res.x) <= near for x in failed)
-    if res.status == 2 and at_edge and not res.optimality <= gtol * scale:
-        res.success = False
+    if res.status == 2 and any(np.linalg.norm(x - res.x) <= near for x in failed):
         res.message = (
-            f"{res.message} but the optimality {res.optimality:.3e} > gtol "
-            f"{gtol * scale:.3e}: the trust region collapsed onto the edge of the region "
-            "where the model can be solved (trial steps next to it failed)"
+            f"{res.message} (the trust region collapsed onto the edge of the region where "
+            "the model can be solved: trial steps next to it failed)"
         )
+    if bounds is not None:
+        _onto_bounds(res, tracked, bounds)
     return res
 
 
-def _fit_standard(like, eps0, bounds, gtol, maxiter, trust_radius=0.1, **_):
+#: how far inside a bound (relative to the box's width, or to the parameter when a side is
+#: open) an interior-point answer is taken to be held at it (see :func:`_onto_bounds`)
+_BARRIER_GAP = 1e-3
+
+
+def _onto_bounds(res, fun, bounds):
+    """Move trust-constr's answer ``res.x`` onto the bounds the gradient pushes it against.
+
+    Parameters within ``_BARRIER_GAP`` of a bound, with the gradient pointing out of the
+    box there, are set to the bound; the move is kept if the objective is finite there,
+    no larger, and its gradient still points out of the box (a KKT multiplier of the right
+    sign), so the status test sees the bound as active.
+    """
+    x = np.array(res.x, dtype=float)
+    g = np.asarray(res.grad, dtype=float)
+    moved, sign = x.copy(), {}  # sign: +1 held at the lower bound (g > 0), -1 at the upper
+    for k, (lo, hi) in enumerate(bounds):
+        lo = -np.inf if lo is None else lo
+        hi = np.inf if hi is None else hi
+        width = hi - lo if np.isfinite(hi - lo) else max(abs(x[k]), 1.0)
+        if x[k] - lo <= _BARRIER_GAP * width and g[k] > 0:
+            moved[k], sign[k] = lo, 1.0
+        elif hi - x[k] <= _BARRIER_GAP * width and g[k] < 0:
+            moved[k], sign[k] = hi, -1.0
+    if not sign:
+        return
+    z, gm = fun(moved)
+    if np.isfinite(z) and z <= res.fun and all(sign[k] * gm[k] > 0 for k in sign):
+        res.x, res.fun, res.grad = moved, z, np.asarray(gm, dtype=float)
+        res.message = f"{res.message} (moved onto the bounds it was held against)"
+
+
+def _fit_standard(like, eps0, bounds, maxiter, gtol=1e-8, trust_radius=0.1, **_):
     sysm = like.system
     tr = _Tracker()
 
@@ -218,11 +246,16 @@ def _fit_standard(like, eps0, bounds, gtol, maxiter, trust_radius=0.1, **_):
         return p.value, p
 
     x, loss, p, ok = tr.final(res.x, evaluate)
-    return res, x, loss, p, ok, tr, {"lam": np.zeros(sysm.n_forces)}
+
+    def gradient(e):
+        return like.evaluate(e, None, order=1).grad_eps
+
+    extra = {"lam": np.zeros(sysm.n_forces), "stationarity": (loss, p.grad_eps, gradient)}
+    return res, x, loss, p, ok, tr, extra
 
 
 def _fit_inner_outer(
-    like, eps0, bounds, gtol, maxiter, lam0=None, trust_radius=0.1, inner_tol=1e-15, **_
+    like, eps0, bounds, maxiter, gtol=1e-8, lam0=None, trust_radius=0.1, inner_tol=1e-15, **_
 ):
     sysm = like.system
     tr = _Tracker()
@@ -259,8 +292,17 @@ def _fit_inner_outer(
         return 0.5 * float(fs.lam @ fs.lam), fs
 
     x, loss, fs, ok = tr.final(res.x, evaluate)
+
+    def gradient(e):  # the branch of lambda* through the estimate's forces
+        f = optimal_forces(like, e, fs.lam, tol=inner_tol)
+        if not f.success:
+            raise ConvergenceError(f"inner solve at eps={e}: {f.message}")
+        return f.dlam_deps.T @ f.lam
+
+    g = None if fs.dlam_deps is None else fs.dlam_deps.T @ fs.lam
     extra = {
         "lam": fs.lam,
+        "stationarity": (loss, g, gradient),
         "inner_message": fs.message,
         "inner_nit": state["inner_nit"],
         "hess_lam_min_eig": fs.min_hess_eig,
@@ -270,7 +312,7 @@ def _fit_inner_outer(
     return res, x, loss, fs.point, ok, tr, extra
 
 
-def _fit_penalty(like, eps0, bounds, gtol, maxiter, lam0=None, penalty=100.0, **_):
+def _fit_penalty(like, eps0, bounds, maxiter, ftol=1e-8, lam0=None, penalty=100.0, **_):
     sysm = like.system
     m, C = sysm.n_eps, sysm.n_forces
     alpha = check_positive("penalty", penalty)
@@ -309,30 +351,21 @@ def _fit_penalty(like, eps0, bounds, gtol, maxiter, lam0=None, penalty=100.0, **
         jac=True,
         method="SLSQP",
         bounds=b,
-        options={"ftol": gtol, "maxiter": maxiter},
+        options={"ftol": ftol, "maxiter": maxiter},
     )
     x, loss, p, ok = tr.final(res.x, lambda x: objective(x)[::2])
     lam = x[m:]
-    before = like.n_solves
-    opt = _penalty_optimality(like, alpha, x[:m], lam, p, gtol) if ok else None
+
+    def gradient(e):  # alpha Lambda(., lam) at the returned forces
+        return alpha * like.evaluate(e, lam, order=1).grad_eps
+
     # the forces' own condition: along lam -> t lam the objective's slope in log t is
     # 2 + alpha lam . dLambda/dlam, zero at a minimum; down the lam -> 0 valley the log term
     # dominates and it is 2 (the objective falls without bound as the forces shrink)
     slope = float(2.0 + alpha * lam @ p.grad_lam) if ok else None
-    if opt is not None and opt.converged and not abs(slope) <= _FORCE_SCALING_TOL:
-        from .convergence import Optimality
-
-        opt = Optimality(
-            False, abs(slope), "force scaling", _FORCE_SCALING_TOL,
-            f"in the forces: the objective still falls as they shrink (slope {slope:.3g} "
-            "per unit log of their scale; 0 at a minimum): the fit went down the lam -> 0 "
-            "valley, where the penalty objective is unbounded below and eps is the "
-            "standard estimate",
-        )  # fmt: skip
     extra = {
         "lam": lam,
-        "optimality": opt,
-        "optimality_solves": like.n_solves - before,
+        "stationarity": (alpha * p.value, alpha * p.grad_eps, gradient),
         "penalty": alpha,
         "log_force_term": float(np.log(0.5 * lam @ lam)),
         "grad_lam_norm": float(np.linalg.norm(p.grad_lam)),
@@ -348,30 +381,56 @@ def _fit_penalty(like, eps0, bounds, gtol, maxiter, lam0=None, penalty=100.0, **
 _FORCE_SCALING_TOL = 0.1
 
 
-def _penalty_optimality(like, alpha, eps, lam, p, tol):
-    """The shared test (:func:`~.convergence.gradient_optimality`) on the penalty form's
-    eps: a minimizer of :math:`\\alpha\\Lambda(\\cdot, \\lambda)` at the returned forces
-    (positive-definite Hessian, by central differences of the analytic gradient, and a
-    Newton decrement below ``tol`` relative to the objective). The forces have no
-    minimizer to test (the objective is unbounded below as :math:`\\lambda \\to 0`)."""
-    from .convergence import gradient_optimality
+def _eps_optimality(stationarity, eps, bounds, tol):
+    """The one status test of every pseudo-likelihood fit: is ``eps`` a minimizer of the
+    fit's objective in :math:`\\epsilon`?
 
+    ``stationarity = (z, g, gradient)``: the objective at ``eps``, its analytic gradient
+    there, and the gradient as a function of :math:`\\epsilon` (``"standard"``:
+    :math:`\\Lambda(\\cdot, 0)`; ``"inner-outer"``: :math:`\\tfrac12\\|\\lambda^*\\|^2`
+    along the branch of forces through the estimate's; ``"penalty"``:
+    :math:`\\alpha\\Lambda(\\cdot, \\lambda)` at the returned forces, which have no
+    minimizer to test). The Hessian is differenced from the analytic gradient (steps
+    :math:`10^{-5}\\max(|\\epsilon_k|, 1)`, central inside the bounds, one-sided inward at
+    them; :func:`~.finite_differences.fd_jacobian`) and the test is the relative Newton
+    decrement of :func:`~.convergence.gradient_optimality`, parameters held at a bound
+    dropped. The gradient's size alone says nothing: on the beam the inner-outer objective
+    changes curvature by :math:`10^8` per unit load, so a gradient of 0.1 there is a
+    Newton step of :math:`10^{-10}`.
+    """
+    z, g, gradient = stationarity
+    if g is None:
+        return Optimality(False, np.inf, "newton decrement", tol,
+                          "in eps: the forces' Hessian is not positive definite at the "
+                          "estimate (no smooth branch of optimal forces)")  # fmt: skip
     eps = np.asarray(eps, dtype=float)
     cols = []
     try:
         for k in range(eps.size):
             h = 1e-5 * max(abs(eps[k]), 1.0)
-            e = np.zeros_like(eps)
-            e[k] = h
-            gp = like.evaluate(eps + e, lam, order=1).grad_eps
-            gm = like.evaluate(eps - e, lam, order=1).grad_eps
-            cols.append(alpha * (gp - gm) / (2 * h))
+            lo, hi = (None, None) if bounds is None else bounds[k]
+            up, down = hi is None or eps[k] + h <= hi, lo is None or eps[k] - h >= lo
+            method, step = ("3-point", h) if up and down else ("2-point", h if up else -h)
+            cols.append(fd_jacobian(gradient, eps, method=method, steps=step, f0=g, columns=[k]))
     except _FAILURES as e:
-        from .convergence import Optimality
-
         return Optimality(False, np.inf, "newton decrement", tol, f"in eps: Hessian: {e}")
-    opt = gradient_optimality(alpha * p.value, alpha * p.grad_eps, np.column_stack(cols), tol=tol)
-    return opt if opt.converged else dataclasses.replace(opt, message=f"in eps: {opt.message}")
+    opt = gradient_optimality(z, g, np.hstack(cols), x=eps, bounds=bounds, tol=tol)
+    return dataclasses.replace(opt, message=f"in eps: {opt.message}")
+
+
+def _force_scaling(opt, slope):
+    """The penalty form's test of its forces, after :func:`_eps_optimality`: a minimum
+    along :math:`\\lambda \\to t\\lambda` (slope 0), not the :math:`\\lambda \\to 0`
+    valley (slope 2)."""
+    if not opt.converged or abs(slope) <= _FORCE_SCALING_TOL:
+        return opt
+    return Optimality(
+        False, abs(slope), "force scaling", _FORCE_SCALING_TOL,
+        f"in the forces: the objective still falls as they shrink (slope {slope:.3g} "
+        "per unit log of their scale; 0 at a minimum): the fit went down the lam -> 0 "
+        "valley, where the penalty objective is unbounded below and eps is the "
+        "standard estimate",
+    )  # fmt: skip
 
 
 _FITTERS = {
@@ -381,16 +440,16 @@ _FITTERS = {
 }
 
 
-#: defaults of the pseudo-likelihood fits (``tol``: the outer gradient tolerance relative
-#: to the gradient at eps0, or SLSQP's ftol for the penalty form)
-_DEFAULT_TOL = 1e-8
+#: defaults of the pseudo-likelihood fits: ``tol`` is the status test's (the relative
+#: Newton decrement, :func:`_eps_optimality`); the optimizers' own stopping rules are
+#: options: trust-constr's ``gtol`` (relative to the gradient at eps0) and SLSQP's ``ftol``
 _DEFAULT_MAXITER = 200
 _SYNONYMS = {"ecfm": "inner-outer"}
 _DEFAULT_METHOD = {"standard": "trust-region", "inner-outer": "trust-region", "penalty": "SLSQP"}
 _OPTIONS = {
-    "standard": {"trust_radius": 0.1},
-    "inner-outer": {"trust_radius": 0.1, "lam0": None, "inner_tol": 1e-15},
-    "penalty": {"lam0": None, "penalty": 100.0},
+    "standard": {"trust_radius": 0.1, "gtol": 1e-8},
+    "inner-outer": {"trust_radius": 0.1, "gtol": 1e-8, "lam0": None, "inner_tol": 1e-15},
+    "penalty": {"lam0": None, "penalty": 100.0, "ftol": 1e-8},
 }
 
 
@@ -446,24 +505,28 @@ def fit_replicated_problem(problem, eps0, s):
         penalty = opts["penalty"]
         if isinstance(penalty, bool) or not isinstance(penalty, numbers.Real):
             raise TypeError(f"`penalty` must be a positive number, got {penalty!r}")
-    for name in ("trust_radius", "inner_tol"):
+    for name in ("trust_radius", "inner_tol", "gtol", "ftol"):
         if name in opts:
-            opts[name] = check_positive(name, opts[name])
+            opts[name] = check_positive(f"options[{name!r}]", opts[name])
     like = problem.likelihood
     solves_before = like.n_solves
     eps0 = system.check_eps(eps0)
-    gtol = _DEFAULT_TOL if s.tol is None else s.tol
+    tol = DECREMENT_TOL if s.tol is None else s.tol
     maxiter = _DEFAULT_MAXITER if s.maxiter is None else s.maxiter
     res, x, loss, p, final_ok, tr, extra = _FITTERS[formulation](
-        like, eps0, s.bounds, gtol, maxiter, **opts
+        like, eps0, s.bounds, maxiter, **opts
     )
     lam = extra.pop("lam")
-    opt = extra.pop("optimality", None)
+    stationarity = extra.pop("stationarity")
     msg = str(res.message)
-    ok = final_ok and bool(res.success)
-    if ok and opt is not None and not opt.converged:
-        ok = False
-        msg += f" [NOT converged {opt.message}]"
+    opt, optimality_solves = None, 0
+    if final_ok:
+        before = like.n_solves
+        opt = _eps_optimality(stationarity, x[: system.n_eps], s.bounds, tol)
+        if formulation == "penalty":
+            opt = _force_scaling(opt, extra["force_scaling_slope"])
+        optimality_solves = like.n_solves - before
+        msg += f" [{'converged' if opt.converged else 'NOT converged'}: {opt.message}]"
     if not final_ok:
         msg += f"; {tr.failures[-1]} -- returning the best point evaluated"
     if tr.failures:
@@ -474,11 +537,14 @@ def fit_replicated_problem(problem, eps0, s):
         grad_eps=p.grad_eps,
         mu=p.mu,
         var=p.var,
-        n_solves=like.n_solves - solves_before - extra.get("optimality_solves", 0),
+        n_solves=like.n_solves - solves_before - optimality_solves,
+        optimality_solves=optimality_solves,
         n_failures=len(tr.failures),
     )
     eps_hat = np.asarray(x[: system.n_eps], dtype=float)
-    verdict = moment_verdict(p.mu, p.var, like.v, alpha=s.alpha)
+    verdict = moment_verdict(
+        p.mu, p.var, like.v, alpha=s.alpha, at_bound=at_bound(eps_hat, s.bounds)
+    )
     if verdict.consistent is False or verdict.identifiability:
         msg += f" [{verdict.message}]"
     if not s.uncertainty:
@@ -490,7 +556,9 @@ def fit_replicated_problem(problem, eps0, s):
         uncertainty=unc,
         eps=eps_hat,
         loss=float(loss),
-        status=_status(ok, final_ok, res, maxiter),
+        status=(
+            decide_status(opt, int(res.nit) >= maxiter) if final_ok else FitStatus.MODEL_FAILURE
+        ),
         optimality=None if opt is None else opt.value,
         message=msg,
         nit=int(res.nit),
@@ -505,14 +573,6 @@ def fit_replicated_problem(problem, eps0, s):
         extra=extra,
         verdict=verdict,
     )
-
-
-def _status(ok, final_ok, res, maxiter):
-    if ok:
-        return FitStatus.CONVERGED
-    if not final_ok:
-        return FitStatus.MODEL_FAILURE
-    return FitStatus.MAX_ITERATIONS if int(res.nit) >= maxiter else FitStatus.STALLED
 
 
 # --------------------------------------------------------------------------------------

@@ -262,6 +262,7 @@ class InverseResult:
         ``mu``, ``var``               replicated                the model's mean and
                                                                 variance at the sensors
         ``n_failures``                replicated                failed evaluations
+        ``optimality_solves``         replicated                solves of the status test
         ``inner_message``,            ``inner-outer``           the last inner solve:
         ``inner_nit``,                                          message, iterations (all),
         ``hess_lam_min_eig``,                                   Hessian in lam (smallest
@@ -270,9 +271,8 @@ class InverseResult:
         ``penalty``,                  ``penalty``               the weight, the log force
         ``log_force_term``,                                     term, the norm of the
         ``grad_lam_norm``,                                      gradient in lam, the
-        ``force_scaling_slope``,                                slope in log force scale
-        ``optimality_solves``                                   (0 at a minimum), solves
-                                                                of the optimality check
+        ``force_scaling_slope``                                 slope in log force scale
+                                                                (0 at a minimum)
         ``grad``, ``grad_history``    Adam (dynamic)            final gradient, all
                                                                 gradients
         ``steps``                     dynamic, ``scheme=        the frozen time grid

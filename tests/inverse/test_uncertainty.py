@@ -214,7 +214,7 @@ def _with_statistics(v, i, dmean, dm):
 @pytest.mark.parametrize("formulation", ["standard", "inner-outer"])
 def test_pseudo_likelihood_covariance_equals_refit_jacobian(formulation):
     from ecfm_uq.inverse import ReplicatedProblem, fit
-    from ecfm_uq.inverse.replicated import replicate_statistics
+    from ecfm_uq.inverse.moments import replicate_statistics
 
     m, v, bounds = _beam_data()
     res = fit(
@@ -254,7 +254,7 @@ def test_pseudo_likelihood_covariance_equals_refit_jacobian(formulation):
 
 
 def test_replicate_statistics_covariance_is_the_sample_covariance():
-    from ecfm_uq.inverse.replicated import replicate_statistics
+    from ecfm_uq.inverse.moments import replicate_statistics
 
     rng = np.random.default_rng(4)
     v = rng.normal(size=(3, 400))
