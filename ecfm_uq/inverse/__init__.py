@@ -17,8 +17,34 @@ Problem`                                                                        
 :class:`ReplicatedProblem`  ``"standard"``, ``"inner-outer"``, ``"penalty"``        Eq. stochastic_model
 ==========================  =====================================================  ================
 
+``SteadyProblem`` also takes ``"ecfm-random"`` (the random-force ECFM, with ``sigma``).
 From a result: :func:`profile_likelihood` / :func:`profile_intervals` (profile-likelihood
 intervals and regions), :func:`likelihood_ratio_test`, ``result.summary()``.
+
+A map of the modules, read from the top: each group imports only from its own group and
+the groups below it (one exception: :mod:`.dynamic_fit` imports the problem it fits,
+:mod:`.dynamic`), and nothing but :mod:`.coverage` imports :mod:`.fitting`:
+
+=====================  ===================================================================
+the entry              :mod:`.fitting` (``fit``: validate, whiten, dispatch);
+                       :mod:`.coverage` (fits over synthetic data sets)
+the problems           :mod:`.interface` (what every problem offers), :mod:`.model_problem`,
+                       :mod:`.problems` (steady, replicated), :mod:`.dynamic`;
+                       :mod:`.noise_model` and :mod:`.whitening` (``sigma`` as given)
+the formulations       :mod:`.steady` (standard and exact ECFM, reduced), :mod:`.noisy` and
+                       :mod:`.noise` (all-at-once, the paper's noise bounds),
+                       :mod:`.discrepancy` and :mod:`.sparse_forces` (random-force ECFM),
+                       :mod:`.dynamic_fit`, :mod:`.replicated` with :mod:`.forces`,
+                       :mod:`.pseudo_likelihood` and :mod:`.moments` (pseudo-likelihood),
+                       :mod:`.loglik` (each formulation's likelihood)
+the statistics         :mod:`.uncertainty`, :mod:`.verdict`, :mod:`.profile` and
+                       :mod:`.profiler`, :mod:`.posterior`, :mod:`.diagnostics`
+shared                 :mod:`.convergence` (the one status decision), :mod:`.drivers` and
+                       :mod:`.optimizers` (the optimizer calls), :mod:`.gradients`,
+                       :mod:`.finite_differences`; the types handed around:
+                       :mod:`.settings` (the validated arguments), :mod:`.result` (the one
+                       frozen result), :mod:`.status`, :mod:`.summary_table`
+=====================  ===================================================================
 """
 
 from .coverage import likelihood_coverage, steady_coverage

@@ -6,9 +6,7 @@ fitter imports the entry point, and a walk of ``sigma`` or ``tol`` from ``fit`` 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
-from .verdict import DEFAULT_ALPHA
+from dataclasses import dataclass
 
 __all__ = ["FitSettings"]
 
@@ -23,9 +21,9 @@ class FitSettings:
     bounds: list | None
     tol: float | None
     maxiter: int | None
-    options: dict = field(default_factory=dict)
-    uncertainty: bool = True
-    alpha: float = DEFAULT_ALPHA
+    options: dict
+    uncertainty: bool
+    alpha: float
 
     def take(self, known):
         """``options`` completed by the defaults in ``known`` (name -> default).
