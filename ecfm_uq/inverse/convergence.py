@@ -82,6 +82,9 @@ __all__ = [
     "scaled_gradient_optimality",
 ]
 
+#: a parameter within this fraction of its box's width of a bound is at it (the verdict's
+#: identifiability finding; the KKT active set uses 1e-10)
+AT_BOUND_RTOL = 1e-8
 #: relative-offset tolerance of the least-squares test
 OFFSET_TOL = 1e-6
 #: Gauss-Newton step tolerance, relative to the parameters (exact-fit problems)
@@ -129,18 +132,35 @@ class Optimality:
     message: str
 
 
-def _active_bounds(eps, g, bounds, rtol=1e-10):
-    """Parameters held at a bound by the gradient ``g`` (KKT multiplier of the right sign)."""
-    active = np.zeros(eps.size, dtype=bool)
+def at_bound(eps, bounds, rtol=AT_BOUND_RTOL):
+    """The parameters at a bound, as ``(index, "lower" | "upper")`` pairs: the one test of
+    position (within ``rtol`` of the box's width, or of the parameter's size when a side
+    is open), used by the verdict's identifiability finding and by the KKT active set."""
     if bounds is None:
-        return active
-    for k, (lo, hi) in enumerate(bounds):
-        width = 1.0 if lo is None or hi is None else max(hi - lo, 1e-300)
-        near = rtol * max(abs(eps[k]), width)
-        if lo is not None and eps[k] <= lo + near and g[k] >= 0:
-            active[k] = True
-        if hi is not None and eps[k] >= hi - near and g[k] <= 0:
-            active[k] = True
+        return []
+    hits = []
+    for m, (x, b) in enumerate(zip(eps, bounds, strict=False)):
+        lo, hi = (None, None) if b is None else b
+        lo = None if lo is None or not np.isfinite(lo) else lo
+        hi = None if hi is None or not np.isfinite(hi) else hi
+        if lo is not None and hi is not None:
+            width = hi - lo
+        else:
+            width = max(abs(x), abs(lo or 0.0), abs(hi or 0.0), 1e-300)
+        tol = rtol * max(abs(width), 1e-300)
+        if lo is not None and x <= lo + tol:
+            hits.append((m, "lower"))
+        elif hi is not None and x >= hi - tol:
+            hits.append((m, "upper"))
+    return hits
+
+
+def active_bounds(eps, g, bounds, rtol=1e-10):
+    """Parameters held at a bound (:func:`at_bound`) by the gradient ``g`` pointing out of
+    the box there (a KKT multiplier of the right sign), as a boolean mask."""
+    active = np.zeros(np.size(eps), dtype=bool)
+    for k, side in at_bound(eps, bounds, rtol):
+        active[k] = g[k] >= 0 if side == "lower" else g[k] <= 0
     return active
 
 
@@ -170,7 +190,7 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
         return Optimality(False, np.inf, "relative offset", tol, "non-finite residual or Jacobian")
     g = J.T @ r
-    free = ~_active_bounds(eps, g, bounds)
+    free = ~active_bounds(eps, g, bounds)
     if not np.any(free):
         return Optimality(True, 0.0, "kkt", tol, "every parameter held at a bound (KKT)")
     Jf = J[:, free]
@@ -252,7 +272,7 @@ def gradient_optimality(z, g, H, *, x=None, bounds=None, tol=DECREMENT_TOL):
     """
     g = np.asarray(g, dtype=float).ravel()
     if x is not None and bounds is not None:
-        free = ~_active_bounds(np.asarray(x, dtype=float).ravel(), g, bounds)
+        free = ~active_bounds(np.asarray(x, dtype=float).ravel(), g, bounds)
         H = np.asarray(H, dtype=float).reshape(g.size, g.size)[np.ix_(free, free)]
         g = g[free]
         if g.size == 0:
@@ -360,7 +380,7 @@ def scaled_gradient_optimality(g, x=None, bounds=None, *, tol=SCALED_GRADIENT_TO
     if not np.all(np.isfinite(g)):
         return Optimality(False, np.inf, "scaled gradient", tol, "non-finite gradient")
     if x is not None and bounds is not None:
-        g = g[~_active_bounds(np.asarray(x, dtype=float).ravel(), g, bounds)]
+        g = g[~active_bounds(np.asarray(x, dtype=float).ravel(), g, bounds)]
     value = float(np.max(np.abs(g), initial=0.0))
     ok = value <= tol
     rel = "<=" if ok else ">"

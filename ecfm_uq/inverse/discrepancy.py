@@ -77,14 +77,14 @@ from scipy import optimize, stats
 
 from ..errors import ConvergenceError, ModelEvaluationError
 from ..system import solve_steady
-from .convergence import SCALED_GRADIENT_TOL, decide_status, scaled_gradient_optimality
+from .convergence import SCALED_GRADIENT_TOL, at_bound, decide_status, scaled_gradient_optimality
 from .diagnostics import fd_hessian
 from .finite_differences import fd_gradient
 from .loglik import LogLikelihood
 from .result import InverseResult, Uncertainty
 from .sparse_forces import sparse_force_variances
 from .status import FitStatus
-from .verdict import at_bound, decide
+from .verdict import decide
 
 __all__ = ["RandomForceModel", "fit_random_force"]
 

@@ -205,7 +205,8 @@ _OBJECTIVE = {
 def _verdict(problem, res, s, traj=None):
     """Whether the unforced model's trajectory at the estimate explains the data
     (``traj``: that trajectory if the caller has it)."""
-    from .verdict import EXTREME_DECADES, FORCE_RULE, _extreme, at_bound, decide, residual_verdict
+    from .convergence import at_bound
+    from .verdict import EXTREME_DECADES, FORCE_RULE, _extreme, decide, residual_verdict
 
     hits = at_bound(res.eps, s.bounds)
     extreme = _extreme(problem.system, res.eps, EXTREME_DECADES)

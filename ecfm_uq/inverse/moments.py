@@ -249,7 +249,7 @@ def moment_verdict(mu, var, v, alpha=DEFAULT_ALPHA, at_bound=()):
         Replicated data.
     alpha : float
     at_bound : sequence of (int, str)
-        The estimate's parameters at a bound (:func:`~.verdict.at_bound`): reported as an
+        The estimate's parameters at a bound (:func:`~.convergence.at_bound`): reported as an
         identifiability finding, not folded into the test.
 
     Returns

@@ -62,13 +62,12 @@ import scipy.optimize as sopt
 
 from .._validation import check_positive
 from ..errors import ConvergenceError
-from .convergence import DECREMENT_TOL, Optimality, decide_status, gradient_optimality
+from .convergence import DECREMENT_TOL, Optimality, at_bound, decide_status, gradient_optimality
 from .finite_differences import fd_jacobian
 from .forces import optimal_forces
 from .moments import DegenerateVarianceError, moment_verdict, replicate_statistics
 from .result import InverseResult, Uncertainty
 from .status import FitStatus
-from .verdict import at_bound
 
 __all__ = ["fit_replicated_problem"]
 
@@ -210,14 +209,11 @@ def _onto_bounds(res, fun, bounds):
     x = np.array(res.x, dtype=float)
     g = np.asarray(res.grad, dtype=float)
     moved, sign = x.copy(), {}  # sign: +1 held at the lower bound (g > 0), -1 at the upper
-    for k, (lo, hi) in enumerate(bounds):
-        lo = -np.inf if lo is None else lo
-        hi = np.inf if hi is None else hi
-        width = hi - lo if np.isfinite(hi - lo) else max(abs(x[k]), 1.0)
-        if x[k] - lo <= _BARRIER_GAP * width and g[k] > 0:
-            moved[k], sign[k] = lo, 1.0
-        elif hi - x[k] <= _BARRIER_GAP * width and g[k] < 0:
-            moved[k], sign[k] = hi, -1.0
+    for k, side in at_bound(x, bounds, rtol=_BARRIER_GAP):
+        if side == "lower" and g[k] > 0:
+            moved[k], sign[k] = bounds[k][0], 1.0
+        elif side == "upper" and g[k] < 0:
+            moved[k], sign[k] = bounds[k][1], -1.0
     if not sign:
         return
     z, gm = fun(moved)

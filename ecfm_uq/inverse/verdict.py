@@ -34,6 +34,7 @@ import numpy as np
 
 from .._validation import as_finite_array, as_operator, check_fraction, check_positive
 from ..errors import ModelEvaluationError
+from .convergence import at_bound
 from .result import Verdict
 
 #: default for ``rtol``: the forces may change the observations by 0.1 % of the data
@@ -44,8 +45,6 @@ EXTREME_DECADES = 8.0
 DEFAULT_ALPHA = 0.05
 #: the name of the exact-match ECFM's rule (noise-free data, no test of stated size)
 FORCE_RULE = "force-to-data (exact-match ECFM, noise-free)"
-#: a parameter within this fraction of its box's width of a bound is at it
-AT_BOUND_RTOL = 1e-8
 
 
 def check_alpha(alpha):
@@ -239,18 +238,18 @@ def consistency_verdict(
     if lam is not None and lam.size:
         out["peak_force_index"] = int(np.argmax(np.abs(lam)))
     sol = solve_steady(system, eps, **dict(solve_options or {})) if solution is None else solution
-    at_bound, extreme = _at_bound(eps, bounds), _extreme(system, eps, extreme_decades)
+    hits, extreme = at_bound(eps, bounds), _extreme(system, eps, extreme_decades)
     forces = lam is not None and lam.size > 0
     if not sol.success:
         parts = [f"the unforced model cannot be solved at eps={eps.tolist()}: {sol.message}"]
         test = "chi2" if sigma is not None else FORCE_RULE
         return decide(
             test, None if sigma is None else 0.0, alpha, parts, explained=False,
-            at_bound=at_bound, extreme=extreme, details=out,
+            at_bound=hits, extreme=extreme, details=out,
         )  # fmt: skip
     e = v - M_obs @ system.mean(sol.Theta)
     return residual_verdict(
-        e, v, sigma, alpha, n_fitted, rtol=rtol, at_bound=at_bound, extreme=extreme,
+        e, v, sigma, alpha, n_fitted, rtol=rtol, at_bound=hits, extreme=extreme,
         details=out, forces=forces,
     )  # fmt: skip
 
@@ -347,31 +346,6 @@ def check_bounds(bounds, n_eps):
         if lo is not None and hi is not None and lo > hi:
             raise ValueError(f"`bounds[{m}]` has lo > hi: {(lo, hi)}; swap them")
     return pairs
-
-
-def at_bound(eps, bounds, rtol=AT_BOUND_RTOL):
-    """The parameters at a bound, as ``(index, "lower" | "upper")`` pairs: the one test
-    (within ``rtol`` of the box's width, or of the parameter's size when a side is open)."""
-    if bounds is None:
-        return []
-    hits = []
-    for m, (x, b) in enumerate(zip(eps, bounds, strict=False)):
-        lo, hi = (None, None) if b is None else b
-        lo = None if lo is None or not np.isfinite(lo) else lo
-        hi = None if hi is None or not np.isfinite(hi) else hi
-        if lo is not None and hi is not None:
-            width = hi - lo
-        else:
-            width = max(abs(x), abs(lo or 0.0), abs(hi or 0.0), 1e-300)
-        tol = rtol * max(abs(width), 1e-300)
-        if lo is not None and x <= lo + tol:
-            hits.append((m, "lower"))
-        elif hi is not None and x >= hi - tol:
-            hits.append((m, "upper"))
-    return hits
-
-
-_at_bound = at_bound
 
 
 def _extreme(system, eps, decades):
