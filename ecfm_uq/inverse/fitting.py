@@ -229,10 +229,11 @@ def fit(
         methods and Adam on it; :data:`~.convergence.OFFSET_TOL`), the KKT stationarity
         of the all-at-once fits (:data:`~.convergence.KKT_TOL`), the gradient in
         standard-error units of the random-force ECFM
-        (:data:`~.convergence.SCALED_GRADIENT_TOL`), the relative gradient of the
-        replicated fits. An optimizer's own stopping settings go in ``options``
-        (``ftol`` of SLSQP, ``gtol`` of BFGS, ...). A model solve's tolerance is the
-        problem's ``solve_tol``.
+        (:data:`~.convergence.SCALED_GRADIENT_TOL`), the relative Newton decrement of
+        the replicated fits' objective in eps (:data:`~.convergence.DECREMENT_TOL`). An
+        optimizer's own stopping settings go in ``options`` (``ftol`` of SLSQP, ``gtol``
+        of BFGS and of the replicated fits' trust-constr, ...). A model solve's tolerance
+        is the problem's ``solve_tol``.
     maxiter : int, optional
         Iterations (epochs for Adam, residual evaluations for ``"least-squares"``).
     options : dict, optional
