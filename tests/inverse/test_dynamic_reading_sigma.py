@@ -221,7 +221,7 @@ def test_heteroscedastic_random_diffusion_weighted_fit_differs_and_equals_model_
     assert res.verdict.details["chi2"] == pytest.approx(mp.verdict.details["chi2"], rel=1e-6)
     # weighting matters here: the estimates differ by a sizeable part of a standard error
     gap = np.abs(res.eps - flat.eps) / res.uncertainty.stderr
-    assert gap.max() > 0.05, gap
+    assert gap.max() > 0.3, gap  # measured 0.61
     assert np.abs(res.eps - flat.eps).max() > 1e3 * np.abs(res.eps - mp.eps).max()
 
 
