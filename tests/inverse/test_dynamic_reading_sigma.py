@@ -210,6 +210,15 @@ def test_heteroscedastic_random_diffusion_weighted_fit_differs_and_equals_model_
     def problem():
         return DynamicInverseProblem(system, Theta0, dt, n_steps, M_obs, V, solve_tol=1e-13)
 
+    # the weighted objective's adjoint gradient (P = 3, sparse) against central differences
+    w = whitened_problem(problem(), dynamic_noise_model(sig, n_steps, 3))
+    assert w.gradient == "adjoint"
+    x = np.array([-0.9, 1.8])
+    np.testing.assert_allclose(
+        w.objective("standard")(x)[1],
+        fd_gradient(lambda y: w.loss(y, "standard"), x, 1e-5),
+        rtol=1e-7,
+    )
     start = [-0.8, 1.5]
     res = fit(problem(), start, sigma=sig)
     flat = fit(problem(), start, sigma=float(sig.mean()))  # the same noise at every reading
