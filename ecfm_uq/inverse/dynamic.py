@@ -72,10 +72,11 @@ class DynamicInverseProblem(InverseProblem):
         Measurement operator :math:`\\mathcal M`.
     V : (n_steps + 1, C) array_like
         Data; row ``i`` is :math:`v_i` at time ``t0 + i * dt`` (row 0, the initial time,
-        is not used by either objective). Their noise is ``fit``'s ``sigma``: one number,
-        one standard deviation per sensor ``(C,)`` or a covariance over the sensors
-        ``(C, C)``, the same at every time, readings at different times independent
-        (:mod:`~ecfm_uq.inverse.whitening`).
+        is not used by either objective). Their noise is ``fit``'s ``sigma``, readings at
+        different times independent: one number, one standard deviation per sensor
+        ``(C,)`` or a covariance over the sensors ``(C, C)``, the same at every time; or
+        one standard deviation per reading ``(n_steps, C)``, the shape of ``V[1:]``
+        (:mod:`~ecfm_uq.inverse.whitening`, which says which shape is which).
     t0 : float
         Initial time.
     solve_tol : float
@@ -223,6 +224,13 @@ class DynamicInverseProblem(InverseProblem):
 
     data_attribute = "V"
 
+    #: ``(n_steps + 1, C)``: the standard deviation of every reading (row 0, unused: 1)
+    #: in a copy whitened for a sigma per reading
+    #: (:func:`~ecfm_uq.inverse.whitening.whitened_problem`, the only place that sets
+    #: it): its ``V`` and its predicted readings are then divided by it, and so is every
+    #: residual and derivative formed from them. ``None``: the data's units.
+    reading_sigma = None
+
     @property
     def n_sensors(self):
         """Number of sensors C."""
@@ -253,7 +261,7 @@ class DynamicInverseProblem(InverseProblem):
         """
         formulation = check_choice("formulation", formulation, FORMULATIONS)
         constraint = None
-        if formulation == "ecfm":
+        if formulation == "ecfm":  # M theta_i = v_i: in the data's units (same solutions)
             if self.adaptive:
                 raise ValueError(
                     "the ECFM formulation constrains the state to the data at every step, "
@@ -265,7 +273,7 @@ class DynamicInverseProblem(InverseProblem):
                     f"the ECFM formulation needs one constraint force per sensor: the system "
                     f"has {self.system.n_forces} (Gamma), the data {self.n_sensors} sensors"
                 )
-            constraint = (self.M_obs, self.V)
+            constraint = (self.M_obs, self._in_data_units(self.V))
         eps = self.system.check_eps(eps)
         if self.adaptive and self.steps is None:
             self.freeze_steps(eps)
@@ -302,13 +310,31 @@ class DynamicInverseProblem(InverseProblem):
 
     def predictions(self, trajectory):
         """Sensor readings of the mean state, :math:`\\mathcal M\\,\\Theta_i\\mathbb E[\\Psi]`,
-        at the data times (the rows of ``V``).
+        at the data times (the rows of ``V``), in the units of ``V`` (divided by
+        :attr:`reading_sigma` in a copy whitened per reading).
 
         Returns
         -------
         (n_steps + 1, C) ndarray
         """
-        return trajectory.Theta[self._rows] @ self.system.E1 @ self.M_obs.T
+        return self._whiten(trajectory.Theta[self._rows] @ self.system.E1 @ self.M_obs.T)
+
+    # the one place a sigma per reading enters (reading_sigma): readings, their derivatives
+    def _whiten(self, readings, rows=slice(None)):
+        """Readings ``(n_rows, C, ...)`` of the data rows ``rows`` in the units of ``V``."""
+        if self.reading_sigma is None:
+            return readings
+        s = self.reading_sigma[rows]
+        return readings / s.reshape(s.shape + (1,) * (np.ndim(readings) - 2))
+
+    def _in_data_units(self, V):
+        return V if self.reading_sigma is None else V * self.reading_sigma
+
+    def _reading_sensitivities(self, traj):
+        """:math:`\\partial(\\mathcal M\\theta_i)/\\partial\\epsilon` at the data times
+        ``i = 1..n_steps`` in the units of ``V``, ``(n_steps, C, n_eps)``."""
+        dmean = np.einsum("tikm,k->tim", traj.dTheta[self._rows[1:]], self.system.E1)
+        return self._whiten(np.einsum("cj,tjm->tcm", self.M_obs, dmean), slice(1, None))
 
     # -- objectives ------------------------------------------------------------------------
     def standard_objective(self, eps, gradient=True):
@@ -334,12 +360,14 @@ class DynamicInverseProblem(InverseProblem):
         z = 0.5 * self.dt * float(np.sum(e * e))
         if not gradient:
             return z, None, traj
-        if adjoint:
+        if adjoint:  # dz/dTheta_i = dt (e_i / sigma_i) M E1^T: de_i/d(M theta_i) = 1/sigma_i
             g = np.zeros(traj.Theta.shape)
-            g[self._rows[1:]] = self.dt * np.einsum("tc,cj,k->tjk", e, self.M_obs, self.system.E1)
+            e_load = self._whiten(e, slice(1, None))
+            g[self._rows[1:]] = self.dt * np.einsum(
+                "tc,cj,k->tjk", e_load, self.M_obs, self.system.E1
+            )
             return z, traj.adjoint_gradient(g), traj
-        dmean = np.einsum("tikm,k->tim", traj.dTheta[self._rows[1:]], self.system.E1)
-        de = np.einsum("cj,tjm->tcm", self.M_obs, dmean)  # (P, C, n_eps)
+        de = self._reading_sensitivities(traj)  # (P, C, n_eps)
         return z, self.dt * np.einsum("tc,tcm->m", e, de), traj
 
     def ecfm_objective(self, eps, gradient=True):
@@ -387,8 +415,7 @@ class DynamicInverseProblem(InverseProblem):
         if formulation == "ecfm":
             return h * traj.lam[1:].ravel(), h * traj.dlam[1:].reshape(-1, n_eps), traj
         e = self.predictions(traj)[1:] - self.V[1:]
-        dmean = np.einsum("tikm,k->tim", traj.dTheta[self._rows[1:]], self.system.E1)
-        de = np.einsum("cj,tjm->tcm", self.M_obs, dmean)
+        de = self._reading_sensitivities(traj)
         return h * e.ravel(), h * de.reshape(-1, n_eps), traj
 
     def objective(self, formulation):
@@ -411,14 +438,14 @@ class DynamicInverseProblem(InverseProblem):
     def log_likelihood(self, formulation, sigma):
         """The :class:`~.loglik.LogLikelihood` of a standard fit: Gaussian least squares
         over the ``n = P C`` readings (sigma known, or profiled out), or why there is none.
-        ``sigma`` an array (per sensor, or a covariance over the sensors; :mod:`.whitening`):
-        that of the whitened readings."""
+        ``sigma`` an array (per sensor, a covariance over the sensors, or per reading;
+        :mod:`.whitening`): that of the whitened readings."""
         from .loglik import least_squares_likelihood, no_likelihood
-        from .noise_model import noise_model
+        from .whitening import dynamic_noise_model
 
         if formulation != "standard":
             return no_likelihood(formulation)
-        noise = noise_model(sigma, self.n_sensors, "sensor, the same at every time")
+        noise = dynamic_noise_model(sigma, self.n_steps, self.n_sensors)
         if noise.kind in ("diagonal", "covariance"):
             from .whitening import whitened_problem
 

@@ -35,8 +35,8 @@ ReplicatedProblem      ``"standard"``,                  ``"trust-region"``;
 
 ``sigma`` is checked once, by :func:`_check_sigma`, before any model solve: a number for
 every formulation; an array (one value per observation or a covariance, per sensor for a
-time series) for ModelProblem, and for the Galerkin formulations that are functions of
-the sensors' residual, which then run once on the whitened problem
+time series, or one per reading) for ModelProblem, and for the Galerkin formulations that
+are functions of the sensors' residual, which then run once on the whitened problem
 (:mod:`.whitening`); ``"noisy-ecfm"`` (the paper's bounds on i.i.d. noise) and replicated
 data (noise from the replicates) refuse an array, naming what to do.
 """
@@ -94,7 +94,8 @@ _SCALAR_SIGMA_ONLY = {
 def _check_sigma(sigma, kind, formulation, problem):
     """``sigma`` validated once, before any model solve: ``None``, a positive float, or a
     :class:`~.noise_model.NoiseModel` (one value per observation or a covariance: per
-    sensor for a time series) for the formulations that whiten (:mod:`.whitening`)."""
+    sensor, a covariance over the sensors or per reading for a time series) for the
+    formulations that whiten (:mod:`.whitening`)."""
     if sigma is None:
         return None
     if kind == "model":
@@ -116,20 +117,11 @@ def _check_sigma(sigma, kind, formulation, problem):
             f"standard deviation for every sensor), not an array of shape "
             f"{np.shape(sigma)}: {_SCALAR_SIGMA_ONLY[kind, formulation]}"
         )
-    C = problem.n_sensors
-    if kind == "dynamic":
-        shape = np.shape(sigma)
-        if len(shape) == 2 and shape != (C, C) and shape[1] == C:
-            raise ValueError(
-                f"`sigma` of shape {shape} gives one value per reading; a "
-                f"DynamicInverseProblem takes one number, one standard deviation per sensor "
-                f"({C},) or a covariance over the sensors ({C}, {C}), the same at every "
-                "time; for noise that changes with time fit the readings as a ModelProblem("
-                "lambda eps: problem.predictions(problem.solve(eps))[1:], problem.V[1:]) "
-                "with sigma=sigma.ravel() (formulation 'standard')"
-            )
-        return noise_model(sigma, C, "sensor, the same at every time")
-    return noise_model(sigma, C)
+    if kind == "dynamic":  # per sensor, a covariance over them, or per reading
+        from .whitening import dynamic_noise_model
+
+        return dynamic_noise_model(sigma, problem.n_steps, problem.n_sensors)
+    return noise_model(sigma, problem.n_sensors)
 
 
 #: the formulations of each problem kind, by name (what each one is: the table above)
@@ -212,10 +204,15 @@ def fit(
         Known noise of the data (else estimated where needed): one standard deviation,
         one per observation ``(n,)`` or a covariance matrix ``(n, n)``
         (:mod:`.noise_model`). For a :class:`~.problems.SteadyProblem` ``n = C`` sensors;
-        for a :class:`~.dynamic.DynamicInverseProblem` ``sigma`` describes the ``C``
-        sensors, the same at every time (``(C,)`` or ``(C, C)``, readings at different
-        times independent). An array is whitened once and the fit runs on
-        :math:`W\\mathcal M` and :math:`Wv` with ``sigma = 1`` (:mod:`.whitening`) for
+        for a :class:`~.dynamic.DynamicInverseProblem` (readings at different times
+        independent) ``sigma`` describes the ``C`` sensors, the same at every time
+        (``(C,)`` or ``(C, C)``), or every reading: ``(n_steps, C)``, the shape of
+        ``V[1:]`` (noise that changes with time). ``(C, C)`` is always a covariance, also
+        when ``n_steps == C`` (a sigma per reading is then given flattened,
+        ``(n_steps * C,)``); other shapes, ``V``'s ``(n_steps + 1, C)`` included, are
+        refused. An array is whitened once and the fit runs on :math:`W\\mathcal M` and
+        :math:`Wv` (per reading: :math:`v_{ic}/\\sigma_{ic}` and predicted readings
+        divided alike) with ``sigma = 1`` (:mod:`.whitening`) for
         ``"standard"``, ``"ecfm"`` (whose estimate does not depend on it: it sets the
         uncertainty and the verdict) and ``"ecfm-random"`` (data covariance
         :math:`\\Sigma + \\tau^2AA^T`); ``"noisy-ecfm"`` and ``ReplicatedProblem`` refuse an

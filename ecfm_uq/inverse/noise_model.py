@@ -42,12 +42,16 @@ class NoiseModel:
         The standard deviation(s) (``kind`` scalar or diagonal).
     chol : (n, n) ndarray or None
         Lower Cholesky factor of the covariance (``kind`` covariance).
+    unit : str
+        What one of the ``n`` values is, for messages (``"reading"``: one of a time
+        series' readings, :func:`~.whitening.dynamic_noise_model`).
     """
 
     kind: str
     n: int
     scale: float | np.ndarray | None = None
     chol: np.ndarray | None = None
+    unit: str = "observation"
 
     @property
     def known(self):
@@ -89,7 +93,7 @@ class NoiseModel:
         if self.kind == "scalar":
             return f"sigma={self.scale:g}"
         if self.kind == "diagonal":
-            return f"sigma per observation ({self.scale.min():.3g} to {self.scale.max():.3g})"
+            return f"sigma per {self.unit} ({self.scale.min():.3g} to {self.scale.max():.3g})"
         if self.kind == "covariance":
             return "a given covariance matrix"
         return "sigma estimated from the residual"

@@ -187,7 +187,8 @@ def test_random_force_ecfm_likelihood_is_that_of_sigma_plus_forces():
     )
 
 
-# -- a time series: sigma describes the sensors, the same at every time ----------------
+# -- a time series: sigma describes the sensors, the same at every time (per reading:
+# -- tests/inverse/test_dynamic_reading_sigma.py) ----------------------------------------
 
 
 @pytest.fixture(scope="module")
@@ -269,9 +270,12 @@ def test_formulations_without_a_whitened_form_refuse_an_array_sigma_by_name(burg
             fit(rep, [0.5], sigma=given)
     m, VB = burgers
     dyn = _dynamic(m, m.M_obs, VB)
-    with pytest.raises(ValueError, match=r"one value per reading.*\(4,\).*\(4, 4\)"):
-        fit(dyn, [1.5, 0.5], sigma=np.full((m.n_steps, 4), 0.01))
-    with pytest.raises(ValueError, match=r"one per sensor, the same at every time"):
+    # a sigma per reading (n_steps, C) is taken: tests/inverse/test_dynamic_reading_sigma.py
+    with pytest.raises(
+        ValueError,
+        match=r"`sigma`.*\(4,\) one standard deviation per sensor"
+        r".*\(4, 4\).*\(20, 4\) one standard deviation per reading",
+    ):
         fit(dyn, [1.5, 0.5], sigma=np.full(3, 0.01))
 
 
