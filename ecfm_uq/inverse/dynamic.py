@@ -485,6 +485,9 @@ class DynamicInverseProblem(InverseProblem):
         noise: :math:`\\sigma^2` given, or :math:`s^2 = \\|r\\|^2/(n_{data} - n_\\epsilon)`
         from the unforced model's residual at ``eps`` (Student-t intervals then). Adam
         stops near, not at, the stationary point; the linearization is taken there.
+        ``sigma`` an array (per sensor, a covariance over the sensors, or per reading; the
+        shapes of :func:`~ecfm_uq.inverse.fit`): the same computation on the whitened
+        problem (:mod:`.whitening`), ``jacobian`` in the data's units.
 
         Returns
         -------
@@ -498,6 +501,16 @@ class DynamicInverseProblem(InverseProblem):
 
         formulation = check_choice("formulation", formulation, FORMULATIONS)
         eps = self.system.check_eps(eps)
+        if sigma is not None and np.ndim(sigma) > 0:  # whitened once, as fit does
+            from .whitening import dynamic_noise_model, jacobian_in_data_units, whitened_problem
+
+            noise = dynamic_noise_model(sigma, self.n_steps, self.n_sensors)
+            if noise.kind != "scalar":
+                unc = whitened_problem(self, noise).uncertainty(eps, formulation, 1.0, covariance)
+                return dataclasses.replace(
+                    unc, jacobian=jacobian_in_data_units(unc.jacobian, noise)
+                )
+            sigma = noise.scale
         try:
             if sigma is not None:
                 s2, model, dof = check_positive("sigma", sigma) ** 2, "known", None

@@ -326,3 +326,20 @@ def test_a_square_sigma_is_the_covariance_also_when_n_steps_equals_c():
     per_sensor = fit(_dynamic(m, V), EPS0, sigma=np.sqrt(np.diag(cov)))
     np.testing.assert_allclose(as_cov.eps, per_sensor.eps, rtol=1e-8)  # two whitenings
     assert as_cov.uncertainty.jacobian.shape == (2, 16)
+
+
+def test_uncertainty_called_directly_takes_the_same_sigma_as_fit(burgers, fitted):
+    """``DynamicInverseProblem.uncertainty(eps, sigma=array)`` whitens as ``fit`` does:
+    a per-reading sigma and a per-sensor one give the fit's covariance and its d eps/dv."""
+    m, V, sig = burgers
+    p, res, _ = fitted
+    direct = p.uncertainty(res.eps, "standard", sigma=sig, covariance="gauss-newton")
+    np.testing.assert_allclose(direct.cov, res.uncertainty.cov, rtol=1e-8)
+    np.testing.assert_allclose(direct.jacobian, res.uncertainty.jacobian, rtol=1e-8,
+                               atol=1e-12 * np.abs(res.uncertainty.jacobian).max())  # fmt: skip
+    s_c = sig.mean(axis=0)  # one per sensor, the same at every time
+    per_sensor = fit(_dynamic(m, V), EPS0, sigma=s_c)
+    direct = p.uncertainty(per_sensor.eps, "standard", sigma=s_c, covariance="gauss-newton")
+    np.testing.assert_allclose(direct.cov, per_sensor.uncertainty.cov, rtol=1e-8)
+    with pytest.raises(ValueError, match="sigma"):
+        p.uncertainty(res.eps, "standard", sigma=np.ones((3, 3, 3)))
