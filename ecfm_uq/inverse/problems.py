@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._validation import as_finite_array, as_operator
+from ..system import solve_steady
 from .gradients import choose_gradient
 from .interface import InverseProblem
 
@@ -94,7 +95,6 @@ class SteadyProblem(InverseProblem):
         one: Gaussian least squares of the sensors' residual), or why there is none."""
         from .loglik import gaussian_likelihood, no_likelihood
         from .noise_model import noise_model
-        from .steady import lazy_standard_residual
 
         if formulation != "standard":
             return no_likelihood(formulation)
@@ -178,3 +178,15 @@ class ReplicatedProblem(InverseProblem):
 def data_size(problem):
     """Number of scalar data a problem's estimate is fitted to (for degrees of freedom)."""
     return int(np.size(problem.v)) if hasattr(problem, "v") else int(np.size(problem.V[1:]))
+
+
+def lazy_standard_residual(system, M_obs, v, eps, **solve_kw):
+    """:func:`standard_residual` with the Jacobian as a callable: the sensitivity solves
+    run only when it is called (a trial point an optimizer rejects needs none)."""
+    sol = solve_steady(system, eps, strict=True, **solve_kw)
+
+    def jacobian():
+        dTheta, _ = sol.eps_sensitivity()
+        return np.asarray(M_obs @ np.einsum("ikm,k->im", dTheta, system.E1))
+
+    return M_obs @ system.mean(sol.Theta) - v, jacobian, sol

@@ -29,6 +29,7 @@ from .drivers import (
     verify_least_squares,
 )
 from .gradients import choose_gradient
+from .problems import lazy_standard_residual
 from .result import InverseResult, Uncertainty, Verdict
 from .status import FitStatus
 from .verdict import consistency_verdict
@@ -104,18 +105,6 @@ def standard_residual(system, M_obs, v, eps, **solve_kw):
     solve_kw.pop("gradient", None)
     r, J, sol = lazy_standard_residual(system, M_obs, v, eps, **solve_kw)
     return r, J(), sol
-
-
-def lazy_standard_residual(system, M_obs, v, eps, **solve_kw):
-    """:func:`standard_residual` with the Jacobian as a callable: the sensitivity solves
-    run only when it is called (a trial point an optimizer rejects needs none)."""
-    sol = solve_steady(system, eps, strict=True, **solve_kw)
-
-    def jacobian():
-        dTheta, _ = sol.eps_sensitivity()
-        return np.asarray(M_obs @ np.einsum("ikm,k->im", dTheta, system.E1))
-
-    return M_obs @ system.mean(sol.Theta) - v, jacobian, sol
 
 
 def ecfm_residual(system, M_obs, v, eps, **solve_kw):
