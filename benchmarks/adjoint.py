@@ -38,7 +38,7 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ecfm_uq.inverse import DynamicInverseProblem  # noqa: E402
-from ecfm_uq.inverse.steady import standard_objective  # noqa: E402
+from ecfm_uq.inverse.formulations.steady import standard_objective  # noqa: E402
 from ecfm_uq.problems.burgers import BurgersModel  # noqa: E402
 from ecfm_uq.problems.fisher_kpp import build_kpp, make_data, sensor_grid  # noqa: E402
 from ecfm_uq.system import solve_steady  # noqa: E402

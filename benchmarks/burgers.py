@@ -15,8 +15,8 @@ tolerance 1e-6):
   compared.
 
 Last lines: ``burgers gradient/forward: <ratio>``, the larger of the two formulations'
-gradient-to-forward time ratios with the default gradient (aim <= 1.5), and ``burgers study speedup: <x>x``
-(naive time over ours for the study).
+gradient-to-forward time ratios with the default gradient (aim <= 1.5), and ``burgers study
+speedup: <x>x`` (naive time over ours for the study).
 
 BLAS threads: the step systems are 50 x 50 (54 x 54 for ECFM). With a multi-threaded
 OpenBLAS, ``lu_solve`` with exactly two right-hand sides (the two sensitivity columns)
@@ -40,7 +40,7 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ecfm_uq.inverse import fit  # noqa: E402
-from ecfm_uq.inverse.dynamic import DynamicInverseProblem  # noqa: E402
+from ecfm_uq.inverse.problems.dynamic import DynamicInverseProblem  # noqa: E402
 from ecfm_uq.problems.burgers import PAPER_TRUE_EPS, BurgersModel  # noqa: E402
 
 

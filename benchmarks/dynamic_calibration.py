@@ -31,7 +31,7 @@ import time
 import numpy as np
 
 from ecfm_uq.inverse import fit
-from ecfm_uq.inverse.dynamic import DynamicInverseProblem
+from ecfm_uq.inverse.problems.dynamic import DynamicInverseProblem
 from ecfm_uq.system import GalerkinSystem, NonlinearTerm
 
 TRUE = np.array([1.5, 2.0])

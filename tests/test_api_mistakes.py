@@ -18,7 +18,7 @@ from ecfm_uq.chaos import ChaosBasis, expectation_tensor, weighted_gram
 from ecfm_uq.chaos.quadrature import tensor_gauss_legendre
 from ecfm_uq.errors import ConvergenceError, MemoryBudgetError, ModelEvaluationError
 from ecfm_uq.inverse import SteadyProblem, fit
-from ecfm_uq.inverse.verdict import consistency_verdict
+from ecfm_uq.inverse.statistics.verdict import consistency_verdict
 from ecfm_uq.memory import set_memory_budget
 from ecfm_uq.spectral import (
     SineBasis,

@@ -10,8 +10,10 @@ problem                     formulations (``fit(problem, eps0, formulation=...)`
 ==========================  =====================================================  ================
 :class:`ModelProblem`       ``"standard"`` (a model that is a Python function)     --
 :class:`SteadyProblem`      ``"standard"``, ``"ecfm"``, ``"noisy-ecfm"``            Eqs. traditional,
-                                                                                   ecfm, kpp_inv,
-                                                                                   ecfm_noise; Sec. 4
+                                                                                   ecfm,
+                                                                                   kpp_inv,
+                                                                                   ecfm_noise;
+                                                                                   Sec. 4
 :class:`DynamicInverse\\    ``"standard"``, ``"ecfm"``                              Eqs. inv_obj,
 Problem`                                                                           ecfm_obj
 :class:`ReplicatedProblem`  ``"standard"``, ``"inner-outer"``, ``"penalty"``        Eq. stochastic_model
@@ -21,55 +23,60 @@ Problem`                                                                        
 From a result: :func:`profile_likelihood` / :func:`profile_intervals` (profile-likelihood
 intervals and regions), :func:`likelihood_ratio_test`, ``result.summary()``.
 
-A map of the modules, read from the top: each group imports only from its own group and
-the groups below it (one exception: :mod:`.dynamic_fit` imports the problem it fits,
-:mod:`.dynamic`), and nothing but :mod:`.coverage` imports :mod:`.fitting`:
+The package, read from the top: each layer imports only from itself and the layers below
+it (:file:`tests/inverse/test_layout.py` checks this), and nothing but :mod:`.coverage`
+imports :mod:`.fitting`:
 
-=====================  ===================================================================
-the entry              :mod:`.fitting` (``fit``: validate, whiten, dispatch);
-                       :mod:`.coverage` (fits over synthetic data sets)
-the problems           :mod:`.interface` (what every problem offers), :mod:`.model_problem`,
-                       :mod:`.problems` (steady, replicated), :mod:`.dynamic`;
-                       :mod:`.noise_model` and :mod:`.whitening` (``sigma`` as given)
-the formulations       :mod:`.steady` (standard and exact ECFM, reduced), :mod:`.noisy` and
-                       :mod:`.noise` (all-at-once, the paper's noise bounds),
-                       :mod:`.discrepancy` and :mod:`.sparse_forces` (random-force ECFM),
-                       :mod:`.dynamic_fit`, :mod:`.replicated` with :mod:`.forces`,
-                       :mod:`.pseudo_likelihood` and :mod:`.moments` (pseudo-likelihood),
-                       :mod:`.loglik` (each formulation's likelihood)
-the statistics         :mod:`.uncertainty`, :mod:`.verdict`, :mod:`.profile` and
-                       :mod:`.profiler`, :mod:`.posterior`, :mod:`.diagnostics`
-shared                 :mod:`.convergence` (the one status decision), :mod:`.drivers` and
-                       :mod:`.optimizers` (the optimizer calls), :mod:`.gradients`,
-                       :mod:`.finite_differences`; the types handed around:
-                       :mod:`.settings` (the validated arguments), :mod:`.result` (the one
-                       frozen result), :mod:`.status`, :mod:`.summary_table`
-=====================  ===================================================================
+==================  ======================================================================
+``fitting``,        ``fit`` (validate, whiten, dispatch: the only entry);
+``coverage``        fits over synthetic data sets
+``formulations/``   how each formulation turns a problem into an estimate: ``steady``
+                    (standard and exact ECFM, reduced), ``noisy`` and ``noise`` (all at
+                    once, the paper's noise bounds), ``discrepancy`` and ``sparse_forces``
+                    (random-force ECFM), ``dynamic_fit``, ``replicated`` and ``forces``
+                    (pseudo-likelihood)
+``problems/``       a model and its data behind one interface (``interface``): ``model``
+                    (a Python function), ``galerkin`` (steady, replicated), ``dynamic``;
+                    ``noise_model`` and ``whitening`` (``sigma`` as given);
+                    ``pseudo_likelihood`` and ``moments`` (the replicated data's
+                    likelihood)
+``statistics/``     what a fit says: ``uncertainty``, ``verdict``, ``loglik``, ``profile``
+                    and ``profiler``, ``posterior``, ``diagnostics``
+``core/``           shared machinery: ``convergence`` (the one status decision),
+                    ``drivers`` and ``optimizers`` (the optimizer calls), ``gradients``,
+                    ``finite_differences``; the types handed around: ``settings`` (the
+                    validated arguments), ``result`` (the one frozen result), ``status``,
+                    ``summary_table``
+==================  ======================================================================
 """
 
+from .core.optimizers import adam
+from .core.result import InverseResult, Uncertainty, Verdict
+from .core.status import FitStatus
 from .coverage import likelihood_coverage, steady_coverage
-from .diagnostics import (
+from .fitting import fit
+from .formulations.forces import optimal_forces
+from .formulations.noise import ConsistencyTest, consistency_test, noise_bounds, sample_moments
+from .formulations.noisy import ConstrainedInverse
+from .formulations.steady import ecfm_objective, standard_objective
+from .problems.dynamic import DynamicInverseProblem
+from .problems.galerkin import ReplicatedProblem, SteadyProblem
+from .problems.model import ModelProblem
+from .problems.moments import (
+    DegenerateVarianceError,
+    negative_log_pseudo_likelihood,
+    sensor_moments,
+)
+from .problems.pseudo_likelihood import PseudoLikelihood
+from .statistics.diagnostics import (
     condition_number,
     expected_relative_error,
     fd_hessian,
     loss_surface,
     taylor_remainders,
 )
-from .dynamic import DynamicInverseProblem
-from .fitting import fit
-from .forces import optimal_forces
-from .loglik import LogLikelihood
-from .model_problem import ModelProblem
-from .moments import DegenerateVarianceError, negative_log_pseudo_likelihood, sensor_moments
-from .noise import ConsistencyTest, consistency_test, noise_bounds, sample_moments
-from .noisy import ConstrainedInverse
-from .optimizers import adam
-from .problems import ReplicatedProblem, SteadyProblem
-from .profile import likelihood_ratio_test, profile_intervals, profile_likelihood
-from .pseudo_likelihood import PseudoLikelihood
-from .result import InverseResult, Uncertainty, Verdict
-from .status import FitStatus
-from .steady import ecfm_objective, standard_objective
+from .statistics.loglik import LogLikelihood
+from .statistics.profile import likelihood_ratio_test, profile_intervals, profile_likelihood
 
 __all__ = [
     "FitStatus",

@@ -6,7 +6,7 @@ and the optimizer, dispatching to the module that owns each problem kind; one to
 vocabulary (``tol``, ``maxiter``); method-specific settings in one ``options`` dict,
 checked by name; one result class (:class:`~ecfm_uq.inverse.InverseResult`), whose
 ``status`` is decided from the optimality conditions at the returned point
-(:mod:`.convergence`), whatever the optimizer reported.
+(:mod:`ecfm_uq.inverse.core.convergence`), whatever the optimizer reported.
 
 =====================  ===============================  ==============================
 problem                formulation                      method (``"auto"`` first)
@@ -37,8 +37,8 @@ ReplicatedProblem      ``"standard"``,                  ``"trust-region"``;
 every formulation; an array (one value per observation or a covariance, per sensor for a
 time series, or one per reading) for ModelProblem, and for the Galerkin formulations that
 are functions of the sensors' residual, which then run once on the whitened problem
-(:mod:`.whitening`); ``"noisy-ecfm"`` (the paper's bounds on i.i.d. noise) and replicated
-data (noise from the replicates) refuse an array, naming what to do.
+(:mod:`ecfm_uq.inverse.problems.whitening`); ``"noisy-ecfm"`` (the paper's bounds on i.i.d.
+noise) and replicated data (noise from the replicates) refuse an array, naming what to do.
 """
 
 from __future__ import annotations
@@ -52,17 +52,17 @@ import numpy as np
 from .._validation import check_int, check_positive
 from ..system.plan import dense_unknowns
 from ..threads import library_threads
-from .noise_model import NoiseModel, noise_model
-from .settings import FitSettings
-from .verdict import DEFAULT_ALPHA, check_alpha, check_bounds
+from .core.settings import FitSettings
+from .problems.noise_model import NoiseModel, noise_model
+from .statistics.verdict import DEFAULT_ALPHA, check_alpha, check_bounds
 
 __all__ = ["fit"]
 
 
 def _problem_kind(problem):
-    from .dynamic import DynamicInverseProblem
-    from .model_problem import ModelProblem
-    from .problems import ReplicatedProblem, SteadyProblem
+    from .problems.dynamic import DynamicInverseProblem
+    from .problems.galerkin import ReplicatedProblem, SteadyProblem
+    from .problems.model import ModelProblem
 
     for cls, kind in (
         (ModelProblem, "model"),
@@ -93,9 +93,9 @@ _SCALAR_SIGMA_ONLY = {
 
 def _check_sigma(sigma, kind, formulation, problem):
     """``sigma`` validated once, before any model solve: ``None``, a positive float, or a
-    :class:`~.noise_model.NoiseModel` (one value per observation or a covariance: per
-    sensor, a covariance over the sensors or per reading for a time series) for the
-    formulations that whiten (:mod:`.whitening`)."""
+    :class:`~ecfm_uq.inverse.problems.noise_model.NoiseModel` (one value per observation or
+    a covariance: per sensor, a covariance over the sensors or per reading for a time
+    series) for the formulations that whiten (:mod:`ecfm_uq.inverse.problems.whitening`)."""
     if sigma is None:
         return None
     if kind == "model":
@@ -118,7 +118,7 @@ def _check_sigma(sigma, kind, formulation, problem):
             f"{np.shape(sigma)}: {_SCALAR_SIGMA_ONLY[kind, formulation]}"
         )
     if kind == "dynamic":  # per sensor, a covariance over them, or per reading
-        from .whitening import dynamic_noise_model
+        from .problems.whitening import dynamic_noise_model
 
         return dynamic_noise_model(sigma, problem.n_steps, problem.n_sensors)
     return noise_model(sigma, problem.n_sensors)
@@ -188,58 +188,62 @@ def fit(
     Parameters
     ----------
     problem : ModelProblem, SteadyProblem, DynamicInverseProblem or ReplicatedProblem
-        The model and the data: a Python function (:class:`~.model_problem.ModelProblem`)
-        or a Galerkin system with its sensors (:mod:`ecfm_uq.inverse.problems`).
+        The model and the data: a Python function
+        (:class:`~ecfm_uq.inverse.problems.model.ModelProblem`) or a Galerkin system with
+        its sensors (:mod:`ecfm_uq.inverse.problems.galerkin`).
     eps0 : (n_eps,) array_like
         Starting point.
     formulation : str
         ``"standard"`` (least squares / maximum likelihood), ``"ecfm"`` (the paper's
         explicit constraint forces, matching the data exactly), ``"ecfm-random"`` (random
         constraint forces with a variance estimated against ``sigma``, steady),
-        ``"noisy-ecfm"`` (the paper's z / chi-squared bounds, steady), ``"inner-outer"`` / ``"penalty"`` (pseudo-likelihood forces,
-        replicated data); see the table in :mod:`ecfm_uq.inverse.fitting`.
+        ``"noisy-ecfm"`` (the paper's z / chi-squared bounds, steady), ``"inner-outer"`` /
+        ``"penalty"`` (pseudo-likelihood forces, replicated data); see the table in
+        :mod:`ecfm_uq.inverse.fitting`.
     method : str
         The optimizer; ``"auto"`` picks the formulation's default.
     sigma : float or array_like, optional
-        Known noise of the data (else estimated where needed): one standard deviation,
-        one per observation ``(n,)`` or a covariance matrix ``(n, n)``
-        (:mod:`.noise_model`). For a :class:`~.problems.SteadyProblem` ``n = C`` sensors;
-        for a :class:`~.dynamic.DynamicInverseProblem` (readings at different times
-        independent) ``sigma`` describes the ``C`` sensors, the same at every time
-        (``(C,)`` or ``(C, C)``), or every reading: ``(n_steps, C)``, the shape of
-        ``V[1:]`` (noise that changes with time). ``(C, C)`` is always a covariance, also
-        when ``n_steps == C`` (a sigma per reading is then given flattened,
-        ``(n_steps * C,)``); other shapes, ``V``'s ``(n_steps + 1, C)`` included, are
-        refused. An array is whitened once and the fit runs on :math:`W\\mathcal M` and
-        :math:`Wv` (per reading: :math:`v_{ic}/\\sigma_{ic}` and predicted readings
-        divided alike) with ``sigma = 1`` (:mod:`.whitening`) for
-        ``"standard"``, ``"ecfm"`` (whose estimate does not depend on it: it sets the
-        uncertainty and the verdict) and ``"ecfm-random"`` (data covariance
-        :math:`\\Sigma + \\tau^2AA^T`); ``"noisy-ecfm"`` and ``ReplicatedProblem`` refuse an
-        array. Without ``sigma`` a least-squares fit has no consistency test
-        (``verdict.consistent is None``).
+        Known noise of the data (else estimated where needed): one standard deviation, one
+        per observation ``(n,)`` or a covariance matrix ``(n, n)``
+        (:mod:`ecfm_uq.inverse.problems.noise_model`). For a
+        :class:`~ecfm_uq.inverse.problems.galerkin.SteadyProblem` ``n = C`` sensors; for a
+        :class:`~ecfm_uq.inverse.problems.dynamic.DynamicInverseProblem` (readings at
+        different times independent) ``sigma`` describes the ``C`` sensors, the same at
+        every time (``(C,)`` or ``(C, C)``), or every reading: ``(n_steps, C)``, the shape
+        of ``V[1:]`` (noise that changes with time). ``(C, C)`` is always a covariance, also
+        when ``n_steps == C`` (a sigma per reading is then given flattened, ``(n_steps *
+        C,)``); other shapes, ``V``'s ``(n_steps + 1, C)`` included, are refused. An array
+        is whitened once and the fit runs on :math:`W\\mathcal M` and :math:`Wv` (per
+        reading: :math:`v_{ic}/\\sigma_{ic}` and predicted readings divided alike) with
+        ``sigma = 1`` (:mod:`ecfm_uq.inverse.problems.whitening`) for ``"standard"``,
+        ``"ecfm"`` (whose estimate does not depend on it: it sets the uncertainty and the
+        verdict) and ``"ecfm-random"`` (data covariance :math:`\\Sigma + \\tau^2AA^T`);
+        ``"noisy-ecfm"`` and ``ReplicatedProblem`` refuse an array. Without ``sigma`` a
+        least-squares fit has no consistency test (``verdict.consistent is None``).
     bounds : sequence of (lo, hi), optional
         Bounds on :math:`\\epsilon` (``None`` for an open side).
     tol : float, optional
-        The tolerance of the test that decides the status (:mod:`.convergence`), on every
-        path: the relative offset of a sum of squares (least squares, the ``minimize``
-        methods and Adam on it; :data:`~.convergence.OFFSET_TOL`), the KKT stationarity
-        of the all-at-once fits (:data:`~.convergence.KKT_TOL`), the gradient in
-        standard-error units of the random-force ECFM
-        (:data:`~.convergence.SCALED_GRADIENT_TOL`), the relative Newton decrement of
-        the replicated fits' objective in eps (:data:`~.convergence.DECREMENT_TOL`). An
-        optimizer's own stopping settings go in ``options`` (``ftol`` of SLSQP, ``gtol``
-        of BFGS and of the replicated fits' trust-constr, ...). A model solve's tolerance
-        is the problem's ``solve_tol``.
+        The tolerance of the test that decides the status
+        (:mod:`ecfm_uq.inverse.core.convergence`), on every path: the relative offset of a
+        sum of squares (least squares, the ``minimize`` methods and Adam on it;
+        :data:`~ecfm_uq.inverse.core.convergence.OFFSET_TOL`), the KKT stationarity of the
+        all-at-once fits (:data:`~ecfm_uq.inverse.core.convergence.KKT_TOL`), the gradient
+        in standard-error units of the random-force ECFM
+        (:data:`~ecfm_uq.inverse.core.convergence.SCALED_GRADIENT_TOL`), the relative Newton
+        decrement of the replicated fits' objective in eps
+        (:data:`~ecfm_uq.inverse.core.convergence.DECREMENT_TOL`). An optimizer's own
+        stopping settings go in ``options`` (``ftol`` of SLSQP, ``gtol`` of BFGS and of the
+        replicated fits' trust-constr, ...). A model solve's tolerance is the problem's
+        ``solve_tol``.
     maxiter : int, optional
         Iterations (epochs for Adam, residual evaluations for ``"least-squares"``).
     options : dict, optional
-        Method- and formulation-specific settings by name (e.g. ``{"lr": 1e-2}`` for
-        Adam, ``{"penalty": 100}`` for the penalty form, ``{"covariance": "sandwich"}``
-        and ``{"polish": False}`` for the steady least-squares fits,
-        ``{"force_prior": "sparse"}`` for the random-force ECFM with a variance per force (a localized discrepancy) and
-        ``{"tau_in_intervals": "held"}`` for its intervals with tau held at its
-        estimate); an unknown name is refused.
+        Method- and formulation-specific settings by name (e.g. ``{"lr": 1e-2}`` for Adam,
+        ``{"penalty": 100}`` for the penalty form, ``{"covariance": "sandwich"}`` and
+        ``{"polish": False}`` for the steady least-squares fits, ``{"force_prior":
+        "sparse"}`` for the random-force ECFM with a variance per force (a localized
+        discrepancy) and ``{"tau_in_intervals": "held"}`` for its intervals with tau held at
+        its estimate); an unknown name is refused.
     uncertainty : bool
         Attach the estimate's uncertainty (costs extra gradient evaluations).
     alpha : float
@@ -284,24 +288,24 @@ def fit(
     )
     _check_formulation(kind, settings)
     if kind == "model":
-        from .model_problem import fit_model_problem
+        from .problems.model import fit_model_problem
 
         return fit_model_problem(problem, eps0, settings)
     if kind == "steady" and (formulation == "noisy-ecfm" or method == "all-at-once"):
-        from .noisy import fit_all_at_once as fitter
+        from .formulations.noisy import fit_all_at_once as fitter
     elif formulation == "ecfm-random":
-        from .discrepancy import fit_random_force as fitter
+        from .formulations.discrepancy import fit_random_force as fitter
     elif kind == "steady":
-        from .steady import fit_steady_problem as fitter
+        from .formulations.steady import fit_steady_problem as fitter
     elif kind == "dynamic":
-        from .dynamic_fit import fit_dynamic_problem as fitter
+        from .formulations.dynamic_fit import fit_dynamic_problem as fitter
     else:
-        from .replicated import fit_replicated_problem as fitter
+        from .formulations.replicated import fit_replicated_problem as fitter
     noise = settings.sigma if isinstance(settings.sigma, NoiseModel) else None
     if noise is None:
         result = fitter(problem, eps0, settings)
     else:  # an array sigma: the same fit of whitened sensors and data, sigma = 1
-        from .whitening import whitened_problem
+        from .problems.whitening import whitened_problem
 
         result = fitter(
             whitened_problem(problem, noise), eps0, dataclasses.replace(settings, sigma=1.0)
@@ -318,8 +322,8 @@ def _in_data_units(result, noise):
     """A fit of whitened data reported for the data given: the estimate's derivative in
     ``v`` (not ``W v``), and messages that name the noise as given where the fitter saw
     ``sigma = 1``."""
-    from .loglik import LogLikelihood
-    from .whitening import jacobian_in_data_units
+    from .problems.whitening import jacobian_in_data_units
+    from .statistics.loglik import LogLikelihood
 
     unit = re.compile(r"sigma ?= ?1(?![\d.e])")
     said = f"sigma=1 (whitened: {noise.describe()})"

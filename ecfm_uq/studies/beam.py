@@ -26,9 +26,9 @@ from scipy import stats
 from ..chaos import ChaosBasis
 from ..errors import SingularSystemError
 from ..inverse import ReplicatedProblem, fit
-from ..inverse.diagnostics import expected_relative_error
-from ..inverse.forces import eps_curvature, optimal_forces
-from ..inverse.pseudo_likelihood import PseudoLikelihood
+from ..inverse.formulations.forces import eps_curvature, optimal_forces
+from ..inverse.problems.pseudo_likelihood import PseudoLikelihood
+from ..inverse.statistics.diagnostics import expected_relative_error
 from ..mc import relative_error
 from ..plotting import pyplot, save_figure
 from ..problems.beam import BeamModel, buckling_load

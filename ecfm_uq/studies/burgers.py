@@ -9,8 +9,8 @@ differences of the sensitivity gradient and its condition number reported (paper
 standard, 3.46 ECFM); the two loss surfaces are tabulated around the optimum.
 
 The numerics live in :mod:`ecfm_uq.problems.burgers` (the model),
-:mod:`ecfm_uq.inverse.dynamic` (objectives, gradients, Adam) and
-:mod:`ecfm_uq.inverse.diagnostics` (Hessian, surfaces); this module reads settings,
+:mod:`ecfm_uq.inverse.problems.dynamic` (objectives, gradients, Adam) and
+:mod:`ecfm_uq.inverse.statistics.diagnostics` (Hessian, surfaces); this module reads settings,
 calls them, draws the figures and assembles the result.
 """
 
@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from ..inverse import DynamicInverseProblem, fit
-from ..inverse.diagnostics import condition_number, fd_hessian, loss_surface
+from ..inverse.statistics.diagnostics import condition_number, fd_hessian, loss_surface
 from ..plotting import pyplot, save_figure
 from ..problems.burgers import (
     INITIAL_STATES,

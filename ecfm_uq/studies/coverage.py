@@ -1,7 +1,7 @@
 """``ecfm-uq reproduce coverage``: are the reported 95 % intervals honest? (issue 13)
 
 Every fit reports a delta-method covariance of its estimate
-(:mod:`ecfm_uq.inverse.uncertainty`). This study draws R seeded synthetic data sets from
+(:mod:`ecfm_uq.inverse.statistics.uncertainty`). This study draws R seeded synthetic data sets from
 two models at known parameters, fits each by the standard and the ECFM formulation, and
 counts how often the reported 95 % intervals contain the truth
 (:mod:`ecfm_uq.inverse.coverage`):
@@ -20,7 +20,8 @@ counts how often the reported 95 % intervals contain the truth
   ECFM, with one variance for every force and with a variance per force (the sparse prior)
   (:func:`~ecfm_uq.inverse.coverage.interval_coverage`);
 * ``discrepancy`` (issue 20): size and power of the test of tau = 0 against a narrow source
-  missing from the rod, by amplitude, for both force priors (:func:`~ecfm_uq.inverse.coverage.discrepancy_power`).
+  missing from the rod, by amplitude, for both force priors
+  (:func:`~ecfm_uq.inverse.coverage.discrepancy_power`).
 
 The existing ``steady`` ECFM rows use the paper's exact-match forces
 (``formulation="ecfm"``), so their numbers are those of v0.2.
@@ -41,7 +42,7 @@ from ..inverse.coverage import (
     model_coverage,
     steady_coverage,
 )
-from ..inverse.problems import SteadyProblem
+from ..inverse.problems.galerkin import SteadyProblem
 from ..plotting import pyplot, save_figure
 from ..problems import regression
 from ..problems.beam import BeamModel

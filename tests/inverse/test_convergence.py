@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from ecfm_uq.inverse import DynamicInverseProblem, FitStatus, SteadyProblem, fit
-from ecfm_uq.inverse.convergence import (
+from ecfm_uq.inverse.core.convergence import (
     OFFSET_TOL,
     gradient_optimality,
     least_squares_optimality,
@@ -241,7 +241,7 @@ def test_kkt_test_on_a_quadratic_program_with_known_multipliers():
     """min 1/2 ||z - a||^2 s.t. z0 + z1 = 1, z1 >= 0.6 (scaled): the solution and its
     multipliers are known in closed form; a shifted point, an infeasible one and a bound
     held by a multiplier of the wrong sign are refused."""
-    from ecfm_uq.inverse.convergence import KKT_TOL, kkt_optimality
+    from ecfm_uq.inverse.core.convergence import KKT_TOL, kkt_optimality
 
     a = np.array([2.0, 0.0, 3.0])
     H = np.array([[1.0, 1.0, 0.0]])
@@ -281,7 +281,7 @@ def test_all_at_once_status_comes_from_the_kkt_conditions():
     """The SLSQP fits are judged by the KKT test, not by SLSQP's own success: stopped by
     the iteration budget they are MAX_ITERATIONS, converged they carry the measured
     stationarity."""
-    from ecfm_uq.inverse.convergence import KKT_TOL
+    from ecfm_uq.inverse.core.convergence import KKT_TOL
 
     system = two_parameter_model()
     v = M_OBS @ solve_steady(system, [0.3, 2.0]).Theta[:, 0] * (1 + 1e-2 * np.array([1, -1, 1]))
@@ -299,7 +299,7 @@ def test_all_at_once_status_comes_from_the_kkt_conditions():
 def test_scaled_gradient_test_projects_active_bounds():
     """The random-force fit's test: the gradient in standard-error units, components held
     at a bound by a gradient pointing out of the box dropped (and only those)."""
-    from ecfm_uq.inverse.convergence import SCALED_GRADIENT_TOL, scaled_gradient_optimality
+    from ecfm_uq.inverse.core.convergence import SCALED_GRADIENT_TOL, scaled_gradient_optimality
 
     assert scaled_gradient_optimality([1e-4, -5e-4]).converged
     off = scaled_gradient_optimality([1e-4, 2e-3])

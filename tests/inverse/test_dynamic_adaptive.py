@@ -10,8 +10,8 @@ from _models import diffusion
 
 from ecfm_uq.chaos import ChaosBasis
 from ecfm_uq.inverse import fit
-from ecfm_uq.inverse.dynamic import DynamicInverseProblem
-from ecfm_uq.inverse.finite_differences import fd_gradient
+from ecfm_uq.inverse.core.finite_differences import fd_gradient
+from ecfm_uq.inverse.problems.dynamic import DynamicInverseProblem
 from ecfm_uq.system import GalerkinSystem, NonlinearTerm, integrate, march
 from ecfm_uq.system.step_control import step_errors
 

@@ -12,8 +12,8 @@ from _models import diffusion
 from scipy import optimize
 
 from ecfm_uq.inverse import DynamicInverseProblem, ModelProblem, fit, profile_intervals
-from ecfm_uq.inverse.finite_differences import fd_gradient
-from ecfm_uq.inverse.whitening import dynamic_noise_model, whitened_problem
+from ecfm_uq.inverse.core.finite_differences import fd_gradient
+from ecfm_uq.inverse.problems.whitening import dynamic_noise_model, whitened_problem
 from ecfm_uq.problems.burgers import BurgersModel
 from ecfm_uq.system import GalerkinSystem, NonlinearTerm, march
 

@@ -169,7 +169,7 @@ def test_every_problem_is_one_interface_and_copies_with_other_data():
     interface: n_data, with_data (a refit equals a fit of a problem built anew from the
     same data; the original keeps its data), log_likelihood."""
     from ecfm_uq.inverse import ModelProblem
-    from ecfm_uq.inverse.interface import InverseProblem
+    from ecfm_uq.inverse.problems.interface import InverseProblem
     from ecfm_uq.problems.beam import BeamModel
     from ecfm_uq.problems.burgers import BurgersModel
 

@@ -7,15 +7,15 @@ import pytest
 from ecfm_uq.chaos import ChaosBasis
 from ecfm_uq.errors import ConvergenceError
 from ecfm_uq.inverse import fit
-from ecfm_uq.inverse.diagnostics import (
+from ecfm_uq.inverse.core.finite_differences import fd_gradient
+from ecfm_uq.inverse.core.optimizers import adam
+from ecfm_uq.inverse.problems.dynamic import DynamicInverseProblem
+from ecfm_uq.inverse.statistics.diagnostics import (
     condition_number,
     fd_hessian,
     loss_surface,
     taylor_remainders,
 )
-from ecfm_uq.inverse.dynamic import DynamicInverseProblem
-from ecfm_uq.inverse.finite_differences import fd_gradient
-from ecfm_uq.inverse.optimizers import adam
 from ecfm_uq.problems.burgers import BurgersModel
 from ecfm_uq.system import Coefficient, GalerkinSystem, LinearTerm, LoadTerm
 
@@ -276,7 +276,7 @@ def test_dynamic_uncertainty_derivative_equals_tight_refits(formulation):
     condition) against refits at perturbed data with a tight least-squares optimizer."""
     import scipy.optimize as sopt
 
-    from ecfm_uq.inverse.dynamic import DynamicInverseProblem
+    from ecfm_uq.inverse.problems.dynamic import DynamicInverseProblem
     from ecfm_uq.problems.burgers import BurgersModel
 
     m = BurgersModel(n_modes=12, n_steps=15, T=0.6)

@@ -11,14 +11,14 @@ from scipy.optimize import minimize, minimize_scalar
 from ecfm_uq.chaos import ChaosBasis, gauss_legendre, weighted_gram
 from ecfm_uq.errors import ConvergenceError
 from ecfm_uq.inverse import ReplicatedProblem, fit
-from ecfm_uq.inverse.diagnostics import expected_relative_error
-from ecfm_uq.inverse.forces import optimal_forces
-from ecfm_uq.inverse.moments import (
+from ecfm_uq.inverse.formulations.forces import optimal_forces
+from ecfm_uq.inverse.problems.moments import (
     DegenerateVarianceError,
     negative_log_pseudo_likelihood,
     sensor_moments,
 )
-from ecfm_uq.inverse.pseudo_likelihood import PseudoLikelihood
+from ecfm_uq.inverse.problems.pseudo_likelihood import PseudoLikelihood
+from ecfm_uq.inverse.statistics.diagnostics import expected_relative_error
 from ecfm_uq.spectral import BeamBasis
 from ecfm_uq.system import (
     Coefficient,

@@ -354,7 +354,7 @@ def test_the_v02_result_names_are_gone():
     import inspect
 
     from ecfm_uq.inverse import InverseResult, Verdict
-    from ecfm_uq.inverse import result as result_module
+    from ecfm_uq.inverse.core import result as result_module
 
     y = data(0)
     res = fit(ModelProblem(decay, y), [1.0, 1.0, 0.0], sigma=0.05)

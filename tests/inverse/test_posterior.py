@@ -6,7 +6,7 @@ import pytest
 pytest.importorskip("emcee")
 
 from ecfm_uq.inverse import SteadyProblem, fit  # noqa: E402
-from ecfm_uq.inverse.posterior import sample_posterior  # noqa: E402
+from ecfm_uq.inverse.statistics.posterior import sample_posterior  # noqa: E402
 
 
 def _case():

@@ -13,7 +13,7 @@ from scipy import optimize
 
 from ecfm_uq.errors import ConvergenceError
 from ecfm_uq.inverse import SteadyProblem, fit
-from ecfm_uq.inverse.sparse_forces import sparse_force_variances
+from ecfm_uq.inverse.formulations.sparse_forces import sparse_force_variances
 from ecfm_uq.system import solve_steady
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -74,7 +74,7 @@ def test_many_forces_end_at_a_point_no_single_variance_improves():
 
 
 def test_variances_that_do_not_settle_are_refused(monkeypatch):
-    import ecfm_uq.inverse.sparse_forces as sf
+    import ecfm_uq.inverse.formulations.sparse_forces as sf
 
     rng = np.random.default_rng(1)
     A = rng.normal(size=(20, 8))

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from ecfm_uq.inverse.uncertainty import (
+from ecfm_uq.inverse.statistics.uncertainty import (
     confidence_intervals,
     delta_method_covariance,
     estimate_jacobian,
@@ -214,7 +214,7 @@ def _with_statistics(v, i, dmean, dm):
 @pytest.mark.parametrize("formulation", ["standard", "inner-outer"])
 def test_pseudo_likelihood_covariance_equals_refit_jacobian(formulation):
     from ecfm_uq.inverse import ReplicatedProblem, fit
-    from ecfm_uq.inverse.moments import replicate_statistics
+    from ecfm_uq.inverse.problems.moments import replicate_statistics
 
     m, v, bounds = _beam_data()
     res = fit(
@@ -254,7 +254,7 @@ def test_pseudo_likelihood_covariance_equals_refit_jacobian(formulation):
 
 
 def test_replicate_statistics_covariance_is_the_sample_covariance():
-    from ecfm_uq.inverse.moments import replicate_statistics
+    from ecfm_uq.inverse.problems.moments import replicate_statistics
 
     rng = np.random.default_rng(4)
     v = rng.normal(size=(3, 400))
@@ -270,7 +270,7 @@ def test_replicate_statistics_covariance_is_the_sample_covariance():
 # --------------------------------------------------------------------------------------
 @pytest.mark.parametrize("sigma", [0.0, -0.01, float("nan")])
 def test_steady_fit_refuses_nonpositive_sigma_before_fitting(sigma, monkeypatch):
-    import ecfm_uq.inverse.steady as steady
+    import ecfm_uq.inverse.formulations.steady as steady
     from ecfm_uq.inverse import SteadyProblem, fit
 
     system, M_obs, v0, _, _ = _heat_case()
@@ -316,7 +316,7 @@ def _ratio_case():
 def test_non_identifiable_combination_is_named_not_nan():
     from ecfm_uq.errors import NonIdentifiableError
     from ecfm_uq.inverse import SteadyProblem, fit
-    from ecfm_uq.inverse.uncertainty import check_identifiable, gauss_newton_covariance
+    from ecfm_uq.inverse.statistics.uncertainty import check_identifiable, gauss_newton_covariance
 
     system, M_obs, v = _ratio_case()
     res = fit(SteadyProblem(system, M_obs, v), [2.0, 1.0], sigma=0.01)

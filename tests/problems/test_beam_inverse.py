@@ -8,9 +8,9 @@ import pytest
 
 from ecfm_uq.chaos import gauss_legendre
 from ecfm_uq.inverse import ReplicatedProblem, fit
-from ecfm_uq.inverse.diagnostics import expected_relative_error
-from ecfm_uq.inverse.forces import optimal_forces
-from ecfm_uq.inverse.pseudo_likelihood import PseudoLikelihood
+from ecfm_uq.inverse.formulations.forces import optimal_forces
+from ecfm_uq.inverse.problems.pseudo_likelihood import PseudoLikelihood
+from ecfm_uq.inverse.statistics.diagnostics import expected_relative_error
 from ecfm_uq.problems.beam import BeamModel
 
 

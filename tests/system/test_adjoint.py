@@ -10,9 +10,9 @@ from _models import diffusion
 
 from ecfm_uq.chaos import ChaosBasis
 from ecfm_uq.inverse import DynamicInverseProblem
-from ecfm_uq.inverse.diagnostics import taylor_remainders
-from ecfm_uq.inverse.gradients import choose_gradient
-from ecfm_uq.inverse.steady import ecfm_objective, standard_objective
+from ecfm_uq.inverse.core.gradients import choose_gradient
+from ecfm_uq.inverse.formulations.steady import ecfm_objective, standard_objective
+from ecfm_uq.inverse.statistics.diagnostics import taylor_remainders
 from ecfm_uq.problems.burgers import BurgersModel
 from ecfm_uq.problems.fisher_kpp import build_kpp, make_data, sensor_grid
 from ecfm_uq.system import solve_steady, solver_options

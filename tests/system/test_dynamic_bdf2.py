@@ -6,8 +6,8 @@ import pytest
 
 from ecfm_uq.chaos import ChaosBasis
 from ecfm_uq.inverse import fit
-from ecfm_uq.inverse.dynamic import DynamicInverseProblem
-from ecfm_uq.inverse.finite_differences import fd_gradient
+from ecfm_uq.inverse.core.finite_differences import fd_gradient
+from ecfm_uq.inverse.problems.dynamic import DynamicInverseProblem
 from ecfm_uq.problems.burgers import BurgersModel
 from ecfm_uq.system import march
 

@@ -1,0 +1,1 @@
+"""The machinery shared by the formulations: status, optimizer calls, results."""

@@ -1,0 +1,363 @@
+"""Optimizer drivers shared by the reduced formulations (objective and gradient in eps).
+
+A driver takes ``evaluate(eps) -> (z, grad, payload)`` (the payload is whatever the
+formulation keeps at the final point: a steady solution, a trajectory), runs one
+optimizer, records the path and the inner-solve failures, and returns an
+:class:`Outcome`; the formulation turns it into an
+:class:`~ecfm_uq.inverse.InverseResult`. An inner solve that fails at a trial point
+(:class:`~ecfm_uq.errors.ConvergenceError`) counts as ``z = inf`` there and is reported.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.optimize as sopt
+
+from ...errors import ConvergenceError
+from .convergence import (
+    OFFSET_TOL,
+    decide_status,
+    least_squares_optimality,
+    polish_least_squares,
+)
+from .status import FitStatus
+
+__all__ = [
+    "MINIMIZE_METHODS",
+    "Outcome",
+    "check_minimize_method",
+    "least_squares_scaled",
+    "minimize_scaled",
+    "verify_least_squares",
+]
+
+#: gradient methods of scipy.optimize.minimize the reduced fits accept by name
+MINIMIZE_METHODS = ("BFGS", "CG", "L-BFGS-B", "TNC", "SLSQP", "Newton-CG", "trust-constr")
+
+
+#: the options the least-squares driver takes (scipy.optimize.least_squares' keywords)
+LEAST_SQUARES_KEYWORDS = ("maxiter", "ftol", "xtol", "gtol", "x_scale", "loss", "f_scale",
+                          "diff_step", "tr_solver", "tr_options", "verbose")  # fmt: skip
+
+
+def check_minimize_options(method, options, n):
+    """Refuse, by name and before any model evaluation, options ``scipy.optimize.minimize``'s
+    ``method`` does not know (scipy itself only warns, after the first evaluations).
+
+    scipy's own check decides: a throw-away minimization of a quadratic in ``n``
+    variables with the same method and options, one iteration.
+    """
+    if not options:
+        return
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            sopt.minimize(lambda x: (0.5 * x @ x, x), np.ones(n), jac=True, method=method,
+                          options={**options, "maxiter": 1})  # fmt: skip
+        except Exception:  # a bad value, not a bad name: the real run reports it
+            return
+    for w in caught:
+        text = str(w.message)
+        if "Unknown solver options" in text:
+            names = text.split(":", 1)[-1].strip()
+            raise TypeError(
+                f"`options` has unknown name(s) {names} for method={method!r}: each name is "
+                f"an option of scipy.optimize.minimize(method={method!r}) "
+                f"(scipy.optimize.show_options('minimize', {method!r}))"
+            )
+
+
+def check_minimize_method(method):
+    """``method`` must be a gradient method of ``scipy.optimize.minimize``."""
+    if method.upper() not in {m.upper() for m in MINIMIZE_METHODS}:
+        raise ValueError(
+            f"unknown `method` {method!r}; choose a gradient method of {MINIMIZE_METHODS}"
+        )
+
+
+@dataclass
+class Outcome:
+    """What a driver did: the final point, how it stopped, the path and the failures."""
+
+    x: np.ndarray
+    loss: float
+    grad: np.ndarray | None
+    payload: object
+    status: FitStatus
+    message: str
+    nit: int
+    nfev: int
+    eps_history: np.ndarray
+    loss_history: np.ndarray
+    failures: list = field(default_factory=list)
+    final_error: Exception | None = None
+    optimality: float | None = None
+
+    @property
+    def success(self):
+        return self.status.success
+
+
+def minimize_scaled(evaluate, eps0, method, bounds, gtol, maxiter, options):
+    """``scipy.optimize.minimize`` on the objective divided by its value at ``eps0``.
+
+    Dividing by :math:`z(\\epsilon_0)` makes ``gtol`` relative (the tolerance does not
+    depend on the data's units). A stop on "precision loss" (status 2) counts as
+    converged when the objective is at round-off zero (a global minimum of a
+    non-negative objective) or when a relative change of ``eps`` would change ``z`` by
+    less than 1e-6 relative.
+
+    Parameters
+    ----------
+    evaluate : callable
+        ``eps -> (z, grad (n,), payload)``; may raise ConvergenceError.
+    eps0 : (n,) ndarray
+    method : str
+    bounds : list of (lo, hi) or None
+    gtol : float
+    maxiter : int
+    options : dict
+        Extra ``scipy.optimize.minimize`` options (override the defaults).
+
+    Returns
+    -------
+    Outcome
+
+    Raises
+    ------
+    ConvergenceError
+        When the objective cannot be evaluated at ``eps0``.
+    """
+    check_minimize_options(method, options, np.size(eps0))
+    hist_eps, hist_loss, failures = [], [], []
+    counts = {"nfev": 0}
+    last = {}
+
+    def fun(eps):
+        counts["nfev"] += 1
+        try:
+            z, g, _ = evaluate(eps)
+        except ConvergenceError as e:
+            failures.append(str(e))
+            z, g = np.inf, np.zeros_like(eps)
+        last["eps"], last["z"] = np.array(eps), z
+        return z / scale, g / scale
+
+    def callback(xk, *args):
+        # the optimizer evaluated fun at xk last (no second solve); fall back otherwise
+        z = last["z"] if "eps" in last and np.array_equal(last["eps"], xk) else fun(xk)[0] * scale
+        hist_eps.append(np.array(xk))
+        hist_loss.append(z)
+
+    scale = 1.0
+    z0 = fun(eps0)[0]
+    if not np.isfinite(z0):
+        raise ConvergenceError(f"the model cannot be solved at eps0={eps0}: {failures[0]}")
+    scale = z0 if z0 > 0 else 1.0
+    last["z"] = z0  # z0 was computed with scale 1
+    callback(eps0)
+    opts = {"maxiter": maxiter}
+    if method.upper() in {"BFGS", "CG", "L-BFGS-B", "TNC"}:
+        opts["gtol"] = gtol
+    if method.upper() == "L-BFGS-B":
+        opts["ftol"] = 1e-15  # stop on the (relative) gradient, not on a stalled decrease
+    opts.update(options)
+    res = sopt.minimize(
+        fun, eps0, jac=True, method=method, bounds=bounds, options=opts, callback=callback
+    )
+    counts["nfev"] += 1
+    path = (np.array(hist_eps), np.array(hist_loss))
+    x = np.asarray(res.x)
+    nit = int(res.get("nit", 0))
+    try:
+        z, g, payload = evaluate(res.x)
+    except ConvergenceError as e:  # the optimizer stopped where the model fails
+        msg = f"{res.message} (the model cannot be solved at the final eps: {e})"
+        return Outcome(x, np.inf, None, None, FitStatus.MODEL_FAILURE, msg, nit,
+                       counts["nfev"], *path, failures, e)  # fmt: skip
+    msg = str(res.message)
+    success = bool(res.success)
+    if not success and res.get("status") == 2 and not failures:
+        # the line search could not decrease z at machine precision. That is convergence
+        # when z is at round-off zero (both objectives are >= 0: a global minimum) or
+        # when first-order optimality holds relative to z itself: a relative change of
+        # eps would change z by less than 1e-6 relative (misspecified data: z* > 0)
+        rel_opt = float(np.linalg.norm(g) * max(np.linalg.norm(res.x), 1.0) / max(z, 1e-300))
+        if z <= 1e-20 * scale:
+            success = True
+            msg += " (objective at round-off zero: global minimum)"
+        elif rel_opt <= 1e-6:
+            success = True
+            msg += f" (stopped at the round-off limit; relative optimality {rel_opt:.1e})"
+    if failures:
+        msg += f" ({len(failures)} inner solves failed; first: {failures[0]})"
+    if success:
+        status = FitStatus.CONVERGED
+    elif nit >= maxiter:
+        status = FitStatus.MAX_ITERATIONS
+    else:
+        status = FitStatus.STALLED
+    return Outcome(x, z, g, payload, status, msg, nit, counts["nfev"], *path, failures)
+
+
+def verify_least_squares(out, residual, bounds, exhausted, *, polish, tol=OFFSET_TOL):
+    """Decide ``out``'s status from the least-squares optimality conditions
+    (:mod:`~ecfm_uq.inverse.core.convergence`), whatever the optimizer said.
+
+    ``residual(eps) -> (r, J, payload)``. When the conditions do not hold and ``polish``
+    is set and the optimizer stopped on its own (not ``exhausted`` its budget), a few
+    Levenberg-Marquardt steps are taken from ``out.x`` first. The returned
+    :class:`Outcome` carries the measured optimality; its message keeps the optimizer's
+    and adds the test's sentence when the two disagree (or after a polish).
+    """
+    if out.payload is None:  # the model cannot be solved at the final point
+        return out
+    try:
+        r, J, payload = residual(out.x)
+    except ConvergenceError as e:
+        out.status, out.message = FitStatus.MODEL_FAILURE, f"{out.message} ({e})"
+        return out
+    out.nfev += 1
+    opt = least_squares_optimality(r, J, out.x, bounds=bounds, tol=tol)
+    msg = out.message
+    if not opt.converged and polish and not exhausted:
+        x, (r, J, payload), opt2, n = polish_least_squares(residual, out.x, bounds=bounds, tol=tol)
+        out.nfev += n
+        if float(r @ r) <= 2 * out.loss or opt2.converged:
+            out.x, out.loss, out.payload, opt = np.asarray(x), 0.5 * float(r @ r), payload, opt2
+            msg += f"; polished by Levenberg-Marquardt steps ({n} evaluations)"
+    said = out.status is FitStatus.CONVERGED
+    out.status = decide_status(opt, exhausted)
+    if opt.converged != said or not opt.converged or "polished" in msg:
+        msg += f" [{'converged' if opt.converged else 'NOT converged'}: {opt.message}]"
+    out.message, out.optimality = msg, opt.value
+    return out
+
+
+def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options):
+    """``scipy.optimize.least_squares`` (trust-region reflective, ``x_scale="jac"``, the
+    exact Jacobian) on the residuals divided by their norm at ``eps0``.
+
+    Parameters
+    ----------
+    residual : callable
+        ``eps -> (r (n,), J (n, p), payload)``; may raise ConvergenceError (the trial
+        point is rejected: the trust region shrinks). ``J`` may be a callable of no
+        argument (a Jacobian computed only where the optimizer asks for it: at accepted
+        points, not at rejected trials).
+    eps0 : (p,) ndarray
+    bounds : list of (lo, hi) or None
+    tol : float or None
+        Relative-offset tolerance of the convergence test (default
+        :data:`~ecfm_uq.inverse.core.convergence.OFFSET_TOL`).
+    maxiter : int
+        Residual evaluations allowed to ``least_squares`` (``max_nfev``).
+    options : dict
+        ``polish`` (default True: Levenberg-Marquardt steps when the test fails), and any
+        keyword of ``scipy.optimize.least_squares`` (``ftol``, ``xtol``, ``gtol``,
+        ``x_scale``, ``loss``...).
+
+    Returns
+    -------
+    Outcome
+        Status decided by :func:`verify_least_squares`.
+
+    Raises
+    ------
+    ConvergenceError
+        When the model cannot be solved at ``eps0``.
+    """
+    options = dict(options)
+    polish = bool(options.pop("polish", True))
+    if "maxiter" in options:  # the v0.2 spelling of minimize's budget
+        maxiter = options.pop("maxiter")
+    tol = OFFSET_TOL if tol is None else tol
+    hist_eps, hist_loss, failures = [], [], []
+    cache = {}
+    counts = {"nfev": 0, "njev": 0}
+
+    def evaluate(x, with_jacobian=False):
+        key = np.asarray(x, dtype=float).tobytes()
+        if key not in cache:
+            counts["nfev"] += 1
+            try:
+                cache.clear()
+                cache[key] = list(residual(np.array(x, dtype=float)))
+            except ConvergenceError as e:
+                failures.append(str(e))
+                cache[key] = None
+        ev = cache[key]
+        if with_jacobian and ev is not None and callable(ev[1]):
+            try:  # a lazy Jacobian (differenced by the problem): only where asked for
+                ev[1] = ev[1]()
+            except ConvergenceError as e:
+                failures.append(str(e))
+                cache[key] = ev = None
+        return ev
+
+    first = evaluate(eps0)
+    if first is None:
+        raise ConvergenceError(f"the model cannot be solved at eps0={eps0}: {failures[0]}")
+    r0 = np.asarray(first[0], dtype=float)
+    scale = float(np.linalg.norm(r0)) or 1.0
+    hist_eps.append(np.array(eps0, dtype=float))
+    hist_loss.append(0.5 * float(r0 @ r0))
+
+    def fun(x):
+        ev = evaluate(x)
+        if ev is None:
+            return np.full(r0.size, np.inf)
+        z = 0.5 * float(ev[0] @ ev[0])
+        if not hist_loss or z < hist_loss[-1]:
+            hist_eps.append(np.array(x, dtype=float))
+            hist_loss.append(z)
+        return np.asarray(ev[0], dtype=float) / scale
+
+    def jac(x):
+        ev = evaluate(x, with_jacobian=True)
+        counts["njev"] += 1
+        if ev is None:  # not reached: TRF asks for J only at accepted points
+            return np.zeros((r0.size, np.size(x)))
+        return np.asarray(ev[1], dtype=float).reshape(r0.size, -1) / scale
+
+    lb = -np.inf * np.ones(len(eps0))
+    ub = np.inf * np.ones(len(eps0))
+    if bounds is not None:
+        lb = np.array([-np.inf if b[0] is None else b[0] for b in bounds], dtype=float)
+        ub = np.array([np.inf if b[1] is None else b[1] for b in bounds], dtype=float)
+    kw = {"method": "trf", "x_scale": "jac", "ftol": 1e-15, "xtol": 1e-15, "gtol": 1e-15}
+    kw.update(options)
+    res = sopt.least_squares(fun, eps0, jac=jac, bounds=(lb, ub), max_nfev=maxiter, **kw)
+    x = np.asarray(res.x)
+    ev = evaluate(x, with_jacobian=True)
+    nit = int(res.njev or 0)
+    msg = str(res.message)
+    if failures:
+        msg += f" ({len(failures)} inner solves failed; first: {failures[0]})"
+    if ev is None:
+        e = ConvergenceError(failures[-1])
+        return Outcome(x, np.inf, None, None, FitStatus.MODEL_FAILURE, msg, nit,
+                       counts["nfev"], np.array(hist_eps), np.array(hist_loss), failures, e)  # fmt: skip
+    r, J, payload = ev
+    out = Outcome(
+        x, 0.5 * float(r @ r), J.T @ r, payload,
+        FitStatus.CONVERGED if res.status > 0 else FitStatus.MAX_ITERATIONS, msg, nit,
+        counts["nfev"], np.array(hist_eps), np.array(hist_loss), failures,
+    )  # fmt: skip
+
+    def cached(e):
+        ev = evaluate(e, with_jacobian=True)
+        if ev is None:
+            raise ConvergenceError(failures[-1])
+        return ev
+
+    out = verify_least_squares(out, cached, bounds, res.status == 0, polish=polish, tol=tol)
+    out.nfev = counts["nfev"]
+    if out.loss < hist_loss[-1]:
+        hist_eps.append(np.array(out.x))
+        hist_loss.append(out.loss)
+    out.eps_history, out.loss_history = np.array(hist_eps), np.array(hist_loss)
+    return out

@@ -1,0 +1,362 @@
+"""The one result of every inverse fit, with its uncertainty and its verdict.
+
+In the manner of :class:`scipy.optimize.OptimizeResult` (and of pyPESTO, where profiles
+and samples are computed *from* a result and stored beside it), every formulation —
+standard, ECFM, noisy, pseudo-likelihood, steady or dynamic — returns an
+:class:`InverseResult` with the same fields:
+
+* how the optimizer ended: ``success``, ``status`` (:class:`~ecfm_uq.inverse.core.status.FitStatus`, decided
+  from the optimality conditions at the returned point), ``message``, ``nit``, ``nfev``,
+  ``njev``, ``optimality``;
+* the estimate: ``eps``, ``loss``, histories; the formulation's ``state``
+  (:math:`\\Theta`) and constraint ``forces`` (:math:`\\lambda`) where it has them;
+  further formulation-specific outputs in ``extra`` (each key documented on
+  :class:`InverseResult`);
+* ``uncertainty``: an :class:`Uncertainty` (covariance, standard errors, intervals, how
+  they were computed, or why not);
+* ``verdict``: a :class:`Verdict`, the answer to "can this model explain these data?"
+  as a test of stated size.
+
+A result is frozen: a fitter builds it once, with :func:`dataclasses.replace` where a
+later step (the uncertainty, the verdict, the likelihood) adds to it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import special
+
+from .status import FitStatus
+
+__all__ = ["InverseResult", "Uncertainty", "Verdict"]
+
+
+def interval_quantile(level, dof=None):
+    """The two-sided ``level`` quantile of every delta-method interval: normal, or
+    Student-t with ``dof`` degrees of freedom when sigma was estimated (n - p).
+
+    scipy.special's inverse CDFs: the quantiles of ``stats.norm.ppf``/``stats.t.ppf`` at a
+    tenth of their per-call cost (a fit of a small model computes one).
+    """
+    q = 0.5 + level / 2
+    return float(special.ndtri(q) if dof is None else special.stdtrit(dof, q))
+
+
+@dataclass(frozen=True)
+class Uncertainty:
+    """How sure an estimate is: covariance, standard errors and intervals, or why not.
+
+    Attributes
+    ----------
+    success : bool
+        Whether the uncertainty could be computed (``False``: see ``message``).
+    message : str
+        Why not, or how (e.g. the non-identifiable parameter combination).
+    cov : (n_eps, n_eps) ndarray or None
+    stderr : (n_eps,) ndarray or None
+    intervals : (n_eps, 2) ndarray or None
+        Two-sided intervals at ``level`` (normal, or Student-t with ``dof``).
+    level : float
+        Coverage the intervals are built for (0.95).
+    method : str
+        ``"gauss-newton"`` (the default of the least-squares fits: the curvature of the
+        sum of squares taken as :math:`J^TJ`, :math:`s^2(J^TJ)^{-1}` for the standard
+        formulation, NIST's convention), ``"implicit"`` (delta method by implicit
+        differentiation of the optimality condition with its full Hessian: the sandwich
+        :math:`H^{-1}J^TJH^{-1}s^2` for least squares; ``options={"covariance":
+        "sandwich"}``), ``"replicates"`` (sandwich from replicated data) or ``""`` when
+        not computed.
+    noise_model : str
+        ``"known"`` (sigma given), ``"estimated"`` (from the residual), ``"replicates"``
+        or ``"none"``.
+    dof : int or None
+        Degrees of freedom of Student-t intervals (sigma estimated), else ``None``.
+    jacobian : (n_eps, n_data) ndarray or None
+        :math:`d\\hat\\epsilon/dv`, the estimate's derivative in the data it was fitted to.
+    """
+
+    success: bool
+    message: str = ""
+    cov: np.ndarray | None = None
+    stderr: np.ndarray | None = None
+    intervals: np.ndarray | None = None
+    level: float = 0.95
+    method: str = ""
+    noise_model: str = "none"
+    dof: int | None = None
+    jacobian: np.ndarray | None = None
+
+    @classmethod
+    def failed(cls, message):
+        """No uncertainty, and why."""
+        return cls(False, str(message))
+
+    def quantile(self, level):
+        """The two-sided ``level`` quantile of these intervals (:func:`interval_quantile`
+        with :attr:`dof`)."""
+        return interval_quantile(level, self.dof)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """Whether the fitted model explains the data: a test of stated size, one rule for all.
+
+    ``consistent`` is ``p_value >= alpha`` (the data are compatible with the model plus
+    its noise at level ``alpha``). For the exact-match ECFM on noise-free data there is no
+    test of stated size: ``p_value`` and ``alpha`` are ``None`` and the rule is that the
+    constraint forces change the observations by at most ``rtol`` of the data
+    (``details["force_to_data"]``). A least-squares fit without a noise level or
+    replicates has no test at all: ``consistent`` is ``None`` and ``message`` says what to
+    give. See :mod:`ecfm_uq.inverse.statistics.verdict`.
+
+    Attributes
+    ----------
+    consistent : bool or None
+        ``None``: no test (no noise level, no replicates).
+    p_value : float or None
+    alpha : float or None
+        The test's size (default 0.05).
+    test : str
+        Which test: e.g. ``"chi2"``, ``"likelihood-ratio tau=0"``, ``"moments z
+        (Bonferroni)"``, ``"force-to-data"``.
+    statistic : float or None
+    message : str
+        One sentence.
+    details : dict
+        Test-specific numbers (``chi2``, ``force_to_data``, ``peak_sensor_index``,
+        ``peak_force_index``, ``at_bound``, ``extreme``, ...).
+    identifiability : str
+        Parameters at a bound (which side) or coefficients at an extreme value: a finding
+        about what the data determine, reported beside the test, never folded into
+        ``consistent``; empty when there is none.
+    """
+
+    consistent: bool | None
+    p_value: float | None = None
+    alpha: float | None = None
+    test: str = ""
+    statistic: float | None = None
+    message: str = ""
+    details: dict = field(default_factory=dict)
+    identifiability: str = ""
+
+    def __eq__(self, other):
+        if isinstance(other, Verdict):
+            return dataclasses.astuple(self) == dataclasses.astuple(other)
+        return NotImplemented
+
+    __hash__ = None
+
+
+def _empty_history():
+    return np.zeros((0, 0))
+
+
+@dataclass(frozen=True, repr=False, eq=False)
+class InverseResult:
+    """Outcome of an inverse fit (every formulation, every optimizer).
+
+    Frozen: built once by the fitter; a step that adds to a result (the uncertainty, the
+    verdict, the likelihood) builds a new one with :func:`dataclasses.replace`.
+
+    Attributes
+    ----------
+    eps : (n_eps,) ndarray
+        The estimate (the optimizer's final point).
+    loss : float
+        Objective at ``eps``.
+    status : FitStatus
+        Decided from the optimality conditions at ``eps``; ``success`` is
+        ``status == FitStatus.CONVERGED``.
+    message : str
+    nit : int
+        Optimizer iterations (epochs for Adam).
+    nfev, njev : int
+        Objective and gradient (or Jacobian) evaluations.
+    optimality : float or None
+        The measured first-order optimality at ``eps`` (unit-free; see
+        :mod:`ecfm_uq.inverse.core.convergence`), when measured.
+    method : str
+        Label of the formulation that ran (``"standard"``, ``"ecfm"``, ``"noisy-ecfm"``,
+        ``"likelihood-inner-outer"``, ...).
+    optimizer : str
+        The optimizer that ran (``"BFGS"``, ``"adam"``, ``"SLSQP"``, ...).
+    eps_history : (nit + 1, n_eps) ndarray
+    loss_history : (nit + 1,) ndarray
+    state : ndarray or None
+        The solution :math:`\\Theta` at the estimate (with the forces where the formulation
+        has them): ``(N, P)`` for the steady least-squares and minimize fits and the
+        replicated fits, the stacked unknowns ``theta`` of the all-at-once SLSQP fits;
+        ``None`` for a :class:`~ecfm_uq.inverse.problems.model.ModelProblem`, the
+        random-force ECFM and the dynamic fits (whose trajectory is
+        ``problem.solve(result.eps, formulation)``; not kept, it is large).
+    forces : ndarray or None
+        The constraint forces :math:`\\lambda` at the estimate: ``(C,)`` for the steady
+        and replicated ECFM fits (the posterior mean for the random-force ECFM; zeros for
+        the replicated ``"standard"`` pseudo-likelihood, which holds them at zero),
+        ``(n_steps + 1, C)`` for the dynamic ECFM; ``None`` where the formulation has no
+        forces (``"standard"``, a :class:`~ecfm_uq.inverse.problems.model.ModelProblem`).
+    uncertainty : Uncertainty
+    verdict : Verdict or None
+    likelihood : LogLikelihood, str or None
+        The fit's negative log-likelihood in :math:`\\epsilon` (for
+        :func:`~ecfm_uq.inverse.profile_intervals`), or why it has none.
+    interval_likelihood : LogLikelihood or None
+        Where it differs from ``likelihood``, the one the profile-likelihood intervals and
+        likelihood-ratio tests use: for the random-force ECFM,
+        :math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))` with the discrepancy's
+        :math:`\\tau` re-estimated at every :math:`\\epsilon` (``likelihood`` holds the
+        data covariance at :math:`\\hat\\tau`: a density of the data given
+        :math:`\\epsilon`, what :func:`~ecfm_uq.inverse.sample_posterior` samples).
+    bounds : list of (lo, hi) or None
+        The bounds the fit ran with.
+    names : list of str or None
+        Parameter names, where the problem has them.
+    extra : dict
+        Formulation-specific outputs, each key below (and no other):
+
+        ============================  ========================  =========================
+        key                           formulation               meaning
+        ============================  ========================  =========================
+        ``prediction``                ModelProblem              the model at ``eps``, in
+                                                                the data's shape
+        ``discrepancy``               all-at-once (SLSQP)       model minus data at the
+                                                                optimum, ``(C,)``
+        ``mean_discrepancy``,         all-at-once               its sample mean and
+        ``var_discrepancy``                                     variance
+        ``residual_norm``             all-at-once               norm of the model
+                                                                equations' residual
+        ``inequality``                all-at-once               the scaled moment
+                                                                inequalities (>= 0 when
+                                                                met)
+        ``moment_bounds``             all-at-once               the z / chi-squared bounds
+                                                                (dict)
+        ``z``                         all-at-once               the stacked unknowns
+                                                                (theta, eps, lam)
+        ``n_variables``               all-at-once               ``z.size``
+        ``start``                     all-at-once               how the start was built
+        ``gradients``                 all-at-once               ``"analytic"`` or ``"fd"``
+        ``wall_time_s``               all-at-once               SLSQP's wall time
+        ``slsqp_status``              all-at-once, ``penalty``  SLSQP's exit mode
+        ``tau``                       random-force ECFM         rms of the forces'
+                                                                standard deviations
+        ``force_tau``                 random-force ECFM         each force's standard
+                                                                deviation, ``(C,)``
+        ``force_stderr``              random-force ECFM         posterior standard
+                                                                deviations of ``forces``
+        ``force_prior``               random-force ECFM         ``"shared"`` or
+                                                                ``"sparse"``
+        ``standard``                  random-force ECFM         the standard fit it
+                                                                started from (a result)
+        ``interval_likelihood``       random-force ECFM         why ``interval_likelihood``
+                                                                is ``None`` (when it is)
+        ``n_solves``                  random-force ECFM,        forward solves
+                                      replicated
+        ``force_norm``                replicated                :math:`\\|\\lambda\\|`
+        ``neg_log_likelihood``        replicated                the pseudo-likelihood
+        ``grad_eps``                  replicated                its gradient in eps
+        ``mu``, ``var``               replicated                the model's mean and
+                                                                variance at the sensors
+        ``n_failures``                replicated                failed evaluations
+        ``optimality_solves``         replicated                solves of the status test
+        ``inner_message``,            ``inner-outer``           the last inner solve:
+        ``inner_nit``,                                          message, iterations (all),
+        ``hess_lam_min_eig``,                                   Hessian in lam (smallest
+        ``hess_lam_cond``,                                      eigenvalue, condition),
+        ``dlam_deps``                                           :math:`d\\lambda/d\\epsilon`
+        ``penalty``,                  ``penalty``               the weight, the log force
+        ``log_force_term``,                                     term, the norm of the
+        ``grad_lam_norm``,                                      gradient in lam, the
+        ``force_scaling_slope``                                 slope in log force scale
+                                                                (0 at a minimum)
+        ``grad``, ``grad_history``    Adam (dynamic)            final gradient, all
+                                                                gradients
+        ``steps``                     dynamic, ``scheme=        the frozen time grid
+                                      "adaptive"``              (dict: ``n_steps``,
+                                                                ``met``, ``max_error``,
+                                                                ``times``, ...)
+        ``profile``                   any                       the last
+                                                                :class:`~.profile.
+                                                                ProfileSummary`, written
+                                                                by :func:`~ecfm_uq.
+                                                                inverse.profile_likelihood`
+                                                                (read by :meth:`summary`)
+        ============================  ========================  =========================
+    """
+
+    eps: np.ndarray
+    loss: float
+    status: FitStatus = FitStatus.STALLED
+    message: str = ""
+    nit: int = 0
+    nfev: int = 0
+    njev: int = 0
+    optimality: float | None = None
+    method: str = ""
+    optimizer: str = ""
+    eps_history: np.ndarray = field(default_factory=_empty_history)
+    loss_history: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    state: np.ndarray | None = None
+    forces: np.ndarray | None = None
+    uncertainty: Uncertainty = field(default_factory=lambda: Uncertainty(False))
+    verdict: Verdict | None = None
+    likelihood: Any = None
+    interval_likelihood: Any = None
+    bounds: list | None = None
+    names: list | None = None
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        def put(name, value):
+            object.__setattr__(self, name, value)
+
+        put("eps", np.asarray(self.eps, dtype=float))
+        put("loss", float(self.loss))
+        put("status", FitStatus(self.status))
+        put("message", str(self.message))
+        put("nit", int(self.nit))
+        put("nfev", int(self.nfev))
+        put("njev", int(self.njev))
+        if self.optimality is not None:
+            put("optimality", float(self.optimality))
+        put("eps_history", np.asarray(self.eps_history))
+        put("loss_history", np.asarray(self.loss_history))
+        if not isinstance(self.uncertainty, Uncertainty):
+            raise TypeError(
+                f"`uncertainty` must be an Uncertainty, got {type(self.uncertainty).__name__}"
+            )
+        if self.verdict is not None and not isinstance(self.verdict, Verdict):
+            raise TypeError(f"`verdict` must be a Verdict, got {type(self.verdict).__name__}")
+        put("extra", dict(self.extra))
+
+    @property
+    def success(self):
+        """Whether the fit converged (``status == FitStatus.CONVERGED``)."""
+        return self.status.success
+
+    def __repr__(self):
+        consistent = None if self.verdict is None else self.verdict.consistent
+        return (
+            f"<InverseResult {self.method} {self.status.name}: eps="
+            f"{np.array2string(self.eps, precision=6)}, consistent={consistent}>"
+        )
+
+    def summary(self, level=0.95):
+        """A table of the fit, as statsmodels and lmfit print one.
+
+        One row per parameter: estimate, standard error, the ``level`` interval (the
+        profile-likelihood interval where :func:`~ecfm_uq.inverse.profile_likelihood` has
+        run at that level, else the delta-method one, labelled), then the status, the
+        measured optimality and the verdict with its test and p-value.
+
+        Returns
+        -------
+        str
+        """
+        from .summary_table import summary_table
+
+        return summary_table(self, level)

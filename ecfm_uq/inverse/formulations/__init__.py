@@ -1,0 +1,1 @@
+"""The inverse formulations: how each one turns a problem into an estimate."""

@@ -1,0 +1,635 @@
+"""ECFM consistent with noisy data: the constraint forces as a random discrepancy.
+
+The paper's ECFM (Eq. ecfm) asks the forces :math:`\\lambda` to make the model match the
+data exactly and minimizes :math:`\\tfrac12\\|\\lambda\\|^2`. With noisy data that objective is
+smallest where the model is most compliant (the forces needed are smallest there), so a
+parameter inside the operator runs to its most compliant corner. Here the forces are a
+random discrepancy inside the model instead,
+
+.. math::
+
+    R(\\theta;\\epsilon) - \\Gamma\\lambda = 0,\\qquad \\lambda \\sim N(0, \\tau^2 I),\\qquad
+    v = \\mathcal M\\,\\mathbb E[\\theta] + e,\\quad e \\sim N(0, \\sigma^2 I),
+
+linearized in :math:`\\lambda` about :math:`\\lambda = 0` (exact for a model linear in
+:math:`\\theta`): with :math:`r(\\epsilon) = v - \\mathcal M\\,\\mathbb E[\\theta(\\epsilon, 0)]`
+and :math:`A(\\epsilon) = \\mathcal M\\,\\partial\\mathbb E[\\theta]/\\partial\\lambda`, the data
+are Gaussian with covariance :math:`S = \\sigma^2 I + \\tau^2 A A^T`, and
+:math:`(\\epsilon, \\tau)` maximize the marginal likelihood
+
+.. math::
+
+    \\ell(\\epsilon, \\tau) = \\tfrac12 r^T S^{-1} r + \\tfrac12 \\log\\det S .
+
+The :math:`\\log\\det S` term is what the paper's objective lacks: a compliant model (large
+:math:`A`) pays for the data variance it claims to explain, so no degenerate corner.
+:math:`\\tau = 0` is the standard least-squares estimate, and :math:`\\sigma \\to 0` with
+:math:`\\tau > 0` recovers the paper's ECFM. At the estimate the forces are the posterior
+mean :math:`\\hat\\lambda = \\tau^2 A^T S^{-1} r` with covariance
+:math:`\\tau^2 I - \\tau^4 A^T S^{-1} A`: a map of the missing physics with error bars.
+
+:math:`\\tau` is estimated by restricted likelihood (REML): the likelihood of the error contrasts
+:math:`K^T r`, :math:`K` an orthonormal basis of the complement of
+:math:`J = \\mathcal M\\,\\partial\\mathbb E[\\theta]/\\partial\\epsilon`, so that the
+parameters fitted to the data do not read as a smaller variance. With
+:math:`K^T A A^T K / a_0^2 = V\\,\\mathrm{diag}(\\xi)\\,V^T` and
+:math:`q = (V^T K^T r)^2/\\sigma^2`,
+
+.. math::
+
+    2(\\ell_R(0) - \\ell_R(s)) = \\sum_k q_k \\frac{s\\xi_k}{1 + s\\xi_k} - \\log(1 + s\\xi_k),
+
+a scalar function of the scaled variance :math:`s = \\tau^2 a_0^2/\\sigma^2`, maximized on a
+log grid and refined by Brent at every :math:`\\epsilon`; :math:`\\epsilon` then minimizes
+the marginal likelihood :math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))` from the standard
+estimate (gradient by central differences in the parameters scaled by their standard
+errors: the exact one would need :math:`\\partial A/\\partial\\epsilon`).
+
+"Can this model explain these data?" is the restricted likelihood-ratio test of
+:math:`\\tau = 0`, :math:`T = \\max_s 2(\\ell_R(0) - \\ell_R(s))`. The null value lies on the
+boundary, and with few sensors the asymptotic :math:`\\tfrac12\\chi^2_0 + \\tfrac12\\chi^2_1`
+(Self & Liang 1987) is far from the truth (conservative); under :math:`\\tau = 0` the
+:math:`q_k` are independent :math:`\\chi^2_1`, so the exact finite-sample null distribution of
+:math:`T` (for the model linearized at the estimate, :math:`\\sigma` known) is simulated
+from them (after Crainiceanu & Ruppert 2004), with a fixed seed.
+
+With ``options={"force_prior": "sparse"}`` each force has a variance of its own,
+:math:`\\lambda_i \\sim N(0, g_i)`, and :math:`S = \\sigma^2 I +
+A\\,\\mathrm{diag}(g)\\,A^T`: the variances maximize the marginal likelihood at every
+:math:`\\epsilon` (:mod:`~ecfm_uq.inverse.formulations.sparse_forces`, started from the
+shared REML estimate), many of them end at zero, and the forces that remain sit where the
+model lacks physics. This is the prior of a localized discrepancy (a missing source): with
+the shared prior, a discrepancy spread over the sensors costs as little as a localized one,
+so a parameter inside the operator can take part of a localized source; with a variance per
+force the forces explaining a localized source are cheap and the parameter is not traded for
+it (Brynjarsdottir & O'Hagan 2014: what the discrepancy's prior says decides what the
+parameters absorb). The profiled likelihood then has local minima (forces switching on and
+off): :math:`\\epsilon` is searched from the standard estimate and from the shared prior's,
+the lower kept. The verdict is the same test of :math:`\\tau = 0` at the estimate: one rule
+for both priors.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import optimize, stats
+
+from ...errors import ConvergenceError, ModelEvaluationError
+from ...system import solve_steady
+from ..core.convergence import (
+    SCALED_GRADIENT_TOL,
+    at_bound,
+    decide_status,
+    scaled_gradient_optimality,
+)
+from ..core.finite_differences import fd_gradient
+from ..core.result import InverseResult, Uncertainty
+from ..core.status import FitStatus
+from ..statistics.diagnostics import fd_hessian
+from ..statistics.loglik import LogLikelihood
+from ..statistics.verdict import decide
+from .sparse_forces import sparse_force_variances
+
+__all__ = ["RandomForceModel", "fit_random_force"]
+
+# the model cannot be solved there (ValueError: non-finite parameters after an overflow)
+_FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError, ValueError)
+# the scaled variance s = tau^2 * a0^2 / sigma^2 is searched on this log grid, then refined
+_S_GRID = np.concatenate([[0.0], np.logspace(-6, 10, 97)])
+_RESTARTS = 5  # L-BFGS-B restarts of the eps search after a stalled line search
+_N_SIM = 4000  # simulations of the test's null distribution (p-value resolution 1/4001)
+_SIM_SEED = 20_261_124  # fixed: the same data always give the same p-value
+
+
+@dataclass(frozen=True)
+class Linearization:
+    """The model at :math:`\\epsilon` with zero forces: residual and force-to-sensor map."""
+
+    eps: np.ndarray
+    r: np.ndarray  # v - M E[theta]
+    A: np.ndarray  # M dE[theta]/dlam, (C, n_forces)
+    mu: np.ndarray  # eigenvalues of A A^T / a0^2
+    w2: np.ndarray  # squared residual in the eigenbasis
+    xi: np.ndarray  # eigenvalues of K^T A A^T K / a0^2, K the complement of J
+    q: np.ndarray  # squared error contrasts in that eigenbasis, over sigma^2
+    J: np.ndarray  # M dE[theta]/deps, (C, n_eps)
+
+
+class RandomForceModel:
+    """The marginal likelihood :math:`\\ell(\\epsilon, \\tau)` of a steady problem.
+
+    Parameters
+    ----------
+    problem : SteadyProblem
+        With constraint forces (``system.Gamma``).
+    sigma : float
+        Known noise standard deviation of the data.
+    prior : {"shared", "sparse"}
+        ``"shared"``: one variance :math:`\\tau^2` for every force (REML);
+        ``"sparse"``: a variance per force, by maximum marginal likelihood
+        (:mod:`~ecfm_uq.inverse.formulations.sparse_forces`), for a discrepancy that is localized.
+    """
+
+    def __init__(self, problem, sigma, prior="shared"):
+        system = problem.system
+        if system.Gamma is None:
+            raise ValueError("the random-force ECFM needs a system with constraint forces (Gamma)")
+        self.problem, self.system, self.sigma = problem, system, float(sigma)
+        self.M = problem.M_obs
+        self.v = problem.v
+        self.a0 = None  # force-to-data scale, fixed at the first linearization
+        self.prior = prior
+        self.n_solves = 0
+
+    def linearize(self, eps):
+        """:class:`Linearization` at ``eps`` (one solve and one multi-right-hand-side
+        back-substitution); raises the model's error where it cannot be solved."""
+        sysm = self.system
+        sol = solve_steady(sysm, eps, strict=True, **self.problem.solve_options)
+        self.n_solves += 1
+        r = self.v - self.M @ sysm.mean(sol.Theta)
+        dmean = np.einsum("nkc,k->nc", sol.lam_sensitivity(), sysm.E1)
+        A = np.asarray(self.M @ dmean)
+        J = np.asarray(self.M @ np.einsum("nkm,k->nm", sol.eps_sensitivity()[0], sysm.E1))
+        AA = A @ A.T
+        if self.a0 is None:
+            self.a0 = float(np.sqrt(max(np.trace(AA) / AA.shape[0], 1e-300)))
+        mu, U = np.linalg.eigh(AA / self.a0**2)
+        mu = np.maximum(mu, 0.0)
+        # error contrasts: the residual's components orthogonal to what eps can explain.
+        # The span of J is found from its unit columns (a parameter whose effect is merely
+        # small, e.g. a reaction rate 10^eps0 far below the diffusion, still explains its
+        # direction: the rank must not depend on the parameters' units or magnitudes) and
+        # by SVD (QR without pivoting misplaces the span when a column vanishes)
+        norms = np.linalg.norm(J, axis=0)
+        Jn = J[:, norms > 0] / norms[norms > 0]
+        U_J, sv, _ = np.linalg.svd(Jn, full_matrices=True)
+        rank = int(np.sum(sv > max(Jn.shape) * np.finfo(float).eps * sv[0])) if sv.size else 0
+        K = U_J[:, rank:]
+        xi, V = np.linalg.eigh(K.T @ AA @ K / self.a0**2)
+        q = (V.T @ (K.T @ r)) ** 2 / self.sigma**2
+        return Linearization(
+            np.asarray(eps, float), r, A, mu, (U.T @ r) ** 2, np.maximum(xi, 0.0), q, J
+        )
+
+    def nll(self, lin, s):
+        """:math:`\\ell` at scaled variance ``s`` (:math:`\\tau^2 = s\\sigma^2/a_0^2`), up to
+        the constant :math:`\\tfrac C2 \\log 2\\pi`."""
+        d = self.sigma**2 * (1.0 + s * lin.mu)
+        return 0.5 * float(np.sum(lin.w2 / d) + np.sum(np.log(d)))
+
+    @staticmethod
+    def restricted_drop(q, xi, s):
+        """:math:`2(\\ell_R(0) - \\ell_R(s))` of error contrasts ``q`` (squared, over
+        sigma^2) with eigenvalues ``xi``; ``q`` (..., K), ``s`` (G,) -> (..., G)."""
+        a = s[:, None] * xi[None, :]  # (G, K)
+        return q @ (a / (1.0 + a)).T - np.sum(np.log1p(a), axis=1)
+
+    def best_s(self, lin):
+        """Restricted-likelihood (REML) estimate of ``s``: the likelihood of the error
+        contrasts (the residual orthogonal to what eps explains, so the fitted parameters
+        do not read as a smaller variance), on a log grid then Brent; returns
+        ``(s, marginal nll at s)``."""
+        drop = self.restricted_drop(lin.q, lin.xi, _S_GRID)
+        k = int(np.argmax(drop))
+        s_hat = 0.0
+        if k > 0 and drop[k] > 0.0:
+            lo, hi = _S_GRID[k - 1], _S_GRID[min(k + 1, _S_GRID.size - 1)]
+            d_lo, d_hi = self._restricted_slope(lin, lo), self._restricted_slope(lin, hi)
+            if d_lo > 0.0 > d_hi:
+                # the stationary point to machine precision (a minimizer of a flat maximum
+                # finds it to sqrt(machine eps) only, too coarse for finite differences
+                # of the profiled likelihood in eps)
+                s_hat = float(
+                    optimize.brentq(
+                        lambda x: self._restricted_slope(lin, x), lo, hi, xtol=1e-300,
+                        rtol=4 * np.finfo(float).eps,
+                    )
+                )  # fmt: skip
+                return s_hat, self.nll(lin, s_hat)
+            res = optimize.minimize_scalar(
+                lambda x: -self.restricted_drop(lin.q, lin.xi, np.array([x]))[0],
+                bounds=(lo, hi), method="bounded", options={"xatol": 1e-10 * hi},
+            )  # fmt: skip
+            s_hat = float(res.x) if -res.fun > drop[k] else float(_S_GRID[k])
+        return s_hat, self.nll(lin, s_hat)
+
+    @staticmethod
+    def _restricted_slope(lin, s):
+        """:math:`d/ds` of :meth:`restricted_drop` at scalar ``s``."""
+        a = 1.0 + s * lin.xi
+        return float(np.sum(lin.q * lin.xi / a**2 - lin.xi / a))
+
+    def profiled_nll(self, eps):
+        """:math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))`: the marginal likelihood with
+        :math:`\\tau` re-estimated (REML) at ``eps`` -- the function the estimate minimizes
+        (one solve); raises the model's error where it cannot be solved."""
+        lin = self.linearize(eps)
+        dead = np.flatnonzero(~(np.linalg.norm(lin.J, axis=0) > 0.0))
+        if dead.size:
+            # e.g. a reaction rate 10^eps0 that underflowed to zero: the parameter has no
+            # effect at all, its direction is lost and the error contrasts would jump to
+            # one more dimension (tau-hat and the likelihood with them)
+            raise ModelEvaluationError(
+                f"eps{dead.tolist()} have no effect on the readings at eps="
+                f"{np.asarray(eps).tolist()} (underflow): the error contrasts of tau are "
+                "undefined there"
+            )
+        return self.variances(lin)[1]
+
+    def variances(self, lin):
+        """The force variances at ``lin`` and the marginal nll there: ``(g, nll)``, ``g``
+        of shape (n_forces,): :math:`\\hat\\tau^2` for every force (shared prior), or each
+        force's own (sparse prior, started from the shared estimate)."""
+        s, val = self.best_s(lin)
+        g = np.full(lin.A.shape[1], self.tau(s) ** 2)
+        if self.prior == "shared":
+            return g, val
+        return sparse_force_variances(lin.A, lin.r, self.sigma**2, g)
+
+    def covariance(self, lin, g):
+        """The data covariance :math:`\\sigma^2 I + A\\,\\mathrm{diag}(g)\\,A^T`."""
+        return self.sigma**2 * np.eye(lin.A.shape[0]) + (lin.A * g) @ lin.A.T
+
+    def profiled_likelihood(self, scale, h=1e-5):
+        """The :class:`LogLikelihood` :math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))` of the
+        profile-likelihood intervals: :math:`\\tau` re-estimated at every :math:`\\epsilon`,
+        so the intervals carry its uncertainty. Gradient by central differences with steps
+        ``h * scale`` (``scale``: the parameters' standard-error scale; the exact gradient
+        would need :math:`\\partial A/\\partial\\epsilon`)."""
+        scale = np.asarray(scale, float)
+
+        def evaluate(eps):
+            return self.profiled_nll(eps), fd_gradient(self.profiled_nll, eps, h * scale)
+
+        return LogLikelihood(
+            evaluate, self.system.n_eps, self.v.size, "random forces",
+            f"marginal likelihood, Gaussian noise sigma={self.sigma:g} and random forces, "
+            "tau re-estimated (REML) at every eps",
+            exact_gradient=False, value_only=self.profiled_nll,
+        )  # fmt: skip
+
+    def restricted_test(self, lin, n_sim=_N_SIM):
+        """Restricted likelihood-ratio test of tau = 0: statistic and p-value.
+
+        Under tau = 0 (and the model linearized at the estimate) the squared error
+        contrasts over sigma^2 are independent chi2_1, so the statistic's finite-sample
+        null distribution is simulated exactly from them (Crainiceanu & Ruppert 2004,
+        sigma known) instead of taken from the asymptotic 1/2 chi2_0 + 1/2 chi2_1 mixture,
+        which is conservative with few sensors. The grid maximization is the same for the
+        data and the simulations."""
+        if lin.xi.size == 0 or not np.any(lin.xi > 0):
+            return 0.0, 1.0
+        T = max(float(self.restricted_drop(lin.q, lin.xi, _S_GRID).max()), 0.0)
+        rng = np.random.default_rng(_SIM_SEED)
+        exceed = 0
+        for start in range(0, n_sim, 500):
+            m = min(500, n_sim - start)
+            q = rng.chisquare(1.0, size=(m, lin.xi.size))
+            sims = np.maximum(self.restricted_drop(q, lin.xi, _S_GRID).max(axis=1), 0.0)
+            exceed += int(np.sum(sims >= T - 1e-12 * max(T, 1.0)))
+        return T, (1 + exceed) / (1 + n_sim) if T > 0 else 1.0
+
+    def conditional_likelihood(self, lin, g):
+        """:math:`\\tfrac12 r(\\epsilon)^T S_0^{-1} r(\\epsilon)` with the data covariance
+        :math:`S_0 = \\sigma^2 I + A\\,\\mathrm{diag}(g)\\,A^T` held at the estimate: the likelihood
+        of :math:`\\epsilon` conditional on the estimated discrepancy (generalized least
+        squares), exact gradient :math:`-J^T S_0^{-1} r`. With :math:`\\hat\\tau = 0` it is
+        the standard likelihood with ``sigma`` known."""
+        from scipy.linalg import cho_factor, cho_solve
+
+        chol = cho_factor(self.covariance(lin, g))
+        sysm = self.system
+
+        def evaluate(eps):
+            sol = solve_steady(sysm, eps, strict=True, **self.problem.solve_options)
+            r = self.v - self.M @ sysm.mean(sol.Theta)
+            dmean = np.einsum("nkm,k->nm", sol.eps_sensitivity()[0], sysm.E1)
+            w = cho_solve(chol, r)
+            return 0.5 * float(r @ w), -np.asarray(self.M @ dmean).T @ w
+
+        def value(eps):
+            sol = solve_steady(sysm, eps, strict=True, **self.problem.solve_options)
+            r = self.v - self.M @ sysm.mean(sol.Theta)
+            return 0.5 * float(r @ cho_solve(chol, r))
+
+        none = not np.any(g)
+        what = "Gaussian, sigma" if none else "GLS with the estimated discrepancy"
+        return LogLikelihood(
+            evaluate, sysm.n_eps, self.v.size, "known sigma" if none else "random forces",
+            f"{what} covariance held at the estimate (sigma={self.sigma:g}, tau={rms(g):.3g})",
+            value_only=value,
+        )  # fmt: skip
+
+    def tau(self, s):
+        return float(np.sqrt(s) * self.sigma / self.a0)
+
+    def forces(self, lin, g):
+        """Posterior mean of the forces (variances ``g``) and their standard deviations."""
+        n_f = lin.A.shape[1]
+        if not np.any(g):
+            return np.zeros(n_f), np.zeros(n_f)
+        GAt = g[:, None] * lin.A.T
+        SiAG = np.linalg.solve(self.covariance(lin, g), GAt.T)
+        lam = SiAG.T @ lin.r
+        var = g - np.einsum("ij,ji->i", GAt, SiAG)
+        return lam, np.sqrt(np.maximum(var, 0.0))
+
+
+def rms(g):
+    """The root-mean-square force standard deviation: tau of the shared prior."""
+    return float(np.sqrt(np.mean(g))) if np.size(g) else 0.0
+
+
+def _profiled(model, eps):
+    lin = model.linearize(eps)
+    g, val = model.variances(lin)
+    return val, g, lin
+
+
+class _Search:
+    """Minimizes the profiled marginal likelihood over eps in scaled coordinates
+    ``x = (eps - eps_std) / scale``: L-BFGS-B with central-difference gradients and
+    restarts, finished derivative-free where tau > 0."""
+
+    def __init__(self, eps_std, scale, bnds, maxiter, tol):
+        self.eps_std, self.scale, self.bnds = eps_std, scale, bnds
+        self.maxiter, self.tol, self.nfev = maxiter, tol, 0
+
+    def _optimal(self, g, x):
+        return scaled_gradient_optimality(g, x, self.bnds, tol=self.tol).converged
+
+    def objective(self, model, count=True):
+        def p(x):
+            self.nfev += count
+            try:
+                return _profiled(model, self.eps_std + self.scale * x)[0]
+            except _FAILURES:
+                return np.inf
+
+        return p
+
+    def run(self, model, x0):
+        """``(x, res)`` from ``x0``; ``res.fun`` the profiled nll at ``x``."""
+        p = self.objective(model)
+        nll0 = self.objective(model, count=False)(np.zeros(x0.size))
+        base, x = nll0, np.array(x0, float)
+        last = {"g": None}
+
+        def fun(x):
+            val = p(x)
+            if not np.isfinite(val):
+                return base + 1e12, np.zeros(x.size)
+            last["g"] = fd_gradient(p, x, 1e-5)
+            return val, last["g"]
+
+        def stop_when_optimal(intermediate_result):
+            # our own criterion, not the optimizer's (its ftol on a finite-difference
+            # gradient behaves differently across scipy versions): the gradient in
+            # standard-error units (convergence.scaled_gradient_optimality) leaves eps
+            # within that fraction of a standard error
+            g = last["g"]
+            if g is not None and g.size and self._optimal(g, intermediate_result.x):
+                raise StopIteration
+
+        nit, njev, maxiter = 0, 0, self.maxiter
+        for _ in range(_RESTARTS):
+            # the standard errors of a consistent fit can be a poor scale once tau > 0
+            # (the optimum may lie many of them away): a stalled line search restarts
+            # from where it stopped, with a fresh quasi-Newton memory
+            res = optimize.minimize(
+                fun, x, jac=True, method="L-BFGS-B", bounds=self.bnds,
+                callback=stop_when_optimal,
+                options={"maxiter": maxiter - nit, "ftol": 1e-10, "gtol": 1e-6},
+            )  # fmt: skip
+            if last["g"] is not None and self._optimal(last["g"], res.x):
+                res.success = True
+            moved = np.max(np.abs(res.x - x)) if x.size else 0.0
+            nit, njev = nit + res.nit, njev + res.njev
+            if res.fun <= nll0:
+                x = res.x
+            if res.success or moved < 1e-8 or nit >= maxiter:
+                break
+        tau_positive = np.isfinite(res.fun) and np.any(
+            _profiled(model, self.eps_std + self.scale * x)[1]
+        )
+        if (tau_positive or not res.success) and self.bnds is None:
+            # with tau > 0 the optimum lies in a long flat valley (the discrepancy trading
+            # off against eps) where a small gradient in standard-error units does not
+            # mean close (a premature stop there made the estimate depend on the
+            # equations' units): finish derivative-free
+            simplex = x + np.vstack([np.zeros(x.size), 10.0 * np.eye(x.size)])
+            nm = optimize.minimize(
+                p, x, method="Nelder-Mead",
+                options={"initial_simplex": simplex, "xatol": 1e-6, "fatol": 1e-12,
+                         "maxfev": 400 * max(x.size, 1)},
+            )  # fmt: skip
+            nit += nm.nit
+            if nm.fun < res.fun:
+                x, res = nm.x, nm
+                res.success = bool(nm.success)
+        res.nit, res.njev = nit, njev
+        return x, res
+
+
+def fit_random_force(problem, eps0, s):
+    """:func:`~ecfm_uq.inverse.fit` of ``formulation="ecfm-random"`` (settings ``s``).
+
+    Starts from the standard estimate (``tau = 0``) and minimizes the marginal likelihood
+    with ``tau`` profiled out.
+    """
+    from ..core.settings import FitSettings
+    from .steady import fit_steady_problem
+
+    system = problem.system
+    opts = s.take({"tau_in_intervals": "profiled", "force_prior": "shared"})  # refuses unknown
+    if opts["tau_in_intervals"] not in ("profiled", "held"):
+        raise ValueError(
+            "`options['tau_in_intervals']` must be 'profiled' (tau re-estimated at every eps "
+            "along the profiles, the default) or 'held' (the data covariance held at "
+            f"tau-hat), got {opts['tau_in_intervals']!r}"
+        )
+    if opts["force_prior"] not in ("shared", "sparse"):
+        raise ValueError(
+            "`options['force_prior']` must be 'shared' (one variance tau^2 for every force, "
+            "the default) or 'sparse' (a variance per force: for a localized discrepancy), "
+            f"got {opts['force_prior']!r}"
+        )
+    standard = fit_steady_problem(
+        problem, eps0,
+        FitSettings("standard", "auto", s.sigma, s.bounds, None, s.maxiter, {}, True, s.alpha),
+    )  # fmt: skip
+    eps_std = np.asarray(standard.eps, float)
+    se = standard.uncertainty.stderr
+    magnitude = np.maximum(1.0, np.abs(eps_std))
+    scale = 0.1 * magnitude
+    if se is not None:
+        # the standard errors, capped at the parameter's magnitude (a flat direction has
+        # a huge one, and steps of that size leave the range where the model solves)
+        scale = np.where(np.isfinite(se) & (se > 0), np.minimum(se, magnitude), scale)
+    bnds = None
+    if s.bounds is not None:
+        bnds = [
+            (None if lo is None else (lo - e) / c, None if hi is None else (hi - e) / c)
+            for (lo, hi), e, c in zip(s.bounds, eps_std, scale, strict=True)
+        ]
+    search = _Search(
+        eps_std, scale, bnds, 200 if s.maxiter is None else s.maxiter,
+        SCALED_GRADIENT_TOL if s.tol is None else s.tol,
+    )  # fmt: skip
+    model = RandomForceModel(problem, s.sigma, "shared")
+    x, res = search.run(model, np.zeros(system.n_eps))
+    if opts["force_prior"] == "sparse":
+        # the sparse prior's profiled likelihood has local minima (forces switching on and
+        # off): searched from the standard estimate and from the shared prior's, the lower
+        # kept
+        shared = model
+        model = RandomForceModel(problem, s.sigma, "sparse")
+        starts = [np.zeros(system.n_eps)] + ([x] if np.any(x) else [])
+        found = [search.run(model, x0) for x0 in starts]
+        x, res = min(found, key=lambda xr: xr[1].fun)
+        model.n_solves += shared.n_solves
+    p = search.objective(model)
+    eps = eps_std + scale * x
+    val, g_hat, lin = _profiled(model, eps)
+    grad = fd_gradient(p, x, 1e-5)
+    # the one status decision (the optimizer's own success is not asked): the gradient
+    # of the profiled marginal likelihood in standard-error units, bounds projected
+    opt = scaled_gradient_optimality(grad, x, search.bnds, tol=search.tol)
+    optimality = opt.value
+    hits = at_bound(eps, s.bounds)
+    status = decide_status(opt, exhausted=res.nit >= search.maxiter)
+    lam, lam_sd = model.forces(lin, g_hat)
+    unc = _uncertainty(p, x, scale, standard, g_hat, model, lin)
+    message = f"{res.message} [{opt.message}]"
+    if status == FitStatus.CONVERGED:
+        # a small gradient is not an optimum where the data no longer determine eps (an
+        # estimate run off towards infinity, e.g. a reaction rate 10^eps0 -> 0): the same
+        # refusal as the standard fit's
+        if not np.any(g_hat) and not standard.success and np.allclose(eps, standard.eps):
+            status, message = standard.status, f"tau = 0, the standard fit: {standard.message}"
+        elif np.any(g_hat) and _singular(_gauss_newton_information(model, lin, g_hat)):
+            status = FitStatus.STALLED
+            message = (
+                f"{message} [NOT converged: the Gauss-Newton information J^T S^-1 J is "
+                "singular at the estimate (the readings no longer depend on some parameter "
+                "combination): the minimum may lie at infinity]"
+            )
+    T, p_value = model.restricted_test(lin)
+    verdict = _verdict(T, p_value, g_hat, lam, lam_sd, s.alpha, hits)
+    # the density of the data given eps (sample_posterior) holds the covariance at tau-hat;
+    # the intervals and likelihood-ratio tests profile tau out: re-estimated at every eps
+    like = model.conditional_likelihood(lin, g_hat)
+    extra = {
+        "force_stderr": lam_sd, "tau": rms(g_hat), "force_prior": model.prior,
+        "force_tau": np.sqrt(g_hat), "standard": standard, "n_solves": model.n_solves,
+    }  # fmt: skip
+    interval_likelihood = None
+    if opts["tau_in_intervals"] == "profiled":
+        try:
+            model.profiled_nll(eps)
+            interval_likelihood = model.profiled_likelihood(scale)
+        except _FAILURES as e:
+            # an estimate run off to where a parameter has no effect (not converged): its
+            # intervals fall back to the held covariance, and say so
+            extra["interval_likelihood"] = (
+                f"tau cannot be re-estimated at the estimate ({e}); the intervals hold the "
+                "data covariance at tau-hat"
+            )
+    return InverseResult(
+        eps=eps, loss=val, status=status, message=message,
+        nit=standard.nit + res.nit, nfev=standard.nfev + search.nfev,
+        njev=standard.njev + res.njev, optimality=optimality, method="ecfm",
+        optimizer="L-BFGS-B", forces=lam, uncertainty=unc, verdict=verdict,
+        likelihood=like, interval_likelihood=interval_likelihood, extra=extra,
+    )  # fmt: skip
+
+
+def _uncertainty(p, x, scale, standard, g_hat, model, lin):
+    """Delta method of the random-force ECFM; the standard fit's where tau = 0.
+
+    With tau > 0: the observed information of the profiled marginal likelihood
+    :math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))` (central differences of ``p`` in the
+    scaled parameters), which carries tau's uncertainty. Where that is not positive
+    definite (a flat valley where the discrepancy trades off against eps, or the kink
+    where :math:`\\hat\\tau(\\epsilon)` leaves zero), the expected (Gauss-Newton)
+    information :math:`J^T S^{-1} J` with :math:`S = \\sigma^2 I + \\hat\\tau^2 AA^T` held at
+    the estimate -- the standard fit's Gauss-Newton convention with the estimated
+    discrepancy added to the noise; it does not carry tau's uncertainty, and the message
+    says so and why."""
+    if not np.any(g_hat):
+        u = standard.uncertainty
+        return Uncertainty(
+            u.success, "tau = 0: the standard estimate and its uncertainty", u.cov, u.stderr,
+            u.intervals, u.level, u.method, u.noise_model, u.dof, u.jacobian,
+        )  # fmt: skip
+    eps = np.asarray(standard.eps, float) + scale * x
+    z = stats.norm.ppf(0.975)
+    why = None
+    try:
+        try:
+            H = fd_hessian(lambda y: fd_gradient(p, y, 1e-5), x, 1e-3)
+            w = np.linalg.eigvalsh(H)
+        except ValueError:  # the model cannot be solved next to the estimate
+            w = np.array([np.nan])
+        if w[0] > 1e-10 * w[-1]:
+            cov = np.linalg.inv(H) * np.outer(scale, scale)
+            se = np.sqrt(np.diag(cov))
+            return Uncertainty(
+                True, "observed information of the marginal likelihood (tau profiled out)",
+                cov, se, np.column_stack([eps - z * se, eps + z * se]), 0.95,
+                "marginal-likelihood", "known",
+            )  # fmt: skip
+        why = (
+            "the observed information of the profiled marginal likelihood is not positive "
+            f"definite (eigenvalues {np.round(w, 6).tolist()} in standard-error units)"
+        )
+    except np.linalg.LinAlgError as e:
+        why = f"the observed information of the profiled marginal likelihood failed ({e})"
+    # the expected information with the covariance held at tau-hat
+    F = _gauss_newton_information(model, lin, g_hat)
+    if _singular(F):
+        return Uncertainty.failed(
+            f"no delta-method uncertainty: {why}, and the Gauss-Newton information J^T S^-1 J "
+            "is singular (a parameter combination the data do not determine)"
+        )
+    cov = np.linalg.inv(F)
+    se = np.sqrt(np.diag(cov))
+    return Uncertainty(
+        True,
+        f"{why}: Gauss-Newton information J^T S^-1 J with S = sigma^2 I + tau^2 A A^T held at "
+        "tau-hat instead (does not carry tau's uncertainty; the profile intervals do)",
+        cov, se, np.column_stack([eps - z * se, eps + z * se]), 0.95,
+        "gauss-newton-held-tau", "known",
+    )  # fmt: skip
+
+
+def _gauss_newton_information(model, lin, g_hat):
+    """:math:`J^T S^{-1} J` with :math:`S = \\sigma^2 I + A\\,\\mathrm{diag}(\\hat g)\\,A^T`,
+    symmetrized."""
+    F = lin.J.T @ np.linalg.solve(model.covariance(lin, g_hat), lin.J)
+    return 0.5 * (F + F.T)
+
+
+def _singular(F):
+    w = np.linalg.eigvalsh(F)
+    return not w[0] > 1e-12 * max(w[-1], 0.0)
+
+
+def _verdict(T, p, g_hat, lam, lam_sd, alpha, at_bound):
+    """The verdict of the restricted likelihood-ratio test of tau = 0."""
+    zs = np.divide(lam, lam_sd, out=np.zeros_like(lam), where=lam_sd > 0)
+    peak = int(np.argmax(np.abs(lam))) if lam.size else None
+    parts = [f"restricted likelihood ratio of tau = 0: T = {T:.3g}, p = {p:.3g} (exact null)"]
+    details = {
+        "tau": rms(g_hat),
+        "lr_statistic": T,
+        "peak_force_index": peak,
+        "force_z": zs,
+    }
+    return decide(
+        "likelihood-ratio tau=0", p, alpha, parts, statistic=T, at_bound=at_bound,
+        details=details,
+    )  # fmt: skip

@@ -1,0 +1,1 @@
+"""The inverse problems: a model and its data, behind one interface."""

@@ -1,0 +1,327 @@
+"""A model that is a Python function: :class:`ModelProblem`, and its least-squares fit.
+
+The front door for a model without equations the library can see (a regression, an ODE
+solved by the user, a wrapped simulator): ``model(eps)`` returns the predictions of the
+data, with the data's shape. Its Jacobian is the user's ``jac(eps)``, or differenced
+(:mod:`ecfm_uq.inverse.core.finite_differences`: one-sided, central or complex steps sized
+to each parameter), its model runs optionally through an executor (a ``dask.distributed``
+client for expensive models). :func:`~ecfm_uq.inverse.fit` runs the standard formulation on
+it (trust-region least squares on the whitened residual :math:`W(f(\\epsilon) - v)`,
+:mod:`ecfm_uq.inverse.problems.noise_model`), and the result has everything a fit offers:
+the status from the optimality conditions, Gauss-Newton standard errors, profile intervals,
+likelihood-ratio tests, posterior samples and the verdict (a chi-squared test with
+``sigma``; none without).
+
+A model that raises, returns the wrong shape or a non-finite value is reported with the
+parameters it was called at: at the starting point as an error (nothing was computed
+yet), later as a rejected trial point (the optimizer backs off; the result keeps the best
+point reached).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..._validation import as_finite_array
+from ...errors import ConvergenceError, ModelEvaluationError
+from ..core.finite_differences import fd_jacobian
+from .interface import InverseProblem
+
+__all__ = ["ModelProblem"]
+
+_JAC_MODES = ("2-point", "3-point", "cs")
+
+
+def _describe_call(name, eps):
+    return f"`{name}` at eps={np.array2string(np.asarray(eps).real, precision=6)}"
+
+
+class ModelProblem(InverseProblem):
+    """Data ``v`` and a model ``model(eps)`` that predicts them.
+
+    Parameters
+    ----------
+    model : callable
+        ``model(eps) -> array_like`` with the shape of ``data``; ``eps`` is a 1-D float
+        array of the parameters (complex for ``jac="cs"``).
+    data : array_like
+        The observations, any shape (flattened in the fit, C order).
+    jac : callable or {"2-point", "3-point", "cs"} or None
+        ``jac(eps) -> (data.size, n_eps)`` (or ``data.shape + (n_eps,)``), the model's
+        derivative; a string (or ``None``, meaning ``"2-point"``, scipy's default) for
+        finite differences with steps sized to each parameter, central differences or
+        complex steps (the model must then accept complex ``eps``).
+    executor : object with ``map``, optional
+        Evaluate the model points of one differenced Jacobian through it (e.g. a
+        ``dask.distributed.Client`` or a ``concurrent.futures`` pool;
+        :func:`ecfm_uq.executor.evaluate_samples`). Default: in this process.
+    names : sequence of str, optional
+        Parameter names for messages and :meth:`~ecfm_uq.inverse.InverseResult.summary`.
+
+    Raises
+    ------
+    TypeError, ValueError
+        ``model``/``jac`` not callable, an unknown ``jac`` mode, non-finite ``data``.
+    """
+
+    formulations = ("standard",)
+
+    def __init__(self, model, data, *, jac=None, executor=None, names=None):
+        if not callable(model):
+            raise TypeError(f"`model` must be a callable model(eps) -> predictions, got {model!r}")
+        if jac is None:
+            jac = "2-point"
+        if isinstance(jac, str):
+            if jac not in _JAC_MODES:
+                raise ValueError(
+                    f"`jac` must be a callable jac(eps) or one of {_JAC_MODES} (finite "
+                    f"differences), got {jac!r}"
+                )
+        elif not callable(jac):
+            raise TypeError(f"`jac` must be a callable jac(eps) or a string, got {jac!r}")
+        if executor is not None and not callable(getattr(executor, "map", None)):
+            raise TypeError("`executor` must have a map method (a dask Client, a pool)")
+        data = np.asarray(data, dtype=float) if not np.isscalar(data) else np.array([data])
+        self.shape = data.shape
+        self.v = as_finite_array("data", data.ravel())
+        self.model, self.jac, self.executor = model, jac, executor
+        self.names = None if names is None else [str(n) for n in names]
+
+    # -- evaluations ------------------------------------------------------------------------
+    def predict(self, eps, *, first=False):
+        """``model(eps)`` flattened and checked.
+
+        Raises
+        ------
+        TypeError, ValueError
+            At the first call (``first``): a model that raises, returns the wrong shape or
+            non-finite values, with the parameters and the fix.
+        ModelEvaluationError
+            Later: the same, as a failed evaluation the optimizer backs off from.
+        """
+        try:
+            y = self.model(eps)
+        except Exception as e:  # a user callback: report any failure with its call
+            msg = f"{_describe_call('model', eps)} raised {type(e).__name__}: {e}"
+            if first or isinstance(e, TypeError | IndexError):
+                raise type(e)(
+                    f"{msg}; `model` must take one argument, the 1-D array of the "
+                    f"{np.size(eps)} parameters, and return the predictions of the data "
+                    f"(shape {self.shape})"
+                ) from e
+            raise ModelEvaluationError(msg) from e
+        y = np.asarray(y)
+        if y.size != self.v.size or (y.shape != self.shape and y.ndim > 1):
+            raise ValueError(
+                f"{_describe_call('model', eps)} returned shape {y.shape}; the data have "
+                f"shape {self.shape}: `model` must predict every observation"
+            )
+        y = y.ravel()
+        if not np.all(np.isfinite(y)):
+            bad = np.flatnonzero(~np.isfinite(y))
+            msg = (
+                f"{_describe_call('model', eps)} returned {bad.size} non-finite value(s) "
+                f"(first at index {int(bad[0])}: {y[bad[0]]})"
+            )
+            if first:
+                raise ValueError(f"{msg}; start from parameters where the model is defined")
+            raise ModelEvaluationError(msg)
+        return y
+
+    def jacobian(self, eps, y=None, *, columns=None, typical=None):
+        """:math:`\\partial f/\\partial\\epsilon` at ``eps``, (n_data, n_eps) (or the
+        requested ``columns``), from ``jac`` or by finite differences."""
+        eps = np.asarray(eps, dtype=float)
+        if callable(self.jac):
+            J = self._user_jacobian(eps)
+            return J if columns is None else J[:, columns]
+        if self.jac == "cs":
+            fun = self._complex_model
+            return fd_jacobian(fun, eps, method="cs", typical=typical, columns=columns)
+        return fd_jacobian(
+            self.predict, eps, method=self.jac, typical=typical, f0=y, columns=columns,
+            map_points=None if self.executor is None else self._map,
+        )  # fmt: skip
+
+    def _complex_model(self, z):
+        try:
+            y = np.asarray(self.model(z))
+        except Exception as e:
+            raise ModelEvaluationError(
+                f"{_describe_call('model', z)} with a complex step raised "
+                f"{type(e).__name__}: {e}; jac='cs' needs a model written for complex "
+                "parameters (no abs, no comparisons, no float()); use jac='3-point'"
+            ) from e
+        if not np.iscomplexobj(y):
+            raise ValueError(
+                "jac='cs': `model` dropped the imaginary part of complex parameters (it "
+                "returned real values); use jac='3-point' or '2-point'"
+            )
+        return y.ravel()
+
+    def _user_jacobian(self, eps):
+        p = eps.size
+        try:
+            J = np.asarray(self.jac(eps), dtype=float)
+        except Exception as e:
+            raise type(e)(
+                f"{_describe_call('jac', eps)} raised {type(e).__name__}: {e}; `jac` must "
+                f"take the 1-D array of the {p} parameters and return the "
+                f"({self.v.size}, {p}) derivative of the predictions"
+            ) from e
+        if J.shape not in ((self.v.size, p), (*self.shape, p)):
+            raise ValueError(
+                f"{_describe_call('jac', eps)} returned shape {J.shape}; expected "
+                f"({self.v.size}, {p}): one row per observation, one column per parameter"
+            )
+        J = J.reshape(self.v.size, p)
+        if not np.all(np.isfinite(J)):
+            raise ModelEvaluationError(f"{_describe_call('jac', eps)} returned non-finite values")
+        return J
+
+    def _map(self, points):
+        from ...executor import evaluate_samples
+
+        return evaluate_samples(self.model, points, self.executor, name="model")
+
+    def residual_function(self, noise, *, typical=None):
+        """``eps -> (r, J, y)``: whitened residual :math:`W(f(\\epsilon) - v)`, its
+        Jacobian as a callable (computed when asked for) and the predictions."""
+        v = self.v
+        calls = {"n": 0}
+
+        def residual(eps):
+            # the first call (at eps0) raises the user's errors: nothing was computed yet
+            calls["n"] += 1
+            y = self.predict(eps, first=calls["n"] == 1)
+            r = noise.whiten(y - v)
+
+            def J():
+                return noise.whiten(self.jacobian(eps, y, typical=typical))
+
+            return r, J, y
+
+        return residual
+
+    def check_derivatives(self, eps, *, rtol=1e-4):
+        """Compare the user's ``jac`` with central differences of ``model`` at ``eps``.
+
+        Returns
+        -------
+        float
+            The largest difference relative to the largest entry of each column.
+
+        Raises
+        ------
+        ValueError
+            When the difference exceeds ``rtol``, naming the worst column.
+        """
+        if not callable(self.jac):
+            raise ValueError("`jac` is differenced already: there is no derivative to check")
+        eps = as_finite_array("eps", eps, ndim=1)
+        J = self._user_jacobian(eps)
+        F = fd_jacobian(lambda e: self.predict(e, first=True), eps, method="5-point")
+        scale = np.maximum(np.max(np.abs(F), axis=0), np.max(np.abs(J), axis=0))
+        err = np.max(np.abs(J - F), axis=0) / np.where(scale > 0, scale, 1.0)
+        worst = int(np.argmax(err))
+        if err[worst] > rtol:
+            raise ValueError(
+                f"`jac` disagrees with finite differences of `model` in column {worst} "
+                f"(relative difference {err[worst]:.2e} > rtol={rtol:g}) at eps="
+                f"{eps.tolist()}: check its sign and its column order"
+            )
+        return float(err[worst])
+
+
+def fit_model_problem(problem, eps0, s):
+    """:func:`~ecfm_uq.inverse.fit` for a :class:`ModelProblem` (validated settings ``s``)."""
+    from ..core.drivers import least_squares_scaled
+    from ..core.result import InverseResult, Uncertainty
+    from ..core.status import FitStatus
+    from ..statistics.loglik import gaussian_likelihood, remember_last_point
+    from ..statistics.uncertainty import estimate_uncertainty, least_squares_jacobian
+    from ..statistics.verdict import check_bounds, model_verdict
+    from .noise_model import noise_model
+
+    if s.formulation not in problem.formulations:
+        raise ValueError(
+            f"formulation={s.formulation!r} needs the model's equations (constraint forces "
+            "enter them); a ModelProblem is a function: use formulation='standard', or "
+            "build a SteadyProblem/DynamicInverseProblem for ECFM"
+        )
+    if s.method not in ("auto", "least-squares", "trf"):
+        raise ValueError(
+            f"unknown `method` {s.method!r} for a ModelProblem; choose 'least-squares' "
+            "(trust-region reflective, the default)"
+        )
+    # run to round-off (scipy's 1e-8 stops ENSO and MGH09 at 1e-6 of NIST's values);
+    # whether the end is an optimum is the relative-offset test's say
+    options = s.take({"polish": True, "x_scale": "jac", "ftol": 1e-15, "xtol": 1e-15,
+                      "gtol": 1e-15})  # fmt: skip
+    eps0 = as_finite_array("eps0", eps0, ndim=1)
+    p, n = eps0.size, problem.n_data
+    bounds = check_bounds(s.bounds, p)
+    if n < p:
+        raise ValueError(
+            f"`data` has {n} observations for {p} parameters: fewer data than parameters "
+            "cannot determine eps"
+        )
+    if problem.names is not None and len(problem.names) != p:
+        raise ValueError(f"`names` has {len(problem.names)} entries for {p} parameters")
+    noise = noise_model(s.sigma, n)
+    residual = remember_last_point(problem.residual_function(noise, typical=eps0))
+    maxiter = 2000 if s.maxiter is None else s.maxiter
+    try:
+        out = least_squares_scaled(residual, eps0, bounds, s.tol, maxiter, options)
+    except ConvergenceError as e:
+        raise ConvergenceError(f"fit: {e}") from e
+    likelihood = gaussian_likelihood(
+        residual, n, p, noise, "least squares of a model function",
+        residual_columns=lambda e, cols: noise.whiten(problem.jacobian(e, columns=cols,
+                                                                       typical=eps0)),
+    )  # fmt: skip
+    if out.payload is None:
+        return InverseResult(
+            eps=out.x, loss=np.inf, message=out.message, nit=out.nit, nfev=out.nfev,
+            status=out.status, method="standard", optimizer="least-squares",
+            eps_history=out.eps_history, loss_history=out.loss_history,
+            verdict=model_verdict(None, None, noise, p, bounds, out.x, failed=out.message),
+            likelihood=likelihood, bounds=bounds, names=problem.names,
+        )  # fmt: skip
+    r, J, y = residual(out.x)
+    J = J()
+    unc = Uncertainty.failed("not computed (uncertainty=False)")
+    if s.uncertainty:
+        if noise.known:
+            s2, how, dof = 1.0, "known", None
+        else:
+            s2, how, dof = float(r @ r) / (n - p) if n > p else np.nan, "estimated", n - p
+        if noise.known or n > p:
+            try:
+                D = least_squares_jacobian(J, problem.names)
+            except ValueError as e:
+                unc = Uncertainty.failed(f"uncertainty not computed: {e}")
+            else:
+                unc = estimate_uncertainty(None, out.x, r, s2, how, dof=dof, deps_dv=D)
+                if unc.jacobian is not None:  # d eps/d(W v) as d eps/dv: the data's units
+                    unc = dataclasses.replace(unc, jacobian=noise.pull_back(unc.jacobian))
+        else:
+            unc = Uncertainty.failed("uncertainty not computed: as many parameters as data "
+                                     "leave no residual to estimate sigma; pass `sigma`")  # fmt: skip
+    verdict = model_verdict(r, noise.whiten(problem.v), noise, p, bounds, out.x)
+    message = out.message
+    if out.status is not FitStatus.CONVERGED and callable(problem.jac):
+        message += (
+            " (a user-supplied `jac` that disagrees with `model` stalls a fit: check it with "
+            "problem.check_derivatives(eps))"
+        )
+    return InverseResult(
+        eps=out.x, loss=out.loss, status=out.status, message=message, nit=out.nit,
+        nfev=out.nfev, njev=out.nit, optimality=out.optimality, method="standard",
+        optimizer="least-squares", eps_history=out.eps_history,
+        loss_history=out.loss_history, extra={"prediction": y.reshape(problem.shape)},
+        uncertainty=unc, verdict=verdict, likelihood=likelihood, bounds=bounds,
+        names=problem.names,
+    )  # fmt: skip

@@ -1,0 +1,1 @@
+"""What a fit says about the data: uncertainty, verdicts, profiles, posteriors."""

@@ -1,0 +1,485 @@
+"""Profile-likelihood intervals and likelihood-ratio tests of a fit.
+
+The delta-method interval :math:`\\hat\\epsilon_i \\pm z\\,\\mathrm{se}_i` assumes the
+log-likelihood is quadratic in :math:`\\epsilon` over the interval. With a parameter inside
+the operator it often is not (a curved, banana-shaped likelihood) and the quick interval
+covers the truth far less often than it says. The profile likelihood does not assume it
+(Raue et al. 2009; lmfit's ``conf_interval``, pyPESTO, Data2Dynamics): for each parameter
+:math:`\\epsilon_i`,
+
+.. math::
+
+    \\ell_p(t) = \\min_{\\epsilon:\\ \\epsilon_i = t} \\ell(\\epsilon), \\qquad
+    \\{t : 2(\\ell_p(t) - \\ell(\\hat\\epsilon)) \\le \\chi^2_{1,\\,\\mathrm{level}}\\}
+
+is the likelihood-ratio interval (Wilks). With :math:`\\sigma` estimated (profiled out) the
+threshold is the profile-t one of Bates & Watts, :math:`\\tfrac n2\\log(1 +
+F_{1,n-p}/(n-p))` (:func:`profile_threshold`: exact for a linear model, where the
+chi-squared threshold under-covers with few data), and the delta-method intervals beside it
+use the same rule (Student-t with :math:`n - p` degrees of freedom). Each profile point
+re-optimizes the other parameters — by trust-region least squares on the residual for a
+Gaussian likelihood (the Jacobian's free columns only), else L-BFGS-B on the exact gradient
+(the adjoint where the problem uses it) — warm-started from the previous point; the profile
+walks out from the estimate with steps sized by the delta-method standard error, growing
+where the profile is flat, and the crossing is refined by Brent's method. A profile that
+does not reach the threshold before the parameter's bound, before the model fails, or within
+``max_steps`` steps gives that end as the bound or :math:`\\pm\\infty` with the reason: the
+data do not bound the parameter on that side (practical non-identifiability) — never a
+made-up finite end.
+
+:func:`profile_likelihood` returns the profiles (for plotting) beside the intervals and
+the delta-method intervals, flagging where the two disagree; :func:`profile_intervals` is
+its (n_eps, 2) array; :func:`likelihood_ratio_test` tests a given :math:`\\epsilon`
+(a point of a joint confidence region) with the others fixed or re-optimized.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from ...threads import library_threads
+from .profiler import MODEL_FAILURES, Profiler, beyond, walk
+from .uncertainty import interval_quantile
+
+__all__ = [
+    "LikelihoodRatioTest",
+    "Profile",
+    "ProfileSummary",
+    "likelihood_ratio_test",
+    "profile_intervals",
+    "profile_likelihood",
+]
+
+# two interval ends "agree" when they differ by less than this fraction of the
+# delta-method half-width
+AGREEMENT_RTOL = 0.1
+_MAX_RECENTRE = 3  # profiles redone from a better point found along them
+
+
+@dataclass(frozen=True)
+class Profile:
+    """The profile of one parameter.
+
+    Attributes
+    ----------
+    index : int
+    values : (k,) ndarray
+        The fixed values :math:`t` of :math:`\\epsilon_i`, increasing (the estimate included).
+    delta : (k,) ndarray
+        :math:`\\ell_p(t) - \\ell(\\hat\\epsilon)`.
+    eps : (k, n_eps) ndarray
+        The re-optimized parameters along the profile.
+    threshold : float
+        The crossing level of ``delta`` (:func:`profile_threshold`).
+    interval : (2,) ndarray
+        The likelihood-ratio interval (an end may be a bound or infinite): the hull of
+        ``regions``.
+    reasons : tuple of str
+        Why each end is where it is (``"crossed"`` or the reason it is open, or where the
+        profile comes back below the threshold).
+    delta_method : (2,) ndarray
+        :math:`\\hat\\epsilon_i \\pm z\\,\\mathrm{se}_i` at the same level (NaN without
+        standard errors).
+    regions : tuple of (lower, upper)
+        Every piece of the parameter's range where the profile is below the threshold:
+        the one around the estimate, and beyond a rise toward a finite bound (a second
+        basin, a ridge to the bound: :func:`profile_likelihood` scans to the bound).
+    """
+
+    index: int
+    values: np.ndarray
+    delta: np.ndarray
+    eps: np.ndarray
+    threshold: float
+    interval: np.ndarray
+    reasons: tuple
+    delta_method: np.ndarray
+    regions: tuple = ()
+
+    @property
+    def agrees(self):
+        """True when both ends are within ``AGREEMENT_RTOL`` of the delta-method half-width."""
+        lo, hi = self.delta_method
+        if not (np.isfinite(lo) and np.isfinite(hi)) or not np.all(np.isfinite(self.interval)):
+            return False
+        half = 0.5 * (hi - lo)
+        return bool(np.all(np.abs(self.interval - self.delta_method) <= AGREEMENT_RTOL * half))
+
+    def plot(self, ax=None, name=None):
+        """Plot :math:`2\\Delta\\ell_p` with the threshold and both intervals."""
+        from ...plotting import pyplot
+
+        if ax is None:
+            _, ax = pyplot().subplots(figsize=(4.5, 3.2))
+        name = name or f"eps[{self.index}]"
+        ax.plot(self.values, 2 * self.delta, "o-", ms=3, label="profile likelihood")
+        ax.axhline(2 * self.threshold, color="k", lw=0.8, ls=":")
+        for x in self.interval:
+            if np.isfinite(x):
+                ax.axvline(x, color="C0", lw=0.8)
+        for x in self.delta_method:
+            if np.isfinite(x):
+                ax.axvline(x, color="C1", lw=0.8, ls="--")
+        ax.plot([], [], color="C1", ls="--", label="delta method")
+        ax.set_xlabel(name)
+        ax.set_ylabel(r"$2\,\Delta\ell$")
+        ax.legend(fontsize=7)
+        return ax
+
+
+@dataclass(frozen=True)
+class ProfileSummary:
+    """Every profile of a fit, its intervals and the delta-method intervals beside them.
+
+    Attributes
+    ----------
+    level : float
+    intervals : (n_eps, 2) ndarray
+        Likelihood-ratio intervals (NaN rows for parameters not profiled).
+    delta_intervals : (n_eps, 2) ndarray
+    profiles : dict of int -> Profile
+    disagree : (n_eps,) bool ndarray
+        True where the delta-method interval is not to be trusted (an end off by more than
+        ``AGREEMENT_RTOL`` of its half-width, or an open profile end).
+    message : str
+    regions : dict of int -> list of (lower, upper)
+        Each profiled parameter's pieces below the threshold (``intervals`` are their
+        hulls).
+    """
+
+    level: float
+    intervals: np.ndarray
+    delta_intervals: np.ndarray
+    profiles: dict = field(default_factory=dict)
+    disagree: np.ndarray = None
+    message: str = ""
+    regions: dict = field(default_factory=dict)
+
+    def plot(self, names=None):
+        """One panel per profiled parameter; returns the figure."""
+        from ...plotting import pyplot
+
+        idx = sorted(self.profiles)
+        fig, axes = pyplot().subplots(1, len(idx), figsize=(4.2 * len(idx), 3.2), squeeze=False)
+        for ax, i in zip(axes[0], idx, strict=True):
+            self.profiles[i].plot(ax, None if names is None else names[i])
+        fig.tight_layout()
+        return fig
+
+
+@dataclass(frozen=True)
+class LikelihoodRatioTest:
+    """:math:`2(\\ell(\\epsilon_0) - \\ell(\\hat\\epsilon))` against :math:`\\chi^2_{\\mathrm{dof}}`."""
+
+    statistic: float
+    dof: int
+    p_value: float
+    eps: np.ndarray
+
+
+def profile_threshold(like, level):
+    """The crossing level of :math:`\\ell_p(t) - \\hat\\ell`.
+
+    Known noise: :math:`\\tfrac12\\chi^2_{1,\\mathrm{level}}` (Wilks). Sigma profiled out
+    (:math:`\\ell = \\tfrac n2\\log S`, :math:`S` the sum of squares): the profile-t
+    interval of Bates & Watts (1988, Sec. 6.1), :math:`S(t) \\le S(\\hat\\epsilon)\\,(1 +
+    F_{1,n-p,\\mathrm{level}}/(n - p))`, i.e. :math:`\\tfrac n2\\log(1 + F/(n - p))`, which
+    is exact for a model linear in its parameters (the t interval) and does not
+    under-cover with few data as the chi-squared threshold does.
+    """
+    if like.noise == "profiled sigma":
+        dof = like.n_data - like.n_eps
+        F = stats.f.ppf(level, 1, dof)
+        return 0.5 * like.n_data * np.log1p(F / dof)
+    return 0.5 * stats.chi2.ppf(level, 1)
+
+
+def _quantile(result, level):
+    """The delta-method quantile at ``level`` on the fit's own rule: Student-t with the
+    uncertainty's ``dof`` where sigma was estimated, normal otherwise."""
+    unc = result.uncertainty
+    return interval_quantile(level, None if unc is None else unc.dof)
+
+
+def _likelihood(result):
+    # the random-force ECFM's intervals profile tau out (result.interval_likelihood)
+    like = getattr(result, "interval_likelihood", None) or getattr(result, "likelihood", None)
+    if like is None or isinstance(like, str):
+        why = like or "it was not made by ecfm_uq.inverse.fit"
+        raise ValueError(f"`result` has no likelihood to profile: {why}")
+    return like
+
+
+def _check_level(level):
+    try:
+        level = float(level)
+    except (TypeError, ValueError):
+        raise TypeError(f"`level` must be a number in (0, 1), got {level!r}") from None
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"`level` must be in (0, 1) (e.g. 0.95), got {level}")
+    return level
+
+
+def _bounds(result, bounds, n):
+    if bounds is None:
+        bounds = getattr(result, "bounds", None)
+    if bounds is None:
+        return [(-np.inf, np.inf)] * n
+    if len(bounds) != n:
+        raise ValueError(f"`bounds` must have one (lo, hi) pair per parameter ({n})")
+    out = []
+    for lo, hi in bounds:
+        out.append((-np.inf if lo is None else float(lo), np.inf if hi is None else float(hi)))
+    return out
+
+
+def _observed_information(like, eps_hat, step):
+    """:math:`\\nabla^2\\ell(\\hat\\epsilon)` by central differences of the exact gradient
+    (symmetrized), or None where the model cannot be solved around the estimate."""
+    n = eps_hat.size
+    H = np.empty((n, n))
+    try:
+        for j in range(n):
+            e = np.zeros(n)
+            e[j] = step[j]
+            H[:, j] = (like(eps_hat + e)[1] - like(eps_hat - e)[1]) / (2 * step[j])
+    except MODEL_FAILURES:
+        return None
+    return 0.5 * (H + H.T)
+
+
+def _scales(result, like, eps_hat):
+    """The fit's delta-method standard errors (NaN where it has none), the observed
+    information's inverse (None if not positive definite) and each parameter's step scale."""
+    unc = result.uncertainty
+    se = None if unc is None else unc.stderr
+    se = np.full(eps_hat.size, np.nan) if se is None else np.asarray(se, dtype=float)
+    have = np.isfinite(se) & (se > 0)
+    step = 1e-4 * np.where(have, se, np.maximum(1.0, np.abs(eps_hat)))
+    H = _observed_information(like, eps_hat, step)
+    naive = None
+    if H is not None and np.all(np.isfinite(H)):
+        w = np.linalg.eigvalsh(H)
+        if w[0] > 1e-12 * max(w[-1], 0.0):
+            naive = np.linalg.inv(H)
+    fallback = 0.1 * np.maximum(1.0, np.abs(eps_hat))
+    if naive is not None:
+        fallback = np.where(have, se, np.sqrt(np.diag(naive)))
+    # a flat direction (practically non-identifiable) has a huge standard error: cap the
+    # step scale at the parameter's magnitude so steps stay where the model can be solved
+    scale = np.minimum(np.where(have, se, fallback), np.maximum(1.0, np.abs(eps_hat)))
+    return se, naive, scale
+
+
+def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci, n_scan):
+    """Every requested profile, and (decrease, eps) of the lowest point found below the
+    estimate's likelihood (None when the estimate is the minimum)."""
+    profiles, best = {}, None
+    for i in which:
+        # a quadratic profile crosses z standard errors out: ~3 steps
+        step = z * prof.scale[i] / 3
+        ends, reasons, pts = [], [], [(prof.eps_hat[i], 0.0, prof.eps_hat)]
+        far = []
+        for direction, bound in ((-1, bnds[i][0]), (1, bnds[i][1])):
+            p, end, why = walk(prof, i, direction, threshold[i], step, bound, max_steps)
+            pts += p
+            if why == "crossed" and np.isfinite(bound) and n_scan > 0:
+                q, regions = beyond(prof, i, direction, threshold[i], end, p[-1][2], bound, n_scan)
+                pts += q
+                far += regions
+                if regions:
+                    why = (
+                        f"crossed at {end:.6g}, but the profile falls below the threshold "
+                        f"again beyond it: {[tuple(np.round(r, 6)) for r in regions]}"
+                    )
+            ends.append(end)
+            reasons.append(why)
+        regions = sorted([(ends[0], ends[1]), *far])
+        hull = (min(r[0] for r in regions), max(r[1] for r in regions))
+        pts.sort(key=lambda q: q[0])
+        k = int(np.argmin([q[1] for q in pts]))
+        if pts[k][1] < -1e-6 * max(1.0, threshold[i]) and (best is None or pts[k][1] < best[0]):
+            best = (pts[k][1], pts[k][2])
+        profiles[i] = Profile(
+            i,
+            np.array([q[0] for q in pts]),
+            np.array([q[1] for q in pts]),
+            np.array([q[2] for q in pts]),
+            threshold[i],
+            np.array(hull, dtype=float),
+            tuple(reasons),
+            delta_ci[i],
+            tuple(regions),
+        )
+    return profiles, best
+
+
+@library_threads()
+def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps=40, scan=12):
+    """Profiles, likelihood-ratio intervals and delta-method intervals of a fit.
+
+    Parameters
+    ----------
+    result : InverseResult
+        From :func:`~ecfm_uq.inverse.fit` of a formulation with a likelihood (see
+        :mod:`ecfm_uq.inverse.statistics.loglik`): ``result.likelihood``.
+    level : float
+        Confidence level in (0, 1).
+    which : sequence of int, optional
+        Parameters to profile (default: all).
+    bounds : sequence of (lo, hi), optional
+        Where the profiles stop (default: the fit's ``bounds``; open otherwise).
+    max_steps : int
+        Steps per side before an end is declared open.
+    scan : int
+        Points on which the range between a crossing and a finite bound is searched for
+        a return below the threshold (``regions``); 0 stops at the crossing. A side
+        without a bound is followed to its crossing only: give bounds to have the whole
+        admissible range searched.
+
+    Returns
+    -------
+    ProfileSummary
+
+    Raises
+    ------
+    ValueError
+        If ``result`` has no likelihood (ECFM's force objective, the penalty form, ...)
+        or ``level`` is not in (0, 1).
+    """
+    like = _likelihood(result)
+    level = _check_level(level)
+    n = like.n_eps
+    which = list(range(n)) if which is None else [int(i) for i in np.atleast_1d(which)]
+    for i in which:
+        if not 0 <= i < n:
+            raise ValueError(f"`which` holds {i}, not a parameter index in [0, {n})")
+    bnds = _bounds(result, bounds, n)
+    eps_hat = np.asarray(result.eps, dtype=float)
+    ell_hat, _ = like(eps_hat)
+    if not np.isfinite(ell_hat):
+        raise ValueError(
+            f"the likelihood is not finite at the estimate ({ell_hat}); an exact fit with "
+            "sigma unknown has no likelihood interval: pass `sigma` to fit"
+        )
+    se, naive, scale = _scales(result, like, eps_hat)
+    threshold = np.full(n, profile_threshold(like, level))
+    if like.noise == "replicated" and naive is not None:
+        # a pseudo-likelihood is not the data's likelihood: its curvature is not the
+        # estimate's precision. Magnitude adjustment (Chandler & Bate 2007): scale the
+        # threshold by the robust (sandwich) over the naive (inverse-Hessian) variance
+        robust = np.where(np.isfinite(se), se**2, np.diag(naive))
+        threshold = threshold * robust / np.diag(naive)
+    z = _quantile(result, level)
+    delta_ci = np.column_stack([eps_hat - z * se, eps_hat + z * se])
+
+    recentred = []
+    for _ in range(_MAX_RECENTRE + 1):
+        profiles, best = _profiles(
+            Profiler(like, eps_hat, ell_hat, scale, bnds), which, threshold, z, bnds,
+            max_steps, delta_ci, scan,
+        )  # fmt: skip
+        if best is None:
+            break
+        # a profile found a lower likelihood: the fit did not end at its optimum; the
+        # intervals are relative to the best point found, so profile again from there
+        recentred.append(f"{best[0]:.3g} lower at eps={np.round(best[1], 6).tolist()}")
+        ell_hat, eps_hat = ell_hat + best[0], best[1]
+    notes = []
+    if recentred:
+        notes.append(
+            "the fit did not end at its optimum: the profiles found a likelihood "
+            + ", then ".join(recentred)
+            + "; the intervals are around the best point found"
+        )
+    intervals = np.full((n, 2), np.nan)
+    for i, prof_i in profiles.items():
+        intervals[i] = prof_i.interval
+        notes += [
+            f"eps[{i}] {side} {'side' if r.startswith('crossed') else 'end open'}: {r}"
+            for side, r in zip(("lower", "upper"), prof_i.reasons, strict=True)
+            if r != "crossed"
+        ]
+    disagree = np.array([i in profiles and not profiles[i].agrees for i in range(n)])
+    for i in np.flatnonzero(disagree & ~np.isfinite(se)):
+        notes.append(f"eps[{i}]: the fit has no delta-method standard error to compare with")
+    for i in np.flatnonzero(disagree & np.isfinite(se)):
+        notes.append(
+            f"eps[{i}]: the likelihood interval {intervals[i].round(6).tolist()} and the "
+            f"delta-method interval {delta_ci[i].round(6).tolist()} disagree: the quadratic "
+            "approximation behind the standard error is not to be trusted here"
+        )
+    regions = {i: list(prof_i.regions) for i, prof_i in profiles.items()}
+    summary = ProfileSummary(
+        level, intervals, delta_ci, profiles, disagree, "; ".join(notes), regions
+    )
+    result.extra["profile"] = summary
+    return summary
+
+
+def profile_intervals(result, level=0.95, **kw):
+    """Likelihood-ratio (profile-likelihood) intervals of a fit, an (n_eps, 2) array.
+
+    See :func:`profile_likelihood` for the parameters and the method. An end the data do
+    not bound is the parameter's bound or infinite (the reason is in
+    ``result.extra["profile"].message``). A ``UserWarning`` says when an interval
+    disagrees with the delta-method one.
+    """
+    summary = profile_likelihood(result, level, **kw)
+    if summary.disagree.any():
+        warnings.warn(summary.message, UserWarning, stacklevel=2)
+    return summary.intervals
+
+
+@library_threads()
+def likelihood_ratio_test(result, eps, *, free=None):
+    """Test :math:`H_0: \\epsilon = \\epsilon_0` (or a subset of it) by the likelihood ratio.
+
+    Parameters
+    ----------
+    result : InverseResult
+        A fit with a likelihood.
+    eps : (n_eps,) array_like
+        The hypothesized parameters; ``eps[free]`` are only starting values.
+    free : sequence of int, optional
+        Parameters re-optimized under :math:`H_0` (nuisance parameters); the test then has
+        ``n_eps - len(free)`` degrees of freedom.
+
+    Returns
+    -------
+    LikelihoodRatioTest
+        ``p_value`` of :math:`2(\\ell_0 - \\hat\\ell)` against :math:`\\chi^2_{\\mathrm{dof}}`;
+        ``eps`` is the point tested (with its free parameters re-optimized). ``eps`` lies
+        in the joint ``level`` confidence region iff ``p_value >= 1 - level``.
+    """
+    like = _likelihood(result)
+    n = like.n_eps
+    eps = np.asarray(eps, dtype=float)
+    if eps.shape != (n,) or not np.all(np.isfinite(eps)):
+        raise ValueError(f"`eps` must be {n} finite parameter values, got {eps.tolist()}")
+    free = [] if free is None else sorted({int(j) for j in np.atleast_1d(free)})
+    if any(not 0 <= j < n for j in free) or len(free) >= n:
+        raise ValueError(f"`free` must name fewer than {n} parameter indices in [0, {n})")
+    fixed = np.setdiff1d(np.arange(n), free)
+    eps_hat = np.asarray(result.eps, dtype=float)
+    ell_hat, _ = like(eps_hat)
+    se, naive, scale = _scales(result, like, eps_hat)
+    prof = Profiler(like, eps_hat, ell_hat, scale, _bounds(result, None, n))
+    start = eps_hat.copy()
+    start[fixed] = eps[fixed]
+    d, at = prof.at(fixed, eps[fixed], start)
+    stat = max(2.0 * d, 0.0)
+    if like.noise == "replicated":
+        if fixed.size > 1 or naive is None or not np.isfinite(se[fixed[0]]):
+            raise ValueError(
+                "a pseudo-likelihood ratio is calibrated (Chandler & Bate's adjustment) for "
+                "one tested parameter with a sandwich standard error only; pass `free` with "
+                "all other parameters"
+            )
+        stat *= naive[fixed[0], fixed[0]] / se[fixed[0]] ** 2
+    dof = len(fixed)
+    return LikelihoodRatioTest(stat, dof, float(stats.chi2.sf(stat, dof)), at)
