@@ -31,7 +31,7 @@ def test_getting_started_function_model_matches_r_nls():
     assert res.success and res.verdict.consistent is None
     np.testing.assert_allclose(res.eps, [212.7, 0.06412], rtol=5e-4)
     np.testing.assert_allclose(res.uncertainty.stderr, [6.947, 0.008281], rtol=5e-4)
-    iv = res.extra["profile"].intervals
+    iv = ns["prof"].intervals
     r = np.array([[197.3, 229.3], [0.04693, 0.08616]])
     assert np.all(np.abs(iv - r) <= 2e-3 * (r[:, 1:] - r[:, :1])), iv
 

@@ -257,8 +257,10 @@ def test_summary_reads_like_a_regression_table():
     for word in ("amplitude", "rate", "offset", "std err", "95 % interval", "delta, t(19)",
                  "CONVERGED", "no test"):  # fmt: skip
         assert word in text
-    profile_likelihood(res)
-    assert "profile" in res.summary()
+    prof = profile_likelihood(res)
+    assert "profile" in res.summary(profile=prof) and "profile" not in res.summary()
+    with pytest.raises(ValueError, match="level"):
+        res.summary(0.9, profile=prof)
     assert "consistent=None" in repr(res)
 
 
@@ -321,7 +323,7 @@ def test_profile_regions_report_a_second_basin_inside_the_bounds():
         from ecfm_uq.inverse import profile_intervals
 
         hull = profile_intervals(res)
-    summary = res.extra["profile"]
+    summary = profile_likelihood(res)
     (lo1, hi1), (lo2, hi2) = summary.regions[1]
     # the regions mirror each other (the likelihood is even in b), to the crossings' tolerance
     np.testing.assert_allclose([lo2, hi2], [-hi1, -lo1], rtol=1e-6)

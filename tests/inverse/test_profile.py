@@ -65,7 +65,7 @@ def test_linear_model_intervals_are_the_closed_form(known_sigma):
         half = stats.t.ppf(0.975, dof) * np.sqrt(rss_hat[0] / dof * cii)
     ci = profile_intervals(res, 0.95)
     np.testing.assert_allclose(ci, np.column_stack([eps_hat - half, eps_hat + half]), rtol=1e-6)
-    summary = res.extra["profile"]
+    summary = profile_likelihood(res, 0.95)
     # a linear model: the delta method is exact, on the same quantile, and agrees
     assert not summary.disagree.any(), summary.message
     np.testing.assert_allclose(summary.delta_intervals, ci, rtol=1e-6)

@@ -1,7 +1,7 @@
 """The one result of every inverse fit, with its uncertainty and its verdict.
 
 In the manner of :class:`scipy.optimize.OptimizeResult` (and of pyPESTO, where profiles
-and samples are computed *from* a result and stored beside it), every formulation —
+and samples are computed *from* a result), every formulation —
 standard, ECFM, noisy, pseudo-likelihood, steady or dynamic — returns an
 :class:`InverseResult` with the same fields:
 
@@ -279,12 +279,6 @@ class InverseResult:
                                       "adaptive"``              (dict: ``n_steps``,
                                                                 ``met``, ``max_error``,
                                                                 ``times``, ...)
-        ``profile``                   any                       the last
-                                                                :class:`~.profile.
-                                                                ProfileSummary`, written
-                                                                by :func:`~ecfm_uq.
-                                                                inverse.profile_likelihood`
-                                                                (read by :meth:`summary`)
         ============================  ========================  =========================
     """
 
@@ -345,13 +339,15 @@ class InverseResult:
             f"{np.array2string(self.eps, precision=6)}, consistent={consistent}>"
         )
 
-    def summary(self, level=0.95):
+    def summary(self, level=0.95, profile=None):
         """A table of the fit, as statsmodels and lmfit print one.
 
         One row per parameter: estimate, standard error, the ``level`` interval (the
-        profile-likelihood interval where :func:`~ecfm_uq.inverse.profile_likelihood` has
-        run at that level, else the delta-method one, labelled), then the status, the
-        measured optimality and the verdict with its test and p-value.
+        profile-likelihood interval of ``profile``, the summary
+        :func:`~ecfm_uq.inverse.profile_likelihood` returned for this fit at that level,
+        else the delta-method one, labelled), then the status, the measured optimality and
+        the verdict with its test and p-value. A profile is passed in, never stored: the
+        result does not change after the fit.
 
         Returns
         -------
@@ -359,4 +355,4 @@ class InverseResult:
         """
         from .summary_table import summary_table
 
-        return summary_table(self, level)
+        return summary_table(self, level, profile)

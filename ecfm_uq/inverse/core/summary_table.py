@@ -7,10 +7,9 @@ import numpy as np
 __all__ = ["summary_table"]
 
 
-def _interval(result, level, j):
-    """(lo, hi, label) of parameter ``j``: the profile interval where one was computed at
-    ``level``, else the delta-method one."""
-    prof = result.extra.get("profile")
+def _interval(result, level, j, prof):
+    """(lo, hi, label) of parameter ``j``: the profile interval of ``prof`` (a profile
+    summary at ``level``) where it has one, else the delta-method one."""
     if (
         prof is not None
         and abs(prof.level - level) < 1e-12
@@ -34,8 +33,14 @@ def _num(x):
     return f"{x:.6g}" if np.isfinite(x) else ("-inf" if x < 0 else "inf" if x > 0 else "n/a")
 
 
-def summary_table(result, level=0.95):
-    """The fit as text: one row per parameter, then status, optimality and verdict."""
+def summary_table(result, level=0.95, profile=None):
+    """The fit as text: one row per parameter, then status, optimality and verdict;
+    ``profile``: a profile summary whose intervals to show (else the delta method's)."""
+    if profile is not None and abs(profile.level - level) > 1e-12:
+        raise ValueError(
+            f"`profile` was computed at level {profile.level:g}, the table is at {level:g}: "
+            "pass profile_likelihood(result, level) at the table's level"
+        )
     n = result.eps.size
     names = getattr(result, "names", None) or [f"eps[{j}]" for j in range(n)]
     unc = result.uncertainty
@@ -43,7 +48,7 @@ def summary_table(result, level=0.95):
     pct = f"{100 * level:g} %"
     rows = [("parameter", "estimate", "std err", f"{pct} interval", "kind")]
     for j in range(n):
-        lo, hi, kind = _interval(result, level, j)
+        lo, hi, kind = _interval(result, level, j, profile)
         rows.append((names[j], _num(result.eps[j]), _num(se[j]), f"[{_num(lo)}, {_num(hi)}]", kind))
     widths = [max(len(r[c]) for r in rows) for c in range(5)]
     lines = [f"{result.method or 'fit'} fit ({result.optimizer or 'optimizer'})"]

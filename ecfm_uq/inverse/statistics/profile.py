@@ -417,7 +417,6 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
     summary = ProfileSummary(
         level, intervals, delta_ci, profiles, disagree, "; ".join(notes), regions
     )
-    result.extra["profile"] = summary
     return summary
 
 
@@ -425,8 +424,8 @@ def profile_intervals(result, level=0.95, **kw):
     """Likelihood-ratio (profile-likelihood) intervals of a fit, an (n_eps, 2) array.
 
     See :func:`profile_likelihood` for the parameters and the method. An end the data do
-    not bound is the parameter's bound or infinite (the reason is in
-    ``result.extra["profile"].message``). A ``UserWarning`` says when an interval
+    not bound is the parameter's bound or infinite (the reason is in the
+    :func:`profile_likelihood` summary's ``message``). A ``UserWarning`` says when an interval
     disagrees with the delta-method one.
     """
     summary = profile_likelihood(result, level, **kw)
