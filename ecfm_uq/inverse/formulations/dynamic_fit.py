@@ -62,14 +62,14 @@ def fit_dynamic_problem(problem, eps0, s):
             res, refrozen = _fit_dynamic(problem, res.eps, s), True
             check = problem.check_steps(res.eps)
     except ConvergenceError as e:  # the estimate cannot be marched or no grid meets rtol
-        res.extra["steps"] = dict(n_steps=problem.steps.n_steps, met=False, message=str(e))
-        return res
-    res.extra["steps"] = dict(
+        steps = dict(n_steps=problem.steps.n_steps, met=False, message=str(e))
+        return dataclasses.replace(res, extra={**res.extra, "steps": steps})
+    steps = dict(
         n_steps=check.n_steps, n_data=problem.n_steps, rtol=check.rtol, atol=check.atol,
         max_error=check.max_error, met=check.met, refrozen=refrozen, times=check.times,
         message=check.message,
     )  # fmt: skip
-    return res
+    return dataclasses.replace(res, extra={**res.extra, "steps": steps})
 
 
 def _fit_dynamic(problem, eps0, s):
