@@ -70,6 +70,7 @@ verdict is the same test of :math:`\\tau = 0` at the estimate: one rule for both
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -95,6 +96,7 @@ _S_GRID = np.concatenate([[0.0], np.logspace(-6, 10, 97)])
 _RESTARTS = 5  # L-BFGS-B restarts of the eps search after a stalled line search
 _N_SIM = 4000  # simulations of the test's null distribution (p-value resolution 1/4001)
 _SIM_SEED = 20_261_124  # fixed: the same data always give the same p-value
+_MEMO = 256  # points whose linearization and force variances a model remembers
 
 
 @dataclass(frozen=True)
@@ -136,6 +138,11 @@ class RandomForceModel:
         self.a0 = None  # force-to-data scale, fixed at the first linearization
         self.prior = prior
         self.n_solves = 0
+        # the last points evaluated, eps bytes -> [Linearization, (g, nll) or None]: the
+        # optimizers and the profiles come back to points they have seen (a restart, the
+        # estimate, the finite-difference stencils around it), and a point's value is a
+        # deterministic function of eps (a0 is fixed by the first linearization)
+        self._memo = OrderedDict()
 
     def linearize(self, eps):
         """:class:`Linearization` at ``eps`` (one solve and one multi-right-hand-side
@@ -220,7 +227,7 @@ class RandomForceModel:
         """:math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))`: the marginal likelihood with
         :math:`\\tau` re-estimated (REML) at ``eps`` -- the function the estimate minimizes
         (one solve); raises the model's error where it cannot be solved."""
-        lin = self.linearize(eps)
+        lin = self._linearization(eps)
         dead = np.flatnonzero(~(np.linalg.norm(lin.J, axis=0) > 0.0))
         if dead.size:
             # e.g. a reaction rate 10^eps0 that underflowed to zero: the parameter has no
@@ -231,7 +238,34 @@ class RandomForceModel:
                 f"{np.asarray(eps).tolist()} (underflow): the error contrasts of tau are "
                 "undefined there"
             )
-        return self.variances(lin)[1]
+        return self._variances(lin)[1]
+
+    def profiled(self, eps):
+        """``(nll, g, lin)`` at ``eps``: :meth:`linearize` and :meth:`variances`,
+        remembered for the last points evaluated."""
+        lin = self._linearization(eps)
+        g, val = self._variances(lin)
+        return val, g, lin
+
+    def _linearization(self, eps):
+        key = np.asarray(eps, dtype=float).tobytes()
+        hit = self._memo.get(key)
+        if hit is not None:
+            self._memo.move_to_end(key)
+            return hit[0]
+        lin = self.linearize(eps)
+        self._memo[key] = [lin, None]
+        if len(self._memo) > _MEMO:
+            self._memo.popitem(last=False)
+        return lin
+
+    def _variances(self, lin):
+        hit = self._memo.get(lin.eps.tobytes())
+        if hit is None or hit[0] is not lin:
+            return self.variances(lin)
+        if hit[1] is None:
+            hit[1] = self.variances(lin)
+        return hit[1]
 
     def variances(self, lin):
         """The force variances at ``lin`` and the marginal nll there: ``(g, nll)``, ``g``
@@ -338,9 +372,7 @@ def rms(g):
 
 
 def _profiled(model, eps):
-    lin = model.linearize(eps)
-    g, val = model.variances(lin)
-    return val, g, lin
+    return model.profiled(eps)
 
 
 class _Search:
