@@ -20,6 +20,7 @@ contact) rather than spread evenly.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from ..errors import ConvergenceError
@@ -59,28 +60,60 @@ def sparse_force_variances(A, r, sigma2, g0, rtol=1e-12):
     ConvergenceError
         If the sweeps do not settle.
     """
-    A = np.asarray(A, float)
-    r = np.asarray(r, float)
-    g = np.array(g0, float)
+    A = np.ascontiguousarray(A, dtype=float)
+    r = np.ascontiguousarray(r, dtype=float)
+    g = np.array(g0, dtype=float)
+    if A.ndim != 2 or r.shape != (A.shape[0],) or g.shape != (A.shape[1],):
+        raise ValueError(
+            f"`A` (C, n), `r` (C,) and `g0` (n,) must agree, got {A.shape}, {r.shape}, "
+            f"{g.shape}"
+        )
+    val, change, settled = _sweeps(A, r, float(sigma2), g, float(rtol), _MAX_SWEEPS, _CANCELLATION)
+    if not settled:
+        raise ConvergenceError(
+            f"the force variances did not settle in {_MAX_SWEEPS} sweeps (largest change "
+            f"{change:.3g} of {g.max():.3g}); the forces may be nearly collinear at the "
+            "sensors: use fewer forces or the shared prior (options={'force_prior': 'shared'})"
+        )
+    return g, val
+
+
+@numba.njit(cache=True)
+def _sweeps(A, r, sigma2, g, rtol, max_sweeps, cancellation):
+    """The coordinate-ascent sweeps on ``g`` (in place): ``(nll, last change, settled)``.
+
+    Each sweep starts from :math:`S^{-1}` afresh (rank-one updates within it, so round-off
+    cannot build up); where ``1 - g_i s_i`` or ``1 + delta s_i`` would cancel (force
+    ``i`` dominates S) the quantities are solved afresh instead of updated.
+    """
     C, n = A.shape
     prev = _nll(A, r, sigma2, g)
-    for _ in range(_MAX_SWEEPS):
-        # S^-1 afresh each sweep (rank-one updates within it), so round-off cannot build up
-        Si = np.linalg.inv(sigma2 * np.eye(C) + (A * g) @ A.T)
+    change = 0.0
+    for _ in range(max_sweeps):
+        Si = np.linalg.inv(_covariance(A, sigma2, g))
         Si = 0.5 * (Si + Si.T)
         change = 0.0
         for i in range(n):
-            a = A[:, i]
+            a = np.ascontiguousarray(A[:, i])
             Sa = Si @ a
-            s, q = float(a @ Sa), float(Sa @ r)
+            s = 0.0
+            q = 0.0
+            for k in range(C):
+                s += a[k] * Sa[k]
+                q += Sa[k] * r[k]
             den = 1.0 - g[i] * s  # S_{-i}^-1 from S^-1 (Sherman-Morrison, force i removed)
-            exact = not den > _CANCELLATION  # force i dominates S: 1 - g s cancels
+            exact = not den > cancellation  # force i dominates S: 1 - g s cancels
             if exact:
-                g_i, g[i] = g[i], 0.0
-                S_m = sigma2 * np.eye(C) + (A * g) @ A.T
+                g_i = g[i]
+                g[i] = 0.0
+                S_m = _covariance(A, sigma2, g)
                 g[i] = g_i
-                w = np.linalg.solve(S_m, np.column_stack([a, r]))
-                s_m, q_m = float(a @ w[:, 0]), float(a @ w[:, 1])
+                w = np.linalg.solve(S_m, np.column_stack((a, r)))
+                s_m = 0.0
+                q_m = 0.0
+                for k in range(C):
+                    s_m += a[k] * w[k, 0]
+                    q_m += a[k] * w[k, 1]
             else:
                 s_m, q_m = s / den, q / den
             new = _best_variance(s_m, q_m)
@@ -90,23 +123,24 @@ def sparse_force_variances(A, r, sigma2, g0, rtol=1e-12):
             change = max(change, abs(delta))
             g[i] = new
             den = 1.0 + delta * s
-            if exact or not den > _CANCELLATION:
-                Si = np.linalg.inv(sigma2 * np.eye(C) + (A * g) @ A.T)
+            if exact or not den > cancellation:
+                Si = np.linalg.inv(_covariance(A, sigma2, g))
             else:
-                Si -= (delta / den) * np.outer(Sa, Sa)
+                f = delta / den
+                for k in range(C):
+                    for m in range(C):
+                        Si[k, m] -= f * (Sa[k] * Sa[m])
         val = _nll(A, r, sigma2, g)
-        if change <= rtol * max(g.max(initial=0.0), 1e-300) or abs(prev - val) <= rtol * max(
-            1.0, abs(val)
-        ):
-            return g, val
+        largest = 0.0
+        for j in range(n):
+            largest = max(largest, g[j])
+        if change <= rtol * max(largest, 1e-300) or abs(prev - val) <= rtol * max(1.0, abs(val)):
+            return val, change, True
         prev = val
-    raise ConvergenceError(
-        f"the force variances did not settle in {_MAX_SWEEPS} sweeps (largest change "
-        f"{change:.3g} of {g.max():.3g}); the forces may be nearly collinear at the sensors: "
-        "use fewer forces or the shared prior (options={'force_prior': 'shared'})"
-    )
+    return prev, change, False
 
 
+@numba.njit(cache=True)
 def _best_variance(s, q):
     """The maximizer :math:`(q^2 - s)/s^2` of one force's variance, or 0; written as
     :math:`(q/s)^2 - 1/s` so that a force of small effect (tiny ``s``) does not underflow
@@ -118,8 +152,33 @@ def _best_variance(s, q):
     return new if np.isfinite(new) and new > 0.0 else 0.0
 
 
+@numba.njit(cache=True)
+def _covariance(A, sigma2, g):
+    """:math:`\\sigma^2 I + A\\,\\mathrm{diag}(g)\\,A^T`."""
+    C, n = A.shape
+    S = np.zeros((C, C))
+    for k in range(C):
+        S[k, k] = sigma2
+        for m in range(C):
+            acc = 0.0
+            for j in range(n):
+                acc += A[k, j] * g[j] * A[m, j]
+            S[k, m] += acc
+    return S
+
+
+@numba.njit(cache=True)
 def _nll(A, r, sigma2, g):
-    S = sigma2 * np.eye(A.shape[0]) + (A * g) @ A.T
-    c = np.linalg.cholesky(S)
-    w = np.linalg.solve(c, r)
-    return 0.5 * float(w @ w) + float(np.sum(np.log(np.diag(c))))
+    c = np.linalg.cholesky(_covariance(A, sigma2, g))
+    C = r.shape[0]
+    w = np.empty(C)  # c^-1 r by forward substitution
+    ww = 0.0
+    logdet = 0.0
+    for k in range(C):
+        acc = r[k]
+        for m in range(k):
+            acc -= c[k, m] * w[m]
+        w[k] = acc / c[k, k]
+        ww += w[k] * w[k]
+        logdet += np.log(c[k, k])
+    return 0.5 * ww + logdet
