@@ -198,17 +198,14 @@ class RandomForceModel:
         s_hat = 0.0
         if k > 0 and drop[k] > 0.0:
             lo, hi = _S_GRID[k - 1], _S_GRID[min(k + 1, _S_GRID.size - 1)]
-            d_lo, d_hi = self._restricted_slope(lin, lo), self._restricted_slope(lin, hi)
-            if d_lo > 0.0 > d_hi:
+            slope = self._restricted_slope(lin)
+            if slope(lo) > 0.0 > slope(hi):
                 # the stationary point to machine precision (a minimizer of a flat maximum
                 # finds it to sqrt(machine eps) only, too coarse for finite differences
                 # of the profiled likelihood in eps)
                 s_hat = float(
-                    optimize.brentq(
-                        lambda x: self._restricted_slope(lin, x), lo, hi, xtol=1e-300,
-                        rtol=4 * np.finfo(float).eps,
-                    )
-                )  # fmt: skip
+                    optimize.brentq(slope, lo, hi, xtol=1e-300, rtol=4 * np.finfo(float).eps)
+                )
                 return s_hat, self.nll(lin, s_hat)
             res = optimize.minimize_scalar(
                 lambda x: -self.restricted_drop(lin.q, lin.xi, np.array([x]))[0],
@@ -218,10 +215,21 @@ class RandomForceModel:
         return s_hat, self.nll(lin, s_hat)
 
     @staticmethod
-    def _restricted_slope(lin, s):
-        """:math:`d/ds` of :meth:`restricted_drop` at scalar ``s``."""
-        a = 1.0 + s * lin.xi
-        return float(np.sum(lin.q * lin.xi / a**2 - lin.xi / a))
+    def _restricted_slope(lin):
+        """:math:`d/ds` of :meth:`restricted_drop`, a function of scalar ``s``: Python
+        floats over the few error contrasts (Brent calls it ~20 times at every eps; a numpy
+        call per term cost more than the arithmetic). The same operations in the same
+        order as the array expression ``sum(q xi / a**2 - xi / a)``."""
+        terms = list(zip((lin.q * lin.xi).tolist(), lin.xi.tolist(), strict=True))
+
+        def slope(s):
+            total = 0.0
+            for qx, x in terms:
+                a = 1.0 + s * x
+                total += qx / (a * a) - x / a
+            return total
+
+        return slope
 
     def profiled_nll(self, eps):
         """:math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))`: the marginal likelihood with
