@@ -60,9 +60,12 @@ DEFAULTS = {
     "seed": 0,
     "n_datasets": 200,
     # the blocks whose fits cost seconds each (the beam's pseudo-likelihood, the
-    # random-force ECFM, ~13 s per data set together): 20 data sets by default so that
-    # `reproduce all` stays within ten minutes; 200 on request (~45 minutes), as v0.3 ran
-    "n_datasets_slow": 20,
+    # random-force ECFM's operator rows with their profiles and its discrepancy test):
+    # ~7 s per data set together (measured 2026-11-26 on two cores, R = 5; ~11 s before
+    # the sparse prior's sweeps were compiled), so 30 data sets by default keep the study at
+    # 380 s (measured) and `reproduce all` within ten minutes; 200 on request, as v0.3
+    # ran (each data set adds those ~7 s)
+    "n_datasets_slow": 30,
     "steady": {
         "n_basis": 20,
         "sensors": 7,
@@ -140,7 +143,7 @@ def add_arguments(parser):
         type=int,
         default=DEFAULTS["n_datasets_slow"],
         help="synthetic data sets of the beam and random-force ECFM blocks (default "
-        f"{DEFAULTS['n_datasets_slow']}; 200 reproduces the v0.3 rows: ~13 s per data set)",
+        f"{DEFAULTS['n_datasets_slow']}; 200 reproduces the v0.3 rows: ~7 s per data set)",
     )
     parser.add_argument(
         "--sigma",
