@@ -61,9 +61,12 @@ DEFAULTS = {
     "seed": 0,
     "n_datasets": 200,
     # the blocks whose fits cost seconds each (the beam's pseudo-likelihood, the
-    # random-force ECFM, ~13 s per data set together): 20 data sets by default so that
-    # `reproduce all` stays within ten minutes; 200 on request (~45 minutes), as v0.3 ran
-    "n_datasets_slow": 20,
+    # random-force ECFM's operator rows with their profiles and its discrepancy test):
+    # ~7 s per data set together (measured 2026-11-26 on two cores, R = 5; ~11 s before
+    # the sparse prior's sweeps were compiled); with 30 by default the study took 315 s
+    # (380 s while other work shared the cores; with 40: 434 s), so `reproduce all`
+    # stays within ten minutes; 200 on request, as v0.3 ran (each adds those ~7 s)
+    "n_datasets_slow": 30,
     "steady": {
         "n_basis": 20,
         "sensors": 7,
@@ -141,7 +144,7 @@ def add_arguments(parser):
         type=int,
         default=DEFAULTS["n_datasets_slow"],
         help="synthetic data sets of the beam and random-force ECFM blocks (default "
-        f"{DEFAULTS['n_datasets_slow']}; 200 reproduces the v0.3 rows: ~13 s per data set)",
+        f"{DEFAULTS['n_datasets_slow']}; 200 reproduces the v0.3 rows: ~7 s per data set)",
     )
     parser.add_argument(
         "--sigma",

@@ -19,6 +19,7 @@ system (:mod:`.galerkin`) only adds them up.
 from __future__ import annotations
 
 import copy
+import math
 import numbers
 
 import numpy as np
@@ -67,10 +68,13 @@ class Coefficient:
                 c = call_user(self._value, f"coefficient {self.label}", "value(eps)", eps)
         except (OverflowError, FloatingPointError, ZeroDivisionError) as e:
             raise _evaluation_error(self.label, eps, e) from e
-        try:
-            finite = np.all(np.isfinite(c))
-        except TypeError:
-            finite = True  # not numeric: let the caller's arithmetic say so
+        if isinstance(c, float):  # the usual case, numpy's float64 included: no array
+            finite = math.isfinite(c)
+        else:
+            try:
+                finite = np.all(np.isfinite(c))
+            except TypeError:
+                finite = True  # not numeric: let the caller's arithmetic say so
         if not finite:
             raise _evaluation_error(self.label, eps, f"value {c}")
         return c
@@ -82,7 +86,8 @@ class Coefficient:
                 g = call_user(self._grad, f"coefficient {self.label}", "grad(eps)", eps)
         except (OverflowError, FloatingPointError, ZeroDivisionError) as e:
             raise _evaluation_error(self.label, eps, e) from e
-        if not np.all(np.isfinite(g)):
+        finite = np.isfinite(g)
+        if not (finite.all() if isinstance(finite, np.ndarray) else finite):
             raise _evaluation_error(self.label, eps, "non-finite gradient")
         return g
 
@@ -607,7 +612,7 @@ class LoadTerm:
                 f"load term {self.name!r}: F(eps, t) returned shape {v.shape}, expected "
                 f"{want} (N={N} state size, P={P} chaos terms); fix the load's size"
             )
-        if not np.all(np.isfinite(v)):
+        if not np.isfinite(v).all():
             from ..errors import ModelEvaluationError
 
             raise ModelEvaluationError(f"load term {self.name!r}: F(eps, t) returned NaN or inf")

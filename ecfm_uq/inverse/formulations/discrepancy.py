@@ -71,6 +71,7 @@ for both priors.
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -101,6 +102,7 @@ _S_GRID = np.concatenate([[0.0], np.logspace(-6, 10, 97)])
 _RESTARTS = 5  # L-BFGS-B restarts of the eps search after a stalled line search
 _N_SIM = 4000  # simulations of the test's null distribution (p-value resolution 1/4001)
 _SIM_SEED = 20_261_124  # fixed: the same data always give the same p-value
+_MEMO = 256  # points whose linearization and force variances a model remembers
 
 
 @dataclass(frozen=True)
@@ -142,6 +144,11 @@ class RandomForceModel:
         self.a0 = None  # force-to-data scale, fixed at the first linearization
         self.prior = prior
         self.n_solves = 0
+        # the last points evaluated, eps bytes -> [Linearization, (g, nll) or None]: the
+        # optimizers and the profiles come back to points they have seen (a restart, the
+        # estimate, the finite-difference stencils around it), and a point's value is a
+        # deterministic function of eps (a0 is fixed by the first linearization)
+        self._memo = OrderedDict()
 
     def linearize(self, eps):
         """:class:`Linearization` at ``eps`` (one solve and one multi-right-hand-side
@@ -197,17 +204,14 @@ class RandomForceModel:
         s_hat = 0.0
         if k > 0 and drop[k] > 0.0:
             lo, hi = _S_GRID[k - 1], _S_GRID[min(k + 1, _S_GRID.size - 1)]
-            d_lo, d_hi = self._restricted_slope(lin, lo), self._restricted_slope(lin, hi)
-            if d_lo > 0.0 > d_hi:
+            slope = self._restricted_slope(lin)
+            if slope(lo) > 0.0 > slope(hi):
                 # the stationary point to machine precision (a minimizer of a flat maximum
                 # finds it to sqrt(machine eps) only, too coarse for finite differences
                 # of the profiled likelihood in eps)
                 s_hat = float(
-                    optimize.brentq(
-                        lambda x: self._restricted_slope(lin, x), lo, hi, xtol=1e-300,
-                        rtol=4 * np.finfo(float).eps,
-                    )
-                )  # fmt: skip
+                    optimize.brentq(slope, lo, hi, xtol=1e-300, rtol=4 * np.finfo(float).eps)
+                )
                 return s_hat, self.nll(lin, s_hat)
             res = optimize.minimize_scalar(
                 lambda x: -self.restricted_drop(lin.q, lin.xi, np.array([x]))[0],
@@ -217,16 +221,27 @@ class RandomForceModel:
         return s_hat, self.nll(lin, s_hat)
 
     @staticmethod
-    def _restricted_slope(lin, s):
-        """:math:`d/ds` of :meth:`restricted_drop` at scalar ``s``."""
-        a = 1.0 + s * lin.xi
-        return float(np.sum(lin.q * lin.xi / a**2 - lin.xi / a))
+    def _restricted_slope(lin):
+        """:math:`d/ds` of :meth:`restricted_drop`, a function of scalar ``s``: Python
+        floats over the few error contrasts (Brent calls it ~20 times at every eps; a numpy
+        call per term cost more than the arithmetic). The same operations in the same
+        order as the array expression ``sum(q xi / a**2 - xi / a)``."""
+        terms = list(zip((lin.q * lin.xi).tolist(), lin.xi.tolist(), strict=True))
+
+        def slope(s):
+            total = 0.0
+            for qx, x in terms:
+                a = 1.0 + s * x
+                total += qx / (a * a) - x / a
+            return total
+
+        return slope
 
     def profiled_nll(self, eps):
         """:math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))`: the marginal likelihood with
         :math:`\\tau` re-estimated (REML) at ``eps`` -- the function the estimate minimizes
         (one solve); raises the model's error where it cannot be solved."""
-        lin = self.linearize(eps)
+        lin = self._linearization(eps)
         dead = np.flatnonzero(~(np.linalg.norm(lin.J, axis=0) > 0.0))
         if dead.size:
             # e.g. a reaction rate 10^eps0 that underflowed to zero: the parameter has no
@@ -237,7 +252,34 @@ class RandomForceModel:
                 f"{np.asarray(eps).tolist()} (underflow): the error contrasts of tau are "
                 "undefined there"
             )
-        return self.variances(lin)[1]
+        return self._variances(lin)[1]
+
+    def profiled(self, eps):
+        """``(nll, g, lin)`` at ``eps``: :meth:`linearize` and :meth:`variances`,
+        remembered for the last points evaluated."""
+        lin = self._linearization(eps)
+        g, val = self._variances(lin)
+        return val, g, lin
+
+    def _linearization(self, eps):
+        key = np.asarray(eps, dtype=float).tobytes()
+        hit = self._memo.get(key)
+        if hit is not None:
+            self._memo.move_to_end(key)
+            return hit[0]
+        lin = self.linearize(eps)
+        self._memo[key] = [lin, None]
+        if len(self._memo) > _MEMO:
+            self._memo.popitem(last=False)
+        return lin
+
+    def _variances(self, lin):
+        hit = self._memo.get(lin.eps.tobytes())
+        if hit is None or hit[0] is not lin:
+            return self.variances(lin)
+        if hit[1] is None:
+            hit[1] = self.variances(lin)
+        return hit[1]
 
     def variances(self, lin):
         """The force variances at ``lin`` and the marginal nll there: ``(g, nll)``, ``g``
@@ -344,9 +386,7 @@ def rms(g):
 
 
 def _profiled(model, eps):
-    lin = model.linearize(eps)
-    g, val = model.variances(lin)
-    return val, g, lin
+    return model.profiled(eps)
 
 
 class _Search:

@@ -20,6 +20,7 @@ contact) rather than spread evenly.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from ...errors import ConvergenceError
@@ -27,6 +28,7 @@ from ...errors import ConvergenceError
 __all__ = ["sparse_force_variances"]
 
 _MAX_SWEEPS = 5000
+_SETTLED, _UNSETTLED, _NOT_POSITIVE = 0, 1, 2  # the kernel's outcome
 _CANCELLATION = 1e-6  # below this 1 - g s (or 1 + delta s) loses digits: solve afresh
 
 
@@ -59,28 +61,77 @@ def sparse_force_variances(A, r, sigma2, g0, rtol=1e-12):
     ConvergenceError
         If the sweeps do not settle.
     """
-    A = np.asarray(A, float)
-    r = np.asarray(r, float)
-    g = np.array(g0, float)
+    A = np.ascontiguousarray(A, dtype=float)
+    r = np.ascontiguousarray(r, dtype=float)
+    g = np.array(g0, dtype=float)
+    if A.ndim != 2 or r.shape != (A.shape[0],) or g.shape != (A.shape[1],):
+        raise ValueError(
+            f"`A` (C, n), `r` (C,) and `g0` (n,) must agree, got {A.shape}, {r.shape}, "
+            f"{g.shape}"
+        )
+    val, change, status = _sweeps(A, r, float(sigma2), g, float(rtol), _MAX_SWEEPS, _CANCELLATION)
+    if status == _NOT_POSITIVE:
+        raise np.linalg.LinAlgError(
+            "sigma^2 I + A diag(g) A^T is not positive definite (a negative variance or "
+            "sigma2 <= 0?)"
+        )
+    if status == _UNSETTLED:
+        raise ConvergenceError(
+            f"the force variances did not settle in {_MAX_SWEEPS} sweeps (largest change "
+            f"{change:.3g} of {g.max():.3g}); the forces may be nearly collinear at the "
+            "sensors: use fewer forces or the shared prior (options={'force_prior': 'shared'})"
+        )
+    return g, val
+
+
+@numba.njit(cache=True)
+def _sweeps(A, r, sigma2, g, rtol, max_sweeps, cancellation):
+    """The coordinate-ascent sweeps on ``g`` (in place): ``(nll, last change, status)``.
+
+    Each sweep starts from :math:`S^{-1}` afresh (rank-one updates within it, so round-off
+    cannot build up); where ``1 - g_i s_i`` or ``1 + delta s_i`` would cancel (force
+    ``i`` dominates S) the quantities are solved afresh instead of updated. Plain loops
+    and a Cholesky factorization of their own (S is symmetric positive definite), so
+    the kernel compiles in seconds.
+    """
     C, n = A.shape
-    prev = _nll(A, r, sigma2, g)
-    for _ in range(_MAX_SWEEPS):
-        # S^-1 afresh each sweep (rank-one updates within it), so round-off cannot build up
-        Si = np.linalg.inv(sigma2 * np.eye(C) + (A * g) @ A.T)
+    prev, ok = _nll(A, r, sigma2, g)
+    if not ok:
+        return prev, 0.0, _NOT_POSITIVE
+    change = 0.0
+    Sa = np.empty(C)
+    for _ in range(max_sweeps):
+        Si, ok = _inverse(_covariance(A, sigma2, g))
+        if not ok:
+            return prev, change, _NOT_POSITIVE
         Si = 0.5 * (Si + Si.T)
         change = 0.0
         for i in range(n):
-            a = A[:, i]
-            Sa = Si @ a
-            s, q = float(a @ Sa), float(Sa @ r)
+            s = 0.0
+            q = 0.0
+            for k in range(C):
+                acc = 0.0
+                for m in range(C):
+                    acc += Si[k, m] * A[m, i]
+                Sa[k] = acc
+                s += A[k, i] * acc
+                q += acc * r[k]
             den = 1.0 - g[i] * s  # S_{-i}^-1 from S^-1 (Sherman-Morrison, force i removed)
-            exact = not den > _CANCELLATION  # force i dominates S: 1 - g s cancels
+            exact = not den > cancellation  # force i dominates S: 1 - g s cancels
             if exact:
-                g_i, g[i] = g[i], 0.0
-                S_m = sigma2 * np.eye(C) + (A * g) @ A.T
+                g_i = g[i]
+                g[i] = 0.0
+                L, ok = _cholesky(_covariance(A, sigma2, g))
                 g[i] = g_i
-                w = np.linalg.solve(S_m, np.column_stack([a, r]))
-                s_m, q_m = float(a @ w[:, 0]), float(a @ w[:, 1])
+                if not ok:
+                    return prev, change, _NOT_POSITIVE
+                wa = _cho_solve(L, np.ascontiguousarray(A[:, i]))
+                wr = _cho_solve(L, r)
+                s_m = 0.0
+                q_m = 0.0
+                for k in range(C):
+                    s_m += A[k, i] * wa[k]
+                    q_m += A[k, i] * wr[k]
             else:
                 s_m, q_m = s / den, q / den
             new = _best_variance(s_m, q_m)
@@ -90,23 +141,28 @@ def sparse_force_variances(A, r, sigma2, g0, rtol=1e-12):
             change = max(change, abs(delta))
             g[i] = new
             den = 1.0 + delta * s
-            if exact or not den > _CANCELLATION:
-                Si = np.linalg.inv(sigma2 * np.eye(C) + (A * g) @ A.T)
+            if exact or not den > cancellation:
+                Si, ok = _inverse(_covariance(A, sigma2, g))
+                if not ok:
+                    return prev, change, _NOT_POSITIVE
             else:
-                Si -= (delta / den) * np.outer(Sa, Sa)
-        val = _nll(A, r, sigma2, g)
-        if change <= rtol * max(g.max(initial=0.0), 1e-300) or abs(prev - val) <= rtol * max(
-            1.0, abs(val)
-        ):
-            return g, val
+                f = delta / den
+                for k in range(C):
+                    for m in range(C):
+                        Si[k, m] -= f * (Sa[k] * Sa[m])
+        val, ok = _nll(A, r, sigma2, g)
+        if not ok:
+            return prev, change, _NOT_POSITIVE
+        largest = 0.0
+        for j in range(n):
+            largest = max(largest, g[j])
+        if change <= rtol * max(largest, 1e-300) or abs(prev - val) <= rtol * max(1.0, abs(val)):
+            return val, change, _SETTLED
         prev = val
-    raise ConvergenceError(
-        f"the force variances did not settle in {_MAX_SWEEPS} sweeps (largest change "
-        f"{change:.3g} of {g.max():.3g}); the forces may be nearly collinear at the sensors: "
-        "use fewer forces or the shared prior (options={'force_prior': 'shared'})"
-    )
+    return prev, change, _UNSETTLED
 
 
+@numba.njit(cache=True)
 def _best_variance(s, q):
     """The maximizer :math:`(q^2 - s)/s^2` of one force's variance, or 0; written as
     :math:`(q/s)^2 - 1/s` so that a force of small effect (tiny ``s``) does not underflow
@@ -118,8 +174,93 @@ def _best_variance(s, q):
     return new if np.isfinite(new) and new > 0.0 else 0.0
 
 
+@numba.njit(cache=True)
+def _covariance(A, sigma2, g):
+    """:math:`\\sigma^2 I + A\\,\\mathrm{diag}(g)\\,A^T`."""
+    C, n = A.shape
+    S = np.zeros((C, C))
+    for k in range(C):
+        S[k, k] = sigma2
+        for m in range(C):
+            acc = 0.0
+            for j in range(n):
+                acc += A[k, j] * g[j] * A[m, j]
+            S[k, m] += acc
+    return S
+
+
+@numba.njit(cache=True)
+def _cholesky(S):
+    """Lower Cholesky factor of ``S`` and whether ``S`` was positive definite."""
+    C = S.shape[0]
+    L = np.zeros((C, C))
+    for j in range(C):
+        d = S[j, j]
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if not d > 0.0:
+            return L, False
+        L[j, j] = np.sqrt(d)
+        for i in range(j + 1, C):
+            acc = S[i, j]
+            for k in range(j):
+                acc -= L[i, k] * L[j, k]
+            L[i, j] = acc / L[j, j]
+    return L, True
+
+
+@numba.njit(cache=True)
+def _forward(L, b):
+    """:math:`L^{-1} b`, ``L`` lower triangular."""
+    C = b.shape[0]
+    w = np.empty(C)
+    for k in range(C):
+        acc = b[k]
+        for m in range(k):
+            acc -= L[k, m] * w[m]
+        w[k] = acc / L[k, k]
+    return w
+
+
+@numba.njit(cache=True)
+def _cho_solve(L, b):
+    """:math:`(L L^T)^{-1} b`."""
+    w = _forward(L, b)
+    C = b.shape[0]
+    x = np.empty(C)
+    for k in range(C - 1, -1, -1):
+        acc = w[k]
+        for m in range(k + 1, C):
+            acc -= L[m, k] * x[m]
+        x[k] = acc / L[k, k]
+    return x
+
+
+@numba.njit(cache=True)
+def _inverse(S):
+    """:math:`S^{-1}` of a symmetric positive definite ``S`` (and whether it was)."""
+    C = S.shape[0]
+    L, ok = _cholesky(S)
+    Si = np.zeros((C, C))
+    if not ok:
+        return Si, False
+    e = np.zeros(C)
+    for j in range(C):
+        e[j] = 1.0
+        Si[:, j] = _cho_solve(L, e)
+        e[j] = 0.0
+    return Si, True
+
+
+@numba.njit(cache=True)
 def _nll(A, r, sigma2, g):
-    S = sigma2 * np.eye(A.shape[0]) + (A * g) @ A.T
-    c = np.linalg.cholesky(S)
-    w = np.linalg.solve(c, r)
-    return 0.5 * float(w @ w) + float(np.sum(np.log(np.diag(c))))
+    """:math:`\\tfrac12 r^T S^{-1} r + \\tfrac12\\log\\det S` and whether S was positive
+    definite."""
+    L, ok = _cholesky(_covariance(A, sigma2, g))
+    if not ok:
+        return np.inf, False
+    w = _forward(L, r)
+    val = 0.0
+    for k in range(r.shape[0]):
+        val += 0.5 * w[k] * w[k] + np.log(L[k, k])
+    return val, True
