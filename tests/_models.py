@@ -4,7 +4,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from ecfm_uq.chaos import ChaosBasis, weighted_gram
-from ecfm_uq.system import Coefficient, GalerkinSystem, LinearTerm, LoadTerm, QuadraticTerm
+from ecfm_uq.system import (
+    Coefficient,
+    GalerkinSystem,
+    LinearTerm,
+    LoadTerm,
+    NonlinearTerm,
+    QuadraticTerm,
+)
 
 
 def fd_stiffness(N, weight=np.ones_like):
@@ -57,3 +64,25 @@ def burgers_like(order, N=8):
         LoadTerm.scaled(np.sin(np.linspace(0.3, 2.8, N)), Coefficient.parameter(0)),
     ]
     return GalerkinSystem(terms, 1, basis=basis, M=np.eye(N))
+
+
+def logistic(order=0, spread=0.5):
+    """u' = a(w) u (1 - u/K), a(w) = a (1 + spread (w - 1/2)) with a uniform germ w
+    (order 0: deterministic), through the user-callback NonlinearTerm."""
+
+    def rate(w, eps):
+        return eps[0] * (1 + spread * (w[0] - 0.5)) if len(w) else eps[0]
+
+    def residual(u, w, eps):
+        return -rate(w, eps) * u * (1 - u / eps[1])
+
+    def jacobian(u, w, eps):
+        return np.array([[-rate(w, eps) * (1 - 2 * u[0] / eps[1])]])
+
+    def eps_jacobian(u, w, eps):
+        a = rate(w, eps)
+        return np.array([[-a / eps[0] * u[0] * (1 - u[0] / eps[1]), -a * u[0] ** 2 / eps[1] ** 2]])
+
+    term = NonlinearTerm(residual, jacobian, eps_jacobian=eps_jacobian, degree=3, size=1)
+    basis = ChaosBasis(order, 1) if order else None
+    return GalerkinSystem([term], 2, basis=basis, M=np.eye(1), name="logistic")

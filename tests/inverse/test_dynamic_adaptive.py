@@ -6,39 +6,16 @@ another code) for the chaos (P > 1) models."""
 
 import numpy as np
 import pytest
-from _models import diffusion
+from _models import diffusion, logistic
 
-from ecfm_uq.chaos import ChaosBasis
 from ecfm_uq.inverse import fit
 from ecfm_uq.inverse.core.finite_differences import fd_gradient
 from ecfm_uq.inverse.problems.dynamic import DynamicInverseProblem
-from ecfm_uq.system import GalerkinSystem, NonlinearTerm, integrate, march
+from ecfm_uq.system import integrate, march
 from ecfm_uq.system.step_control import step_errors
 
 TRUE = np.array([1.5, 2.0])  # growth rate a, capacity K
 U0, T, N_DATA = 0.1, 6.0, 8
-
-
-def logistic(order=0, spread=0.5):
-    """u' = a(w) u (1 - u/K), a(w) = a (1 + spread (w - 1/2)) with a uniform germ w
-    (order 0: deterministic), through the user-callback NonlinearTerm."""
-
-    def rate(w, eps):
-        return eps[0] * (1 + spread * (w[0] - 0.5)) if len(w) else eps[0]
-
-    def residual(u, w, eps):
-        return -rate(w, eps) * u * (1 - u / eps[1])
-
-    def jacobian(u, w, eps):
-        return np.array([[-rate(w, eps) * (1 - 2 * u[0] / eps[1])]])
-
-    def eps_jacobian(u, w, eps):
-        a = rate(w, eps)
-        return np.array([[-a / eps[0] * u[0] * (1 - u[0] / eps[1]), -a * u[0] ** 2 / eps[1] ** 2]])
-
-    term = NonlinearTerm(residual, jacobian, eps_jacobian=eps_jacobian, degree=3, size=1)
-    basis = ChaosBasis(order, 1) if order else None
-    return GalerkinSystem([term], 2, basis=basis, M=np.eye(1), name="logistic")
 
 
 def closed_form(t, a, K):

@@ -8,14 +8,14 @@ by their message, before any march."""
 
 import numpy as np
 import pytest
-from _models import diffusion
+from _models import diffusion, logistic
 from scipy import optimize
 
 from ecfm_uq.inverse import DynamicInverseProblem, ModelProblem, fit, profile_intervals
 from ecfm_uq.inverse.core.finite_differences import fd_gradient
 from ecfm_uq.inverse.problems.whitening import dynamic_noise_model, whitened_problem
 from ecfm_uq.problems.burgers import BurgersModel
-from ecfm_uq.system import GalerkinSystem, NonlinearTerm, march
+from ecfm_uq.system import march
 
 EPS0 = [1.5, 0.5]
 
@@ -238,17 +238,7 @@ def test_adaptive_scheme_logistic_growth_per_reading_sigma_equals_model_problem(
     """The logistic growth u' = a u (1 - u/K) on the frozen error-controlled grid of
     scheme='adaptive' (steps between the data times), one sensor, noise 1 % to 10 %."""
 
-    def residual(u, w, eps):
-        return -eps[0] * u * (1 - u / eps[1])
-
-    def jacobian(u, w, eps):
-        return np.array([[-eps[0] * (1 - 2 * u[0] / eps[1])]])
-
-    def eps_jacobian(u, w, eps):
-        return np.array([[-u[0] * (1 - u[0] / eps[1]), -eps[0] * u[0] ** 2 / eps[1] ** 2]])
-
-    term = NonlinearTerm(residual, jacobian, eps_jacobian=eps_jacobian, degree=3, size=1)
-    system = GalerkinSystem([term], 2, M=np.eye(1), name="logistic")
+    system = logistic()
     T, n = 6.0, 8
     t = np.linspace(0.0, T, n + 1)
     V0 = (2.0 / (1 + (2.0 / 0.1 - 1) * np.exp(-1.5 * t)))[:, None]  # a = 1.5, K = 2
