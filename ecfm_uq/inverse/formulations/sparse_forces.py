@@ -66,8 +66,7 @@ def sparse_force_variances(A, r, sigma2, g0, rtol=1e-12):
     g = np.array(g0, dtype=float)
     if A.ndim != 2 or r.shape != (A.shape[0],) or g.shape != (A.shape[1],):
         raise ValueError(
-            f"`A` (C, n), `r` (C,) and `g0` (n,) must agree, got {A.shape}, {r.shape}, "
-            f"{g.shape}"
+            f"`A` (C, n), `r` (C,) and `g0` (n,) must agree, got {A.shape}, {r.shape}, {g.shape}"
         )
     val, change, status = _sweeps(A, r, float(sigma2), g, float(rtol), _MAX_SWEEPS, _CANCELLATION)
     if status == _NOT_POSITIVE:
