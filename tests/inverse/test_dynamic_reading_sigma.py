@@ -177,9 +177,15 @@ def test_the_exact_match_ecfm_estimate_ignores_a_per_reading_sigma(burgers):
     m, V, sig = burgers
     res = fit(_dynamic(m, V), EPS0, formulation="ecfm", sigma=sig)
     plain = fit(_dynamic(m, V), EPS0, formulation="ecfm")
-    assert res.success, res.message
-    np.testing.assert_allclose(res.eps, plain.eps, rtol=1e-10)
-    np.testing.assert_allclose(res.forces, plain.forces, rtol=1e-8, atol=1e-10)
+    assert res.success and plain.success, res.message
+    # two optimizer runs of one objective: equal to the precision the status test certifies
+    # (a Gauss-Newton step below 1e-6 sqrt(p) standard errors; measured 0 with the current
+    # scipy, 4e-8 standard errors with the minimum versions); were sigma to move the ECFM
+    # estimate, it would move it by a fraction of a standard error
+    np.testing.assert_allclose(res.eps, plain.eps, rtol=0, atol=1e-6 * res.uncertainty.stderr.min())
+    # at one eps the forces (no optimizer involved) are those of the problem without sigma
+    forces = _dynamic(m, V).solve(res.eps, "ecfm").lam
+    np.testing.assert_allclose(res.forces, forces, rtol=1e-8, atol=1e-10 * np.abs(forces).max())
     D = res.uncertainty.jacobian
     np.testing.assert_allclose(res.uncertainty.cov, D @ np.diag(sig.ravel() ** 2) @ D.T,
                                rtol=1e-8)  # fmt: skip
