@@ -196,11 +196,7 @@ def integrate(
     if system.M is None:
         system.mass_matrix()  # raises the "no mass matrix" error
     N, P = system.shape
-    Theta0 = as_finite_array("Theta0", Theta0)
-    if Theta0.shape == (N,):
-        Theta0 = np.outer(Theta0, np.eye(P)[0])
-    if Theta0.shape != (N, P):
-        raise ValueError(f"`Theta0` must have shape {(N, P)} or {(N,)}, got {Theta0.shape}")
+    Theta0 = system.check_initial_state(Theta0)
     if atol is None:
         big = float(np.abs(Theta0).max())
         atol = rtol * (big if big > 0 else 1.0)

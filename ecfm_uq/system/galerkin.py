@@ -177,6 +177,17 @@ class GalerkinSystem:
         eps = np.atleast_1d(as_finite_array("eps", eps))  # strings, ragged lists refused
         return as_finite_array("eps", eps, shape=(self.n_eps,))
 
+    def check_initial_state(self, Theta0):
+        """Validate an initial state: (N, P) chaos coefficients, or (N,) a deterministic
+        state (its mean coefficients, the rest zero); returned as (N, P)."""
+        N, P = self.shape
+        Theta0 = as_finite_array("Theta0", Theta0)
+        if Theta0.shape == (N,):
+            Theta0 = np.outer(Theta0, np.eye(P)[0])
+        if Theta0.shape != (N, P):
+            raise ValueError(f"`Theta0` must have shape {(N, P)} or {(N,)}, got {Theta0.shape}")
+        return Theta0
+
     def check_lam(self, lam):
         """Validate ``lam`` (None means zero forces)."""
         if lam is None:

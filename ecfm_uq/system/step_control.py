@@ -274,9 +274,7 @@ def choose_steps(
     max_steps = check_int("max_steps", max_steps, minimum=MIN_STEPS)
     eps = system.check_eps(eps)
     N, P = system.shape
-    Theta0 = as_finite_array("Theta0", Theta0)
-    if Theta0.shape == (N,):
-        Theta0 = np.outer(Theta0, np.eye(P)[0])
+    Theta0 = system.check_initial_state(Theta0)
     atol = default_atol(rtol, Theta0) if atol is None else atol
     times = t_data.copy()
     if start is not None:

@@ -165,11 +165,7 @@ def march(
     scheme = check_scheme(scheme)
     N, P = system.shape
     n = N * P
-    Theta0 = as_finite_array("Theta0", Theta0)
-    if Theta0.shape == (N,):
-        Theta0 = np.outer(Theta0, np.eye(P)[0])
-    if Theta0.shape != (N, P):
-        raise ValueError(f"`Theta0` must have shape {(N, P)} or {(N,)}, got {Theta0.shape}")
+    Theta0 = system.check_initial_state(Theta0)
     M_obs, V = _check_constraint(system, constraint, n_rows=n_steps + 1)
     constrained = M_obs is not None
     C = system.n_forces if constrained else 0

@@ -160,12 +160,7 @@ class DynamicInverseProblem(InverseProblem):
         self.steps = None  # the frozen StepSequence of scheme="adaptive"
         self._last = {}  # formulation -> last trajectory (the warm start)
         N, P = system.shape
-        Theta0 = as_finite_array("Theta0", Theta0)
-        if Theta0.shape == (N,):
-            Theta0 = np.outer(Theta0, np.eye(P)[0])
-        if Theta0.shape != (N, P):
-            raise ValueError(f"`Theta0` must have shape {(N,)} or {(N, P)}, got {Theta0.shape}")
-        self.Theta0 = Theta0
+        self.Theta0 = system.check_initial_state(Theta0)
         self.M_obs = as_dense_rows("M_obs", M_obs)
         if self.M_obs.shape[1] != N:
             raise ValueError(f"`M_obs` must have N = {N} columns, got shape {self.M_obs.shape}")
