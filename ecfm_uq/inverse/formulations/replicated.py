@@ -81,21 +81,6 @@ __all__ = ["fit_replicated_problem"]
 FORMULATIONS = ("inner-outer", "penalty", "standard")
 
 
-def _bounds(bounds, n):
-    if bounds is None:
-        return None
-    try:
-        b = [
-            (None if lo is None else float(lo), None if hi is None else float(hi))
-            for lo, hi in bounds
-        ]
-    except (TypeError, ValueError) as e:
-        raise TypeError("`bounds` must be a sequence of (lo, hi) pairs, one per eps") from e
-    if len(b) != n:
-        raise ValueError(f"`bounds` must have {n} (lo, hi) pairs (one per eps), got {len(b)}")
-    return b
-
-
 _FAILURES = (ConvergenceError, DegenerateVarianceError)
 
 
