@@ -78,6 +78,7 @@ __all__ = [
     "gradient_optimality",
     "kkt_optimality",
     "least_squares_optimality",
+    "bounds_arrays",
     "polish_least_squares",
     "scaled_gradient_optimality",
 ]
@@ -195,32 +196,32 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
         return Optimality(True, 0.0, "kkt", tol, "every parameter held at a bound (KKT)")
     Jf = J[:, free]
     n, p = Jf.shape
-    Q, R = np.linalg.qr(Jf)
-    qr = Q.T @ r
-    orth = r - Q @ qr
-    norm_orth = float(np.linalg.norm(orth))
+    # one SVD of the columns scaled to unit norm (parameters' units do not matter) gives
+    # all three: the rank, the orthonormal basis of the column space for the offset (the
+    # offset needs a full-rank J: its basis would hold arbitrary directions otherwise) and
+    # the minimum-norm Gauss-Newton step on the scaled columns, so a column of tiny norm (a
+    # rate gone to infinity, the model flat in it) still counts, and only exactly parallel
+    # columns (a combination the data cannot see) are left out
+    norms = np.linalg.norm(Jf, axis=0)
+    if np.all(norms > 0):
+        U, sv, Vt = np.linalg.svd(Jf / norms, full_matrices=False)
+        rank_ok = bool(sv[-1] > RANK_RCOND * sv[0])
+        ur = U.T @ r
+        keep = sv > np.finfo(float).eps * max(n, p) * sv[0]  # lstsq's default cut-off
+        delta = -(Vt[keep].T @ (ur[keep] / sv[keep])) / norms
+        norm_orth = float(np.linalg.norm(r - U @ ur))
+        norm_proj = float(np.linalg.norm(ur))
+    else:
+        rank_ok = False
+        delta = np.full(p, np.inf)
+        norm_orth = norm_proj = 0.0  # no offset: the step test decides
     if n > p and norm_orth > 0:
-        offset = (np.linalg.norm(qr) / np.sqrt(p)) / (norm_orth / np.sqrt(n - p))
+        offset = (norm_proj / np.sqrt(p)) / (norm_orth / np.sqrt(n - p))
     elif np.linalg.norm(r) == 0:
         offset = 0.0
     else:
         offset = np.inf  # nothing to compare with: the step test decides
     offset = float(offset)
-    # rank on the columns scaled to unit norm (parameters' units do not matter): the
-    # offset needs a full-rank J (its Q1 would hold arbitrary directions); the step is
-    # the minimum-norm one on the scaled columns, so a column of tiny norm (a rate gone
-    # to infinity, the model flat in it) still counts, and only exactly parallel columns
-    # (a combination the data cannot see) are left out
-    norms = np.linalg.norm(Jf, axis=0)
-    if np.all(norms > 0):
-        sv = np.linalg.svd(Jf / norms, compute_uv=False)
-        rank_ok = bool(sv[-1] > RANK_RCOND * sv[0])
-        # the Gauss-Newton step, on the scaled columns too (an unscaled least-squares
-        # solve would drop a column of tiny norm as if it were zero)
-        delta = np.linalg.lstsq(Jf / norms, -r, rcond=None)[0] / norms
-    else:
-        rank_ok = False
-        delta = np.full(p, np.inf)
     # relative to each parameter (a parameter at exactly 0: to the largest, else 1)
     ref = np.abs(eps[free])
     ref[ref == 0] = np.abs(eps).max() or 1.0
@@ -421,11 +422,8 @@ def polish_least_squares(residual, eps, *, bounds=None, maxiter=20, tol=OFFSET_T
     """
     from ...errors import ConvergenceError
 
-    lo = hi = None
-    if bounds is not None:
-        lo = np.array([-np.inf if b[0] is None else b[0] for b in bounds])
-        hi = np.array([np.inf if b[1] is None else b[1] for b in bounds])
     x = np.asarray(eps, dtype=float).copy()
+    lo, hi = bounds_arrays(bounds, x.size)
     ev = residual(x)
     nfev = 1
     opt = least_squares_optimality(ev[0], ev[1], x, bounds=bounds, tol=tol, xtol=xtol)
@@ -442,9 +440,7 @@ def polish_least_squares(residual, eps, *, bounds=None, maxiter=20, tol=OFFSET_T
             # (J^T J + mu D^2) step = -g, via the augmented least-squares system
             Aug = np.vstack([J, np.sqrt(mu) * np.diag(d)])
             step = np.linalg.lstsq(Aug, -np.concatenate([r, np.zeros(x.size)]), rcond=None)[0]
-            xt = x + step
-            if lo is not None:
-                xt = np.clip(xt, lo, hi)
+            xt = np.clip(x + step, lo, hi)
             if np.array_equal(xt, x):
                 break
             try:
@@ -472,3 +468,13 @@ def polish_least_squares(residual, eps, *, bounds=None, maxiter=20, tol=OFFSET_T
             break
         opt = least_squares_optimality(ev[0], ev[1], x, bounds=bounds, tol=tol, xtol=xtol)
     return x, ev, opt, nfev
+
+
+def bounds_arrays(bounds, p):
+    """``bounds`` (a list of (lo, hi), None for no bound, or None) as two (p,) arrays
+    with infinities where there is no bound."""
+    if bounds is None:
+        return np.full(p, -np.inf), np.full(p, np.inf)
+    lo = np.array([-np.inf if b[0] is None else b[0] for b in bounds], dtype=float)
+    hi = np.array([np.inf if b[1] is None else b[1] for b in bounds], dtype=float)
+    return lo, hi

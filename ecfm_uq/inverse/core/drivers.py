@@ -19,6 +19,7 @@ import scipy.optimize as sopt
 from ...errors import ConvergenceError
 from .convergence import (
     OFFSET_TOL,
+    bounds_arrays,
     decide_status,
     least_squares_optimality,
     polish_least_squares,
@@ -323,11 +324,7 @@ def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options):
             return np.zeros((r0.size, np.size(x)))
         return np.asarray(ev[1], dtype=float).reshape(r0.size, -1) / scale
 
-    lb = -np.inf * np.ones(len(eps0))
-    ub = np.inf * np.ones(len(eps0))
-    if bounds is not None:
-        lb = np.array([-np.inf if b[0] is None else b[0] for b in bounds], dtype=float)
-        ub = np.array([np.inf if b[1] is None else b[1] for b in bounds], dtype=float)
+    lb, ub = bounds_arrays(bounds, len(eps0))
     kw = {"method": "trf", "x_scale": "jac", "ftol": 1e-15, "xtol": 1e-15, "gtol": 1e-15}
     kw.update(options)
     res = sopt.least_squares(fun, eps0, jac=jac, bounds=(lb, ub), max_nfev=maxiter, **kw)

@@ -93,6 +93,16 @@ def fd_jacobian(fun, x, *, method="2-point", steps=None, typical=None, f0=None, 
         return np.column_stack(outs) if outs else np.zeros((0, 0))
     if method not in FD_METHODS:
         raise ValueError(f"`method` must be one of {FD_METHODS}, got {method!r}")
+    if method == "2-point" and f0 is not None and map_points is None:
+        # the common case (an optimizer's Jacobian at a point it evaluated): no stencil
+        base = np.asarray(f0, dtype=float).ravel()
+        J = np.empty((base.size, cols.size))
+        for c, j in enumerate(cols):
+            e = x.copy()
+            e[j] = x[j] + h[j]
+            # the step actually taken (x + h rounded) divides, not h
+            J[:, c] = (np.asarray(fun(e), dtype=float).ravel() - base) / (e[j] - x[j])
+        return J
     offsets = _offsets(method)
     points = []
     for j in cols:

@@ -119,7 +119,7 @@ class ModelProblem(InverseProblem):
                 f"shape {self.shape}: `model` must predict every observation"
             )
         y = y.ravel()
-        if not np.all(np.isfinite(y)):
+        if not np.isfinite(y).all():
             bad = np.flatnonzero(~np.isfinite(y))
             msg = (
                 f"{_describe_call('model', eps)} returned {bad.size} non-finite value(s) "
