@@ -8,7 +8,9 @@ equations, the data or a parameter by a positive constant changes no decision.
 
 Least squares, :math:`z = \\tfrac12\\|r(\\epsilon)\\|^2` with Jacobian :math:`J`
 (:func:`least_squares_optimality`)
-    With :math:`J = Q_1 R_1` (thin QR, :math:`n` residuals, :math:`p` free parameters),
+    With :math:`Q_1` an orthonormal basis of the columns of :math:`J` (:math:`n`
+    residuals, :math:`p` free parameters; computed here from the thin SVD of :math:`J`
+    with its columns scaled to unit norm, which also gives the rank and the step below),
     the **relative offset** of Bates and Watts (1981)
 
     .. math::
@@ -16,7 +18,7 @@ Least squares, :math:`z = \\tfrac12\\|r(\\epsilon)\\|^2` with Jacobian :math:`J`
         c = \\frac{\\|Q_1^T r\\| / \\sqrt p}{\\|r - Q_1 Q_1^T r\\| / \\sqrt{n - p}}
 
     compares the part of the residual the model could still remove (the Gauss-Newton
-    step, :math:`R_1\\delta = -Q_1^T r`) with the part it cannot: :math:`c\\sqrt p` bounds
+    step, :math:`J\\delta = -Q_1Q_1^T r`) with the part it cannot: :math:`c\\sqrt p` bounds
     the Gauss-Newton step in units of the estimate's own standard errors. It does not
     depend on how :math:`J` is scaled, so it refuses a point where the gradient vanishes
     only because the model flattens out (an asymptote: :math:`J \\to 0`, the residual
