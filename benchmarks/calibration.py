@@ -11,8 +11,9 @@ Jacobian given: issue 28's size, two parameters), fitted from the same start
   parameters) against a profile computed with scipy alone: each parameter fixed, the
   others refitted by warm-started ``least_squares``, the threshold crossing by Brent.
 
-Each is timed as the best of ``--repeat`` runs in this one process (the machine is shared:
-best-of is the least noisy statistic); the estimates and intervals are compared too.
+Each is timed as the best of ``--repeat`` runs in this one process, ours and scipy's taking
+turns (the machine is shared: best-of is the least noisy statistic, and alternating keeps a
+change of load from favouring either side); the estimates and intervals are compared too.
 
 Last lines: ``calibration fit/scipy time ratio: <float>`` and ``calibration
 profile/scipy-profile time ratio: <float>``.
@@ -74,13 +75,18 @@ def scipy_profile(y, ls, se, level=0.95):
     return out
 
 
-def best_of(fn, repeat):
-    times, value = [], None
+def best_of(fns, repeat):
+    """Best time of each function over ``repeat`` rounds, the functions taking turns
+    within each round (a change of the machine's load hits both sides alike); returns
+    the best times and the last values."""
+    times = [[] for _ in fns]
+    values = [None] * len(fns)
     for _ in range(repeat):
-        t0 = time.perf_counter()
-        value = fn()
-        times.append(time.perf_counter() - t0)
-    return min(times), value
+        for k, fn in enumerate(fns):
+            t0 = time.perf_counter()
+            values[k] = fn()
+            times[k].append(time.perf_counter() - t0)
+    return [min(t) for t in times], values
 
 
 def main(argv=None):
@@ -91,16 +97,18 @@ def main(argv=None):
     problem = ModelProblem(model, y)
     fit(problem, START)  # first call: imports
 
-    t_fit, res = best_of(lambda: fit(problem, START), args.repeat)
-    t_sp, (ls, se) = best_of(lambda: scipy_fit(y), args.repeat)
+    (t_fit, t_sp), (res, (ls, se)) = best_of(
+        [lambda: fit(problem, START), lambda: scipy_fit(y)], args.repeat
+    )
     print(f"estimates: ecfm_uq {res.eps.round(8)}, scipy {ls.x.round(8)}")
     print(f"  largest relative difference {np.max(np.abs(res.eps / ls.x - 1)):.1e}; "
           f"standard errors {np.max(np.abs(res.uncertainty.stderr / se - 1)):.1e}")  # fmt: skip
     print(f"fit: ecfm_uq {1e3 * t_fit:.2f} ms, scipy least_squares {1e3 * t_sp:.2f} ms")
 
     rep = max(3, args.repeat // 5)
-    t_prof, summary = best_of(lambda: profile_likelihood(res), rep)
-    t_sprof, ref = best_of(lambda: scipy_profile(y, ls, se), rep)
+    (t_prof, t_sprof), (summary, ref) = best_of(
+        [lambda: profile_likelihood(res), lambda: scipy_profile(y, ls, se)], rep
+    )
     width = ref[:, 1] - ref[:, 0]
     diff = np.max(np.abs(summary.intervals - ref), axis=1) / width
     print(f"profile intervals: ecfm_uq {summary.intervals.round(6).tolist()}")

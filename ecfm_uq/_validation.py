@@ -29,7 +29,7 @@ def as_finite_array(name, value, *, ndim=None, shape=None, dtype=float):
         ):
             want = tuple("any" if s is None else s for s in shape)
             raise ValueError(f"`{name}` must have shape {want}, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         raise ValueError(f"`{name}` contains NaN or inf; pass finite values only")
     return arr
 

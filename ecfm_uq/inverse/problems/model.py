@@ -119,7 +119,9 @@ class ModelProblem(InverseProblem):
                 f"shape {self.shape}: `model` must predict every observation"
             )
         y = y.ravel()
-        if not np.isfinite(y).all():
+        # a finite sum means every value is finite (NaN and inf propagate): one reduction
+        # on the common path, the elementwise test only when the sum is not finite
+        if not np.isfinite(y.sum()) and not np.isfinite(y).all():
             bad = np.flatnonzero(~np.isfinite(y))
             msg = (
                 f"{_describe_call('model', eps)} returned {bad.size} non-finite value(s) "
@@ -305,7 +307,7 @@ def fit_model_problem(problem, eps0, s):
                 unc = Uncertainty.failed(f"uncertainty not computed: {e}")
             else:
                 unc = estimate_uncertainty(None, out.x, r, s2, how, dof=dof, deps_dv=D)
-                if unc.jacobian is not None:  # d eps/d(W v) as d eps/dv: the data's units
+                if unc.jacobian is not None and noise.known:  # d eps/d(W v) as d eps/dv
                     unc = dataclasses.replace(unc, jacobian=noise.pull_back(unc.jacobian))
         else:
             unc = Uncertainty.failed("uncertainty not computed: as many parameters as data "
