@@ -63,7 +63,7 @@ DEFAULTS = {
     # the blocks whose fits cost seconds each (the beam's pseudo-likelihood, the
     # random-force ECFM's operator rows with their profiles and its discrepancy test):
     # ~7 s per data set together (measured 2026-11-26 on two cores, R = 5; ~11 s before
-    # the sparse prior's sweeps were compiled); with 30 by default the study took 370 s in
+    # the sparse prior's sweeps were compiled); with 30 by default the study took 370-377 s in
     # a fresh clone (315 s with the kernel compiled already; with 40: 434 s), so `reproduce all`
     # stays within ten minutes; 200 on request, as v0.3 ran (each adds those ~7 s)
     "n_datasets_slow": 30,
