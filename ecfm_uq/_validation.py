@@ -29,9 +29,16 @@ def as_finite_array(name, value, *, ndim=None, shape=None, dtype=float):
         ):
             want = tuple("any" if s is None else s for s in shape)
             raise ValueError(f"`{name}` must have shape {want}, got {arr.shape}")
-    if not np.isfinite(arr).all():
+    if not all_finite(arr):
         raise ValueError(f"`{name}` contains NaN or inf; pass finite values only")
     return arr
+
+
+def all_finite(arr):
+    """Whether every value of the float array ``arr`` is finite: a finite sum says so (NaN
+    and inf propagate through it) in one reduction; the elementwise test runs only when
+    the sum is not finite (a bad value, or finite values whose sum overflows)."""
+    return bool(np.isfinite(arr.sum())) or bool(np.isfinite(arr).all())
 
 
 def describe(value):

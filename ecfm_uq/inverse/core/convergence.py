@@ -70,6 +70,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.optimize
 
+from ..._validation import all_finite
 from .status import FitStatus
 
 __all__ = [
@@ -90,6 +91,7 @@ __all__ = [
 AT_BOUND_RTOL = 1e-8
 #: relative-offset tolerance of the least-squares test
 OFFSET_TOL = 1e-6
+_EPS = float(np.finfo(float).eps)
 #: Gauss-Newton step tolerance, relative to the parameters (exact-fit problems)
 XTOL = 1e-8
 #: a Jacobian whose columns, scaled to unit norm, have smallest/largest singular value
@@ -190,11 +192,11 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
     r = np.asarray(r, dtype=float).ravel()
     J = np.asarray(J, dtype=float).reshape(r.size, -1)
     eps = np.asarray(eps, dtype=float).ravel()
-    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
+    if not (all_finite(r) and all_finite(J)):
         return Optimality(False, np.inf, "relative offset", tol, "non-finite residual or Jacobian")
     g = J.T @ r
     free = ~active_bounds(eps, g, bounds)
-    if not np.any(free):
+    if not free.any():
         return Optimality(True, 0.0, "kkt", tol, "every parameter held at a bound (KKT)")
     Jf = J[:, free]
     n, p = Jf.shape
@@ -205,11 +207,11 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
     # rate gone to infinity, the model flat in it) still counts, and only exactly parallel
     # columns (a combination the data cannot see) are left out
     norms = np.linalg.norm(Jf, axis=0)
-    if np.all(norms > 0):
+    if (norms > 0).all():
         U, sv, Vt = np.linalg.svd(Jf / norms, full_matrices=False)
         rank_ok = bool(sv[-1] > RANK_RCOND * sv[0])
         ur = U.T @ r
-        keep = sv > np.finfo(float).eps * max(n, p) * sv[0]  # lstsq's default cut-off
+        keep = sv > _EPS * max(n, p) * sv[0]  # lstsq's default cut-off
         delta = -(Vt[keep].T @ (ur[keep] / sv[keep])) / norms
         norm_orth = float(np.linalg.norm(r - U @ ur))
         norm_proj = float(np.linalg.norm(ur))

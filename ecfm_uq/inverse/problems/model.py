@@ -24,7 +24,7 @@ import dataclasses
 
 import numpy as np
 
-from ..._validation import as_finite_array
+from ..._validation import all_finite, as_finite_array
 from ...errors import ConvergenceError, ModelEvaluationError
 from ..core.finite_differences import fd_jacobian
 from .interface import InverseProblem
@@ -119,9 +119,7 @@ class ModelProblem(InverseProblem):
                 f"shape {self.shape}: `model` must predict every observation"
             )
         y = y.ravel()
-        # a finite sum means every value is finite (NaN and inf propagate): one reduction
-        # on the common path, the elementwise test only when the sum is not finite
-        if not np.isfinite(y.sum()) and not np.isfinite(y).all():
+        if not all_finite(y):
             bad = np.flatnonzero(~np.isfinite(y))
             msg = (
                 f"{_describe_call('model', eps)} returned {bad.size} non-finite value(s) "
