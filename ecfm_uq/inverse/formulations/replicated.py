@@ -67,6 +67,7 @@ from ..core.convergence import (
     DECREMENT_TOL,
     Optimality,
     at_bound,
+    bounds_arrays,
     decide_status,
     gradient_optimality,
 )
@@ -149,11 +150,7 @@ def _trust_region(fun, eps0, bounds, gtol, maxiter, trust_radius):
             "inner solve fails there); choose a start where the model can be solved"
         )
     scale = max(1.0, float(np.abs(g0).max()))
-    b = None
-    if bounds is not None:
-        lo = [-np.inf if lo is None else lo for lo, _ in bounds]
-        hi = [np.inf if hi is None else hi for _, hi in bounds]
-        b = sopt.Bounds(lo, hi)
+    b = None if bounds is None else sopt.Bounds(*bounds_arrays(bounds, len(eps0)))
     with warnings.catch_warnings():
         # trust-constr warns when it swaps its bound-handling method; not a failure
         warnings.simplefilter("ignore", UserWarning)

@@ -225,21 +225,23 @@ class PseudoLikelihood:
             "ik,kl,ilqm->iqm", A, self.Cpsi, A_le
         )
 
-        def outer(a, b, w):
-            return np.einsum("i,iq,ir->qr", w, a, b)
+        def gauss_newton(mu_a, s_a, mu_b, s_b):
+            """The second derivatives of Lambda in the moments, contracted with the
+            moments' first derivatives in a and in b."""
 
-        H_ll = (
-            outer(mu_l, mu_l, f_mumu)
-            + outer(mu_l, s_l, f_mus)
-            + outer(s_l, mu_l, f_mus)
-            + outer(s_l, s_l, f_ss)
-            + np.einsum("i,iqr->qr", f_s, s_ll)
-        )
+            def outer(a, b, w):
+                return np.einsum("i,iq,ir->qr", w, a, b)
+
+            return (
+                outer(mu_a, mu_b, f_mumu)
+                + outer(mu_a, s_b, f_mus)
+                + outer(s_a, mu_b, f_mus)
+                + outer(s_a, s_b, f_ss)
+            )
+
+        H_ll = gauss_newton(mu_l, s_l, mu_l, s_l) + np.einsum("i,iqr->qr", f_s, s_ll)
         H_le = (
-            outer(mu_l, mu_e, f_mumu)
-            + outer(mu_l, s_e, f_mus)
-            + outer(s_l, mu_e, f_mus)
-            + outer(s_l, s_e, f_ss)
+            gauss_newton(mu_l, s_l, mu_e, s_e)
             + np.einsum("i,iqm->qm", f_mu, mu_le)
             + np.einsum("i,iqm->qm", f_s, s_le)
         )

@@ -42,6 +42,7 @@ import numpy as np
 from scipy import stats
 
 from ...threads import library_threads
+from ..core.convergence import bounds_arrays
 from .profiler import MODEL_FAILURES, Profiler, beyond, walk
 from .uncertainty import interval_quantile
 
@@ -231,10 +232,8 @@ def _bounds(result, bounds, n):
         return [(-np.inf, np.inf)] * n
     if len(bounds) != n:
         raise ValueError(f"`bounds` must have one (lo, hi) pair per parameter ({n})")
-    out = []
-    for lo, hi in bounds:
-        out.append((-np.inf if lo is None else float(lo), np.inf if hi is None else float(hi)))
-    return out
+    lo, hi = bounds_arrays(bounds, n)
+    return list(zip(lo.tolist(), hi.tolist(), strict=True))
 
 
 def _observed_information(like, eps_hat, step):
