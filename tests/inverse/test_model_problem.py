@@ -381,3 +381,34 @@ def test_the_v02_result_names_are_gone():
     new = dataclasses.replace(res, message="replaced")
     assert new.message == "replaced" and res.message != "replaced"
     np.testing.assert_array_equal(new.eps, res.eps)
+
+
+def test_physical_units_give_the_unit_free_answer():
+    """A relaxation modulus in pascals and nanoseconds, G(t) = G0 exp(-t / tau) + Ginf
+    (G0 ~ 2e9 Pa, tau ~ 3e-9 s), fitted as the docs show with 3 % noise and sigma
+    estimated: the same estimates (to 1e-6) and standard errors (to 1e-6) as the fit of
+    the same data in GPa and ns, mapped back, and the same profile intervals (to 1e-3 of
+    their width)."""
+    t_ns = np.linspace(0.0, 12.0, 15)
+    truth = np.array([2.0, 3.0, 0.5])  # GPa, ns, GPa
+
+    def scaled(e):
+        return e[0] * np.exp(-t_ns / e[1]) + e[2]
+
+    rng = np.random.default_rng(7)
+    y_gpa = scaled(truth) * (1 + 0.03 * rng.standard_normal(t_ns.size))
+    units = np.array([1e9, 1e-9, 1e9])  # Pa per GPa, s per ns, Pa per GPa
+    t_s = t_ns * 1e-9
+
+    def physical(e):
+        return e[0] * np.exp(-t_s / e[1]) + e[2]
+
+    a = fit(ModelProblem(scaled, y_gpa), [1.0, 1.0, 0.0])
+    b = fit(ModelProblem(physical, 1e9 * y_gpa), [1e9, 1e-9, 0.0])
+    assert a.success and b.success, (a.message, b.message)
+    np.testing.assert_allclose(b.eps / units, a.eps, rtol=1e-6)
+    np.testing.assert_allclose(b.uncertainty.stderr / units, a.uncertainty.stderr, rtol=1e-6)
+    ia = profile_likelihood(a).intervals
+    ib = profile_likelihood(b).intervals / units[:, None]
+    width = ia[:, 1] - ia[:, 0]
+    assert np.all(np.abs(ib - ia) <= 1e-3 * width[:, None]), (ia, ib)
