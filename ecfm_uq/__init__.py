@@ -11,4 +11,4 @@ Layers, in the direction data flows:
 ``studies``    one module per paper section, writing result.json and figures
 """
 
-__version__ = "0.1.0"
+__version__ = "0.5.0.dev0"

@@ -270,3 +270,12 @@ def test_every_formulation_fills_the_typed_fields_and_documents_its_extra_keys()
     for res in (noisy, std, random, model):
         check_extra_documented(res)
     assert "prediction" in model.extra
+
+
+def test_fit_status_prints_its_name():
+    """``print(res.status)`` says what happened (issue 37), the code stays an int."""
+    from ecfm_uq.inverse import FitStatus
+
+    assert str(FitStatus.CONVERGED) == "CONVERGED"
+    assert f"{FitStatus.STALLED:>8}" == " STALLED"
+    assert FitStatus.MAX_ITERATIONS == 1 and int(FitStatus.STALLED) == 2

@@ -54,3 +54,10 @@ class FitStatus(IntEnum):
     def success(self):
         """Whether this status counts as a successful fit."""
         return self is FitStatus.CONVERGED
+
+    def __str__(self):
+        """The name, not the code: ``print(res.status)`` prints ``CONVERGED``."""
+        return self.name
+
+    def __format__(self, spec):
+        return format(self.name, spec)
