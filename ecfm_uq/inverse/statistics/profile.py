@@ -42,7 +42,7 @@ import numpy as np
 from scipy import stats
 
 from ...threads import library_threads
-from ..core.convergence import bounds_arrays
+from ..core.convergence import at_bound, bounds_arrays
 from .profiler import MODEL_FAILURES, Profiler, beyond, walk
 from .uncertainty import interval_quantile
 
@@ -89,6 +89,11 @@ class Profile:
         Every piece of the parameter's range where the profile is below the threshold:
         the one around the estimate, and beyond a rise toward a finite bound (a second
         basin, a ridge to the bound: :func:`profile_likelihood` scans to the bound).
+    concerns : tuple of str
+        The profile's own evidence against its interval (:func:`profile_concerns`): an
+        open end, a second region, a branch that falls on its way out, a re-optimized
+        parameter at its bound inside the interval (where the chi-squared threshold
+        does not hold), an inner fit that did not converge. Empty when there is none.
     """
 
     index: int
@@ -100,6 +105,13 @@ class Profile:
     reasons: tuple
     delta_method: np.ndarray
     regions: tuple = ()
+    concerns: tuple = ()
+
+    @property
+    def trusted(self):
+        """True when the profile shows no evidence against its interval (``concerns``
+        empty); the distance to the delta-method interval is not such evidence."""
+        return not self.concerns
 
     @property
     def agrees(self):
@@ -150,6 +162,10 @@ class ProfileSummary:
     regions : dict of int -> list of (lower, upper)
         Each profiled parameter's pieces below the threshold (``intervals`` are their
         hulls).
+    trusted : (n_eps,) bool ndarray
+        True where the profile shows no evidence against its interval
+        (:attr:`Profile.concerns`, listed in ``message``); False for a parameter not
+        profiled. ``disagree`` is about the delta method, this is about the profile.
     """
 
     level: float
@@ -159,6 +175,7 @@ class ProfileSummary:
     disagree: np.ndarray = None
     message: str = ""
     regions: dict = field(default_factory=dict)
+    trusted: np.ndarray = None
 
     def plot(self, names=None):
         """One panel per profiled parameter; returns the figure."""
@@ -274,6 +291,69 @@ def _scales(result, like, eps_hat):
     return se, naive, scale
 
 
+#: a fall of the profile on its way out larger than this fraction of the threshold is a
+#: non-monotone branch (smaller ones are the inner fits' round-off)
+MONOTONE_RTOL = 0.01
+
+
+def profile_concerns(i, values, delta, eps, main, reasons, regions, threshold, bounds,
+                     unconverged=()):  # fmt: skip
+    """The profile's own evidence against the interval of parameter ``i``.
+
+    An interval from the chi-squared (or profile-t) threshold is what it says only where
+    the profile is a regular likelihood ratio: both ends crossed, one region, the profile
+    rising on the way out, every re-optimized parameter inside its box and every inner fit
+    converged. Each failure of these is returned as a sentence; none of them is the
+    distance to the delta-method interval (a skewed likelihood is not a failure).
+
+    Parameters
+    ----------
+    i : int
+    values, delta : (k,) ndarray
+        The profile's points, increasing in ``values``.
+    eps : (k, n_eps) ndarray
+        The re-optimized parameters at those points.
+    main : (lower, upper)
+        The region around the estimate (the walks' two ends).
+    reasons : (str, str)
+        Why each end is where it is.
+    regions : sequence of (lower, upper)
+    threshold : float
+    bounds : sequence of (lo, hi)
+    unconverged : sequence of (fixed, values)
+        Inner fits that did not converge (:class:`~.profiler.Profiler`).
+    """
+    concerns = [
+        f"{side} end open" for side, r in zip(("lower", "upper"), reasons, strict=True)
+        if not r.startswith("crossed")
+    ]  # fmt: skip
+    if len(regions) > 1:
+        concerns.append(f"{len(regions)} regions below the threshold")
+    lo, hi = main
+    inside = (values >= lo) & (values <= hi)
+    t, d = values[inside], delta[inside]
+    if t.size > 2:
+        k = int(np.argmin(d))
+        fall = max(np.max(np.diff(d[: k + 1]), initial=0.0), np.max(-np.diff(d[k:]), initial=0.0))
+        if fall > MONOTONE_RTOL * threshold:
+            concerns.append(f"the profile falls by {2 * fall:.3g} (in 2*delta) on its way out")
+    hits = {}
+    for row, ti in zip(eps[inside], t, strict=True):
+        for m, side in at_bound(row, bounds):
+            if m != i:
+                hits.setdefault((m, side), ti)
+    for (m, side), ti in sorted(hits.items()):
+        b = bounds[m][0 if side == "lower" else 1]
+        concerns.append(
+            f"eps[{m}] sits at its {side} bound {b:g} (from eps[{i}]={ti:.6g}): the "
+            "chi-squared threshold does not hold there"
+        )
+    bad = [v[0] for f, v in unconverged if f == (i,) and lo <= v[0] <= hi]
+    if bad:
+        concerns.append(f"{len(bad)} inner fit(s) inside the interval did not converge")
+    return tuple(concerns)
+
+
 def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci, n_scan):
     """Every requested profile, and (decrease, eps) of the lowest point found below the
     estimate's likelihood (None when the estimate is the minimum)."""
@@ -303,17 +383,17 @@ def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci, n_scan):
         k = int(np.argmin([q[1] for q in pts]))
         if pts[k][1] < -1e-6 * max(1.0, threshold[i]) and (best is None or pts[k][1] < best[0]):
             best = (pts[k][1], pts[k][2])
+        values = np.array([q[0] for q in pts])
+        delta = np.array([q[1] for q in pts])
+        eps = np.array([q[2] for q in pts])
+        concerns = profile_concerns(
+            i, values, delta, eps, (ends[0], ends[1]), reasons, regions, threshold[i], bnds,
+            prof.unconverged,
+        )  # fmt: skip
         profiles[i] = Profile(
-            i,
-            np.array([q[0] for q in pts]),
-            np.array([q[1] for q in pts]),
-            np.array([q[2] for q in pts]),
-            threshold[i],
-            np.array(hull, dtype=float),
-            tuple(reasons),
-            delta_ci[i],
-            tuple(regions),
-        )
+            i, values, delta, eps, threshold[i], np.array(hull, dtype=float), tuple(reasons),
+            delta_ci[i], tuple(regions), concerns,
+        )  # fmt: skip
     return profiles, best
 
 
@@ -409,12 +489,16 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
     for i in np.flatnonzero(disagree & np.isfinite(se)):
         notes.append(
             f"eps[{i}]: the likelihood interval {intervals[i].round(6).tolist()} and the "
-            f"delta-method interval {delta_ci[i].round(6).tolist()} disagree: the quadratic "
-            "approximation behind the standard error is not to be trusted here"
+            f"delta-method interval {delta_ci[i].round(6).tolist()} disagree (a likelihood "
+            "that is not quadratic there: prefer the likelihood interval)"
         )
+    trusted = np.array([i in profiles and profiles[i].trusted for i in range(n)])
+    for i, prof_i in profiles.items():
+        if prof_i.concerns:
+            notes.append(f"eps[{i}] interval not trusted: " + "; ".join(prof_i.concerns))
     regions = {i: list(prof_i.regions) for i, prof_i in profiles.items()}
     summary = ProfileSummary(
-        level, intervals, delta_ci, profiles, disagree, "; ".join(notes), regions
+        level, intervals, delta_ci, profiles, disagree, "; ".join(notes), regions, trusted
     )
     return summary
 

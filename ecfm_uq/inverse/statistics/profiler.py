@@ -33,6 +33,9 @@ class Profiler:
         self.scale, self.bounds = scale, bounds
         self.nfev = 0
         self.visited = []  # optima of the inner problems, reused as starting points
+        # (fixed indices, values) where no inner optimizer run reported convergence:
+        # evidence against the profile there (ProfileSummary.trusted)
+        self.unconverged = []
         exact = like.exact_gradient
         self.by_differences = not exact and like.value_only is not None
         self.inner_options = {
@@ -114,6 +117,8 @@ class Profiler:
                 f"={np.round(values, 6).tolist()}"
             )
         eps[free] = self.eps_hat[free] + s * res.x
+        if not res.success:
+            self.unconverged.append((tuple(fixed.tolist()), tuple(np.atleast_1d(values))))
         self.visited.append(eps.copy())
         return float(res.fun) - self.ell_hat, eps
 

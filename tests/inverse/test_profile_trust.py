@@ -1,0 +1,89 @@
+"""A profile's interval is flagged by the profile's own evidence (issue 37 item 4), not by
+its distance to the delta-method interval: a skewed but regular profile is trusted, a
+profile along which a re-optimized parameter sits at its bound is not (the chi-squared
+threshold assumes an interior optimum), and so is one that stays below the threshold to
+the parameter's bound."""
+
+import numpy as np
+import pytest
+
+from ecfm_uq.inverse import ModelProblem, fit, profile_likelihood
+from ecfm_uq.inverse.statistics.profile import profile_concerns
+
+S = np.array([0.02, 0.02, 0.06, 0.06, 0.11, 0.11, 0.22, 0.22, 0.56, 0.56, 1.10, 1.10])
+RATE = np.array([76, 47, 97, 107, 123, 139, 159, 152, 191, 201, 207, 200], dtype=float)
+
+
+def michaelis_menten(e):
+    return e[0] * S / (e[1] + S)
+
+
+def test_a_skewed_regular_profile_is_trusted():
+    """Puromycin: K_m's likelihood interval is asymmetric against the delta method's
+    (they disagree by 0.1 of the half-width and more), yet nothing is wrong with it."""
+    res = fit(ModelProblem(michaelis_menten, RATE, names=["V_max", "K_m"]), [200.0, 0.1])
+    prof = profile_likelihood(res)
+    assert prof.disagree[1], prof.message
+    assert prof.trusted.all(), prof.message
+    assert "not trusted" not in prof.message
+
+
+XS = np.array([0.2, 0.35, 0.5, 0.65, 0.8])
+MODES = np.arange(1, 40, 2)
+
+
+def rod(e):
+    """-w'' + c w = s on (0, 1), w = 0 at both ends, read at five points: a reaction
+    coefficient c inside the operator, singular as c -> -pi^2 (the readings blow up); the
+    likelihood runs along a ridge (s / (pi^2 + c) nearly fixed) toward that end."""
+    c, s = e
+    shape = 4 / (MODES * np.pi) * np.sin(np.pi * np.outer(XS, MODES))
+    return s * (shape / (MODES**2 * np.pi**2 + c)).sum(1)
+
+
+def test_a_nuisance_parameter_at_its_bound_along_the_profile_is_flagged():
+    truth = np.array([-8.0, 10.0])
+    y0 = rod(truth)
+    sigma = 0.05 * np.abs(y0).mean()
+    y = y0 + sigma * np.random.default_rng(0).standard_normal(y0.size)
+    res = fit(ModelProblem(rod, y, names=["c", "s"]), [-5.0, 8.0], bounds=[(-9.8, 50.0),
+              (0.1, 100.0)], sigma=sigma)  # fmt: skip
+    prof = profile_likelihood(res)
+    # the profile of s re-optimizes c, which reaches its bound near the singularity
+    concerns = prof.profiles[1].concerns
+    assert any("eps[0] sits at its lower bound -9.8" in c for c in concerns), concerns
+    assert not prof.trusted[1]
+    assert "eps[1] interval not trusted" in prof.message
+
+
+def test_concerns_read_the_profile_points():
+    """Each rule on hand-made profile points: a regular profile has none."""
+    values = np.array([-2.0, -1.0, 0.0, 1.0, 2.0])
+    delta = 0.5 * values**2
+    eps = np.column_stack([values, np.zeros(5)])
+    bounds = [(-10.0, 10.0), (-1.0, 1.0)]
+    args = (0, values, delta, eps, (-2.0, 2.0), ("crossed", "crossed"))
+    assert profile_concerns(*args, [(-2.0, 2.0)], 1.92, bounds) == ()
+    # a fall on the way out (a second dip inside the interval)
+    bumpy = delta.copy()
+    bumpy[-1] = 0.1
+    (c,) = profile_concerns(0, values, bumpy, *args[3:], [(-2.0, 2.0)], 1.92, bounds)
+    assert "falls" in c
+    # the other parameter at its bound inside the interval
+    at = eps.copy()
+    at[3:, 1] = 1.0
+    (c,) = profile_concerns(0, values, delta, at, *args[4:], [(-2.0, 2.0)], 1.92, bounds)
+    assert c.startswith("eps[1] sits at its upper bound 1 (from eps[0]=1)")
+    # an open end, two regions, an inner fit that did not converge
+    out = profile_concerns(0, values, delta, eps, (-2.0, 2.0), ("crossed", "the profile "
+                           "stays below"), [(-2.0, 2.0), (5.0, 6.0)], 1.92, bounds,
+                           [((0,), (1.0,)), ((1,), (0.5,))])  # fmt: skip
+    assert out == ("upper end open", "2 regions below the threshold",
+                   "1 inner fit(s) inside the interval did not converge")  # fmt: skip
+
+
+@pytest.mark.parametrize("level", [0.9, 0.99])
+def test_trusted_is_per_parameter_and_sized(level):
+    res = fit(ModelProblem(michaelis_menten, RATE), [200.0, 0.1])
+    prof = profile_likelihood(res, level, which=[1])
+    assert prof.trusted.tolist() == [False, True]  # eps[0] not profiled: nothing to trust
