@@ -202,7 +202,7 @@ class VerificationReport:
         shape = self.output_shape
 
         def label(j):
-            return "y" if shape == () else "y" + str(list(np.unravel_index(j, shape)))
+            return "y" if shape == () else "y" + str([int(i) for i in np.unravel_index(j, shape)])
 
         lines = [
             f"Monte Carlo verification of a PCE surrogate: n = {self.n} model runs, "
