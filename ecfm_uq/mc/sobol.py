@@ -13,6 +13,7 @@ import numpy as np
 from .._validation import check_int
 from ..executor import evaluate_samples
 from ..memory import check_allocation
+from ..plotting import sobol_bars
 
 __all__ = ["SobolResult", "sobol_indices"]
 
@@ -47,6 +48,33 @@ class SobolResult(NamedTuple):
     n_evaluations: int
     level: float
     design: str
+
+    def plot(self, ax=None, names=None, component=()):
+        """Bars of the first-order and total indices with their intervals as error bars.
+
+        Parameters
+        ----------
+        ax : matplotlib Axes, optional
+        names : sequence of str, optional
+            Input names on the axis (default ``x0, x1, ...``).
+        component : int or tuple
+            The output component drawn (``()`` for a scalar output).
+
+        Returns
+        -------
+        matplotlib Axes
+        """
+        ax = sobol_bars(
+            self.first_order,
+            self.total,
+            names,
+            ax,
+            self.first_order_interval,
+            self.total_interval,
+            component,
+        )
+        ax.set_title(f"Sobol indices by sampling ({100 * self.level:g} % intervals)")
+        return ax
 
 
 def _delta_se(num, s, r):

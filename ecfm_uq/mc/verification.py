@@ -29,6 +29,7 @@ from .._validation import as_finite_array, check_int
 from ..chaos.inputs import as_inputs, draw_germs
 from ..chaos.pce import PolynomialChaosExpansion
 from ..executor import NonFiniteOutputError
+from ..plotting import pyplot
 from .sampling import batch_errors, loglog_slope, mc_moments, monte_carlo, relative_error
 
 __all__ = ["VerificationReport", "verify"]
@@ -256,7 +257,7 @@ class VerificationReport:
         matplotlib Axes
         """
         if ax is None:
-            _, ax = _pyplot().subplots(figsize=(4.5, 4.2))
+            _, ax = pyplot().subplots(figsize=(4.5, 4.2))
         y_m = np.asarray(self.model_values).reshape(-1)
         y_p = np.asarray(self.pce_values).reshape(-1)
         step = max(1, math.ceil(y_m.size / _PARITY_POINTS))
@@ -282,7 +283,7 @@ class VerificationReport:
         matplotlib Axes
         """
         if ax is None:
-            _, ax = _pyplot().subplots(figsize=(4.5, 4.2))
+            _, ax = pyplot().subplots(figsize=(4.5, 4.2))
         n = np.asarray(self.sizes, dtype=float)
         em = np.asarray(self.convergence_mean_error)
         ev = np.asarray(self.convergence_variance_error)
@@ -309,7 +310,7 @@ class VerificationReport:
         (2,) ndarray of matplotlib Axes
         """
         if ax is None:
-            _, ax = _pyplot().subplots(1, 2, figsize=(9.5, 4.2))
+            _, ax = pyplot().subplots(1, 2, figsize=(9.5, 4.2))
         axes = np.asarray(ax, dtype=object).reshape(-1)
         if axes.size != 2:
             raise ValueError(f"`ax` must be two Axes (parity, convergence), got {axes.size}")
@@ -317,12 +318,6 @@ class VerificationReport:
         self.plot_convergence(axes[1])
         axes[0].figure.tight_layout()
         return axes
-
-
-def _pyplot():
-    from ..plotting import pyplot
-
-    return pyplot()
 
 
 def _check_inputs(pce, inputs):
