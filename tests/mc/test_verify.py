@@ -1,6 +1,8 @@
 """Monte Carlo verification of a PCE surrogate (ecfm_uq.mc.verify, issue 38 item 3)."""
 
+import re
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from pathlib import Path
 
 import matplotlib
 import numpy as np
@@ -202,3 +204,15 @@ def test_model_raising_is_wrapped_with_its_sample(poly_pce):
         verify(poly_pce, fails_above, 50, seed=7, executor=ex)
     with pytest.raises(ValueError, match="NaN or inf at sample"):
         verify(poly_pce, poly_nan, 50, seed=7)
+
+
+@pytest.mark.slow  # the page's sparse fit (300 runs, adaptive degree) takes seconds
+def test_docs_example_runs_and_prints_what_the_page_says():
+    text = (Path(__file__).resolve().parents[2] / "docs" / "verify.md").read_text()
+    code = re.findall(r"```python\n(.*?)```", text, re.S)[0]
+    ns = {}
+    exec(compile(code.replace("print(report.summary())", ""), "verify.md", "exec"), ns)
+    rep = ns["report"]
+    assert rep.max_abs_z < 4 and rep.holdout_error < 1e-6
+    assert f"max |z| = {rep.max_abs_z:.2f}" in text
+    assert f"MC error slope in n = {rep.convergence_slope:.2f}" in text
