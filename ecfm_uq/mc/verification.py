@@ -21,6 +21,7 @@ and plots (parity and convergence).
 from __future__ import annotations
 
 import math
+import pickle
 from dataclasses import dataclass
 
 import numpy as np
@@ -347,6 +348,15 @@ def _check_inputs(pce, inputs):
 def _run_model(model, x, executor, workers, chunksize, callback, pce):
     """The model at each row of ``x``; a failure names the sample and chains the original."""
     n = x.shape[0]
+    if executor is None and workers > 1:
+        try:
+            pickle.dumps(model)
+        except Exception as e:
+            raise TypeError(
+                "`model` must be picklable to run in worker processes: use a module-level "
+                "function or functools.partial of one (not a lambda or closure), or pass "
+                "workers=1"
+            ) from e
     rows = np.column_stack([np.arange(n, dtype=float), x])
     dims = f"{pce.dim} input(s)"
     try:
@@ -446,7 +456,8 @@ def verify(
     Raises
     ------
     TypeError
-        ``pce`` not a PolynomialChaosExpansion; ``model`` not callable.
+        ``pce`` not a PolynomialChaosExpansion; ``model`` not callable, or not picklable
+        for the worker processes of ``workers > 1``.
     ValueError
         ``n < 2``; ``inputs`` that are not the surrogate's; a model output of another
         size than the surrogate's; a model raising IndexError, TypeError or ValueError
@@ -473,6 +484,7 @@ def verify(
     if not callable(model):
         raise TypeError(f"`model` must be callable model(x) -> array, got {type(model).__name__}")
     n = check_int("n", n, minimum=2)
+    workers = check_int("workers", workers, minimum=1)
     q = as_finite_array("quantiles", quantiles, ndim=1)
     if q.size == 0 or np.any((q < 0) | (q > 1)):
         raise ValueError(f"`quantiles` must be probabilities in [0, 1], got {q.tolist()}")

@@ -177,6 +177,8 @@ def test_n_below_two_is_refused(poly_pce):
         verify(poly_pce, poly, 1)
     with pytest.raises(TypeError, match="`pce`"):
         verify(poly, poly, 10)
+    with pytest.raises(TypeError, match="`model` must be picklable"):
+        verify(poly_pce, lambda x: poly(x), 10, workers=2)
 
 
 def test_inputs_other_than_the_surrogates_are_refused(poly_pce):
