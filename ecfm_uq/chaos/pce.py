@@ -21,6 +21,7 @@ import scipy.sparse as sp
 
 from .._validation import as_finite_array, check_choice, check_int
 from ..memory import check_allocation, check_covariance
+from ..plotting import sobol_bars
 from .basis import ChaosBasis
 from .inputs import UniformInputs, as_inputs, draw_germs
 from .projection import project
@@ -464,6 +465,28 @@ class PolynomialChaosExpansion:
             if np.max(np.abs(val), initial=0.0) >= threshold:
                 out[key] = val
         return out
+
+    def plot_sobol(self, ax=None, names=None, component=()):
+        """Bars of the first-order and total Sobol indices of each input.
+
+        Parameters
+        ----------
+        ax : matplotlib Axes, optional
+        names : sequence of str, optional
+            Input names on the axis (default: the inputs' names, ``w0, ...`` without inputs).
+        component : int or tuple
+            The output component drawn (``()`` for a scalar output).
+
+        Returns
+        -------
+        matplotlib Axes
+        """
+        if names is None:
+            names = self.inputs.names if self.inputs is not None else None
+            names = names or [f"w{k}" for k in range(self.dim)]
+        ax = sobol_bars(self.first_order(), self.total(), names, ax, component=component)
+        ax.set_title("Sobol indices of the PCE")
+        return ax
 
     # -- evaluation and sampling -------------------------------------------------------
     def evaluate(self, omega):

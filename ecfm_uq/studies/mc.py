@@ -18,16 +18,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..chaos import fit_pce
+from ..chaos import PolynomialChaosExpansion, fit_pce
 from ..mc import (
     batch_errors,
-    draw_germ,
     loglog_slope,
-    mc_moments,
-    monte_carlo,
     quadrature_moments,
     relative_error,
     sobol_indices,
+    verify,
 )
 from ..plotting import pyplot, save_figure
 from ..problems.beam import BeamModel, buckling_load
@@ -191,18 +189,22 @@ def run(settings, out_dir, progress):
     x = np.linspace(0.0, 1.0, s["n_x"])
     model.check_load(s["eps"])
 
-    # PCE (Eq. pce) and its statistics (Eq. stats)
+    # PCE (Eq. pce) of the sensors and the displacement on x, and its statistics (Eq.
+    # stats), against Monte Carlo over deterministic solves of the same discretization:
+    # mc.verify draws the germ from the seed and runs the solves (fn) on it
     sol = model.solve(s["eps"], strict=True)
-    pce_mean, pce_var = model.sensor_moments(sol.Theta)
-    pce_mean_x, pce_var_x = model.displacement_moments(sol.Theta, x)
-
-    # Monte Carlo over deterministic solves of the same discretization
+    surrogate = PolynomialChaosExpansion.from_galerkin(
+        model.system, sol.Theta, observe=np.vstack([model.M_obs, model.basis.evaluate(x)])
+    )
     fn = model.response_function(s["eps"], x=x)
-    omega = draw_germ(s["samples"], s["seed"])
     progress.log(f"Monte Carlo: {s['samples']} deterministic solves on {s['workers']} worker(s)")
     with progress.bar(s["samples"], "Monte Carlo") as bar:
-        y = monte_carlo(fn, omega, workers=s["workers"], callback=bar.update)
-    mom = mc_moments(y)
+        ver = verify(
+            surrogate, fn, s["samples"], seed=s["seed"], workers=s["workers"], callback=bar.update
+        )
+    y = ver.model_values
+    pce_mean, pce_var = ver.pce_mean[:C], ver.pce_variance[:C]
+    pce_mean_x, pce_var_x = ver.pce_mean[C:], ver.pce_variance[C:]
 
     # high-accuracy reference: Gauss-Legendre quadrature over omega of the same solves
     ref_mean, ref_var = quadrature_moments(fn, s["reference_points"])
@@ -230,8 +232,7 @@ def run(settings, out_dir, progress):
     u_ref = model.deterministic_displacement(om_ref, s["eps"], x, n_basis=s["reference_basis"])
     ref_errs = [relative_error(w_pce[:, j], u_ref[:, j]) for j in range(len(om_ref))]
 
-    z_mean = (pce_mean - mom.mean[:C]) / mom.se_mean[:C]
-    z_var = (pce_var - mom.var[:C]) / mom.se_var[:C]
+    mc_mean, mc_var = ver.mc_mean, ver.mc_variance
     result = {
         "settings": s,
         "delta": model.delta,
@@ -252,14 +253,14 @@ def run(settings, out_dir, progress):
         "mc": {
             "samples": s["samples"],
             "workers": s["workers"],
-            "mean": mom.mean[:C],
-            "var": mom.var[:C],
-            "se_mean": mom.se_mean[:C],
-            "se_var": mom.se_var[:C],
-            "z_mean": z_mean,
-            "z_var": z_var,
-            "rel_error_mean_vs_reference": relative_error(mom.mean[:C], ref_mean[:C]),
-            "rel_error_var_vs_reference": relative_error(mom.var[:C], ref_var[:C]),
+            "mean": mc_mean[:C],
+            "var": mc_var[:C],
+            "se_mean": ver.se_mean[:C],
+            "se_var": ver.se_variance[:C],
+            "z_mean": ver.mean_z[:C],
+            "z_var": ver.variance_z[:C],
+            "rel_error_mean_vs_reference": relative_error(mc_mean[:C], ref_mean[:C]),
+            "rel_error_var_vs_reference": relative_error(mc_var[:C], ref_var[:C]),
             "convergence": {
                 "sizes": sizes,
                 "n_batches": n_batches,
@@ -276,18 +277,18 @@ def run(settings, out_dir, progress):
             "var": ref_var[:C],
             "rel_change_with_32_more_nodes": ref_check,
         },
-        "rel_error_mean": relative_error(pce_mean, mom.mean[:C]),
-        "rel_error_var": relative_error(pce_var, mom.var[:C]),
+        "rel_error_mean": relative_error(pce_mean, mc_mean[:C]),
+        "rel_error_var": relative_error(pce_var, mc_var[:C]),
         "pce_vs_reference_max_rel_error": max(ref_errs),
         "pce_vs_reference": {"omega": om_ref, "rel_error": ref_errs},
         "field": {
             "x": x,
             "pce_mean": pce_mean_x,
             "pce_var": pce_var_x,
-            "mc_mean": mom.mean[C:],
-            "mc_var": mom.var[C:],
-            "rel_error_mean": relative_error(pce_mean_x, mom.mean[C:]),
-            "rel_error_var": relative_error(pce_var_x, mom.var[C:]),
+            "mc_mean": mc_mean[C:],
+            "mc_var": mc_var[C:],
+            "rel_error_mean": relative_error(pce_mean_x, mc_mean[C:]),
+            "rel_error_var": relative_error(pce_var_x, mc_var[C:]),
         },
     }
     progress.log("Sobol indices: PCE against the sampling estimator (Ishigami)")

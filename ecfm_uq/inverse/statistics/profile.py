@@ -40,7 +40,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import stats
+from scipy.interpolate import PchipInterpolator
 
+from ...plotting import pyplot
 from ...threads import library_threads
 from ..core.convergence import at_bound, bounds_arrays
 from .profiler import MODEL_FAILURES, Profiler, beyond, walk
@@ -123,13 +125,28 @@ class Profile:
         return bool(np.all(np.abs(self.interval - self.delta_method) <= AGREEMENT_RTOL * half))
 
     def plot(self, ax=None, name=None):
-        """Plot :math:`2\\Delta\\ell_p` with the threshold and both intervals."""
-        from ...plotting import pyplot
+        """Plot :math:`2\\Delta\\ell_p` with the threshold and both intervals.
 
+        The computed profile points are markers; the curve through them is a monotone
+        piecewise-cubic (PCHIP) interpolant, which neither overshoots nor invents a dip
+        between them (the profile itself is not recomputed).
+
+        Parameters
+        ----------
+        ax : matplotlib Axes, optional
+        name : str, optional
+            The parameter's name on the x axis (default ``eps[i]``).
+
+        Returns
+        -------
+        matplotlib Axes
+        """
         if ax is None:
             _, ax = pyplot().subplots(figsize=(4.5, 3.2))
         name = name or f"eps[{self.index}]"
-        ax.plot(self.values, 2 * self.delta, "o-", ms=3, label="profile likelihood")
+        t, y = _smooth_profile(self.values, 2 * np.asarray(self.delta, dtype=float))
+        ax.plot(t, y, "-", color="C0", label="profile likelihood")
+        ax.plot(self.values, 2 * self.delta, "o", ms=3, color="C0", label="computed points")
         ax.axhline(2 * self.threshold, color="k", lw=0.8, ls=":")
         for x in self.interval:
             if np.isfinite(x):
@@ -142,6 +159,23 @@ class Profile:
         ax.set_ylabel(r"$2\,\Delta\ell$")
         ax.legend(fontsize=7)
         return ax
+
+
+def _smooth_profile(values, y, per_gap=24):
+    """A PCHIP curve through the finite profile points, ``per_gap`` points per interval
+    (the points themselves when fewer than three are finite)."""
+    t = np.asarray(values, dtype=float)
+    ok = np.isfinite(t) & np.isfinite(y)
+    t, y = t[ok], y[ok]
+    t, first = np.unique(t, return_index=True)  # increasing, one value per t
+    y = y[first]
+    if t.size < 3:
+        return t, y
+    tt = np.concatenate(
+        [np.linspace(a, b, per_gap, endpoint=False) for a, b in zip(t[:-1], t[1:], strict=True)]
+        + [t[-1:]]
+    )
+    return tt, PchipInterpolator(t, y)(tt)
 
 
 @dataclass(frozen=True)
@@ -176,17 +210,39 @@ class ProfileSummary:
     message: str = ""
     regions: dict = field(default_factory=dict)
     trusted: np.ndarray = None
+    names: tuple = ()
 
-    def plot(self, names=None):
-        """One panel per profiled parameter; returns the figure."""
-        from ...plotting import pyplot
+    def plot(self, ax=None, names=None):
+        """One panel per profiled parameter (:meth:`Profile.plot`).
 
+        Parameters
+        ----------
+        ax : sequence of matplotlib Axes, optional
+            One per profiled parameter (default: a new 1 x k figure).
+        names : sequence of str, optional
+            Names of all parameters (default: the fit's ``names``, else ``eps[i]``).
+
+        Returns
+        -------
+        (k,) ndarray of matplotlib Axes
+            ``axes[0].figure`` is the figure.
+        """
         idx = sorted(self.profiles)
-        fig, axes = pyplot().subplots(1, len(idx), figsize=(4.2 * len(idx), 3.2), squeeze=False)
-        for ax, i in zip(axes[0], idx, strict=True):
-            self.profiles[i].plot(ax, None if names is None else names[i])
-        fig.tight_layout()
-        return fig
+        names = list(self.names) if names is None else [str(n) for n in names]
+        if names and len(names) <= max(idx, default=-1):
+            raise ValueError(
+                f"`names` must name all {max(idx) + 1} parameters (the profiles are of "
+                f"{idx}), got {len(names)}"
+            )
+        if ax is None:
+            fig, ax = pyplot().subplots(1, len(idx), figsize=(4.2 * len(idx), 3.2), squeeze=False)
+        axes = np.asarray(ax, dtype=object).reshape(-1)
+        if axes.size != len(idx):
+            raise ValueError(f"`ax` must hold {len(idx)} Axes (one per profile), got {axes.size}")
+        for a, i in zip(axes, idx, strict=True):
+            self.profiles[i].plot(a, names[i] if names else None)
+        axes[0].figure.tight_layout()
+        return axes
 
 
 @dataclass(frozen=True)
@@ -497,9 +553,11 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
         if prof_i.concerns:
             notes.append(f"eps[{i}] interval not trusted: " + "; ".join(prof_i.concerns))
     regions = {i: list(prof_i.regions) for i, prof_i in profiles.items()}
+    names = tuple(getattr(result, "names", None) or ())
     summary = ProfileSummary(
-        level, intervals, delta_ci, profiles, disagree, "; ".join(notes), regions, trusted
-    )
+        level, intervals, delta_ci, profiles, disagree, "; ".join(notes), regions, trusted,
+        names if len(names) == n else (),
+    )  # fmt: skip
     return summary
 
 
