@@ -252,3 +252,26 @@ def test_band_plot_returns_axes(linear):
     assert len(ax.collections) == 1 and len(ax.lines) == 2  # the band; value and data
     np.testing.assert_allclose(ax.lines[1].get_ydata(), y)
     plt.close(ax.figure)
+
+
+def test_prediction_page_examples_run():
+    import re
+    from pathlib import Path
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "prediction.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
+    assert len(blocks) == 2
+    ns = {}
+    for code in blocks:
+        exec(compile(code, "prediction.md", "exec"), ns)
+    plt.close("all")
+    res, pred, conf = ns["res"], ns["pred"], ns["conf"]
+    np.testing.assert_allclose(res.eps, [212.68, 0.06412], rtol=5e-4)
+    assert np.all(pred.upper - pred.lower > conf.upper - conf.lower)
+    assert ns["t_inputs"].dof == 10 and ns["inputs"].names == ("Vm", "K")
+    assert ns["draws"].shape == (1000, 1)
