@@ -24,10 +24,12 @@ freedom the expansion converges slowly and the variance exists only for :math:`\
 from __future__ import annotations
 
 import numpy as np
+from scipy import stats
 
 from .._validation import as_finite_array
 from .germs import Germ
 from .inputs import Inputs, draw_germs
+from .marginals import as_marginal
 
 __all__ = ["StudentInputs"]
 
@@ -104,11 +106,13 @@ class StudentInputs(Inputs):
 
     @property
     def marginals(self):
-        """Each input's law, a scipy frozen ``t(dof, loc_k, sqrt(S_kk))``."""
-        from scipy import stats
-
+        """Each input's law, :math:`t_\\nu(\\mu_k, \\sqrt{S_{kk}})`, as a
+        :class:`~ecfm_uq.chaos.marginals.Marginal`."""
         sd = np.sqrt(np.diag(self.scale))
-        return tuple(stats.t(self.dof, m, s) for m, s in zip(self.loc, sd, strict=True))
+        return tuple(
+            as_marginal(stats.t(self.dof, m, s), n)
+            for m, s, n in zip(self.loc, sd, self.names, strict=True)
+        )
 
     def __repr__(self):
         return f"StudentInputs({', '.join(self.names)}; dof={self.dof:g})"

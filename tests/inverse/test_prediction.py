@@ -191,6 +191,14 @@ def test_to_inputs_t_is_the_multivariate_t_and_is_refused_with_sigma_known(purom
     r_hat = np.corrcoef(x, rowvar=False)[0, 1]
     r = unc.cov[0, 1] / np.sqrt(unc.cov[0, 0] * unc.cov[1, 1])
     assert abs(r_hat - r) < 0.01
+    # a PCE on its p + 1 germs: the mean exact, the variance nu/(nu - 2) S_00 approached
+    # as the degree grows (x is not polynomial in the scale germ)
+    errs = []
+    for order in (2, 4, 6):
+        pce = fit_pce(lambda e: e[0], t_in, method="quadrature", order=order)
+        assert pce.mean == pytest.approx(puromycin.eps[0], rel=1e-12)
+        errs.append(abs(pce.variance / (nu / (nu - 2) * unc.cov[0, 0]) - 1))
+    assert errs[0] > errs[1] > errs[2] and errs[2] < 5e-3
     known = fit(ModelProblem(mm, RATE, jac=mm_jac), [200.0, 0.1], sigma=10.0)
     with pytest.raises(ValueError, match="kind='normal'"):
         known.uncertainty.to_inputs("t")
