@@ -22,6 +22,7 @@ SparseTensor3        coordinate-form third-order tensor with contractions
 PolynomialChaosExpansion  a PCE as an object: moments, Sobol indices, sampling, chaospy export
 Inputs               any continuous marginals, independent or joined by a Gaussian copula
 UniformInputs        independent uniform inputs on their own ranges, mapped to the germ
+StudentInputs        a multivariate Student t (a normal scale mixture: p + 1 germs)
 project              pseudo-spectral projection of node values onto the basis
 input_basis, input_coefficients, input_gram
                      a Galerkin model's coefficients and states as functions of the inputs
@@ -37,6 +38,7 @@ from .ownlaw import OwnGerm
 from .pce import PolynomialChaosExpansion
 from .projection import project
 from .quadrature import gauss_legendre
+from .student import StudentInputs
 from .tensors import (
     GaussNodes,
     SparseTensor3,
@@ -54,6 +56,7 @@ __all__ = [
     "OwnGerm",
     "PolynomialChaosExpansion",
     "Inputs",
+    "StudentInputs",
     "UniformInputs",
     "fit_pce",
     "input_basis",

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.linalg as sla
+from scipy import special
 
 from .._validation import as_finite_array
 from .germs import LEGENDRE, Germ
@@ -271,6 +272,36 @@ class Inputs:
         return chaospy.J(*[m.to_chaospy() for m in self.marginals])
 
     @classmethod
+    def from_samples(cls, samples, names=None):
+        """Inputs that reproduce samples: empirical marginals joined by a Gaussian copula.
+
+        Each marginal is the continuous law whose CDF interpolates the empirical one
+        linearly between consecutive order statistics (``scipy.stats.rv_histogram`` with
+        the sorted samples as edges: equal mass between neighbours; its support is the
+        samples' range, so no value beyond them is drawn), reached from the germ as any
+        bounded law (its own polynomials alone, the normal-score transform when joined).
+        The copula's correlation is that of the normal scores
+        :math:`\\Phi^{-1}(\\mathrm{rank}/(n + 1))` of the columns (Nataf): for normal
+        samples, their correlation.
+
+        Parameters
+        ----------
+        samples : (n, dim) array_like
+            At least 10 finite points; a 1-D array is one input.
+        names : sequence of str, optional
+
+        Returns
+        -------
+        Inputs
+
+        Raises
+        ------
+        ValueError
+            Misshaped or non-finite ``samples``, fewer than 10, a constant column.
+        """
+        return _empirical_inputs(cls, samples, names)
+
+    @classmethod
     def from_chaospy(cls, dist, names=None):
         """Inputs from a chaospy distribution: ``J``/``Iid`` of 1-D laws, or ``MvNormal``."""
         import chaospy
@@ -292,6 +323,36 @@ class Inputs:
             )
         parts = [dist] if len(dist) == 1 and not isinstance(dist, chaospy.J) else list(dist)
         return cls(parts, names=names)
+
+
+def _empirical_inputs(cls, samples, names):
+    """:meth:`Inputs.from_samples`."""
+    from scipy import stats
+
+    x = as_finite_array("samples", samples)
+    if x.ndim == 1:
+        x = x[:, None]
+    if x.ndim != 2 or x.shape[0] < 10:
+        raise ValueError(
+            f"`samples` must have shape (n, dim) with at least 10 points, got {x.shape}"
+        )
+    n, d = x.shape
+    laws = []
+    for k in range(d):
+        edges = np.unique(x[:, k])
+        if edges.size < 2:
+            raise ValueError(
+                f"`samples` column {k} is constant ({edges[0]:g}): a constant is not an "
+                "input; drop it"
+            )
+        # equal mass between consecutive order statistics: the empirical CDF interpolated
+        laws.append(stats.rv_histogram((np.ones(edges.size - 1), edges), density=False))
+    if d == 1:
+        return cls(laws, names=names)
+    ranks = stats.rankdata(x, axis=0)
+    z = special.ndtri(ranks / (n + 1.0))  # normal scores
+    R = np.corrcoef(z, rowvar=False)
+    return cls(laws, correlation=0.5 * (R + R.T), names=names)
 
 
 def draw_germs(germs, n, seed=None):

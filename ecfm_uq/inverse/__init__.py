@@ -41,7 +41,9 @@ imports :mod:`.fitting`:
                     ``pseudo_likelihood`` and ``moments`` (the replicated data's
                     likelihood)
 ``statistics/``     what a fit says: ``uncertainty``, ``verdict``, ``loglik``, ``profile``
-                    and ``profiler``, ``posterior``, ``diagnostics``
+                    and ``profiler``, ``posterior``, ``diagnostics``, ``prediction``
+                    (bands; ``InverseResult.predict`` in ``core`` reaches it through a
+                    function this package's import registers, not an upward import)
 ``core/``           shared machinery: ``convergence`` (the one status decision),
                     ``drivers`` and ``optimizers`` (the optimizer calls), ``gradients``,
                     ``finite_differences``; the types handed around: ``settings`` (the
@@ -76,9 +78,11 @@ from .statistics.diagnostics import (
     taylor_remainders,
 )
 from .statistics.loglik import LogLikelihood
+from .statistics.prediction import Band, predict_band
 from .statistics.profile import likelihood_ratio_test, profile_intervals, profile_likelihood
 
 __all__ = [
+    "Band",
     "FitStatus",
     "ModelProblem",
     "ReplicatedProblem",
@@ -106,6 +110,7 @@ __all__ = [
     "negative_log_pseudo_likelihood",
     "noise_bounds",
     "optimal_forces",
+    "predict_band",
     "likelihood_coverage",
     "sample_moments",
     "sensor_moments",

@@ -290,7 +290,7 @@ def fit(
     if kind == "model":
         from .problems.model import fit_model_problem
 
-        return fit_model_problem(problem, eps0, settings)
+        return _with_estimate(fit_model_problem(problem, eps0, settings))
     if kind == "steady" and (formulation == "noisy-ecfm" or method == "all-at-once"):
         from .formulations.noisy import fit_all_at_once as fitter
     elif formulation == "ecfm-random":
@@ -315,7 +315,19 @@ def fit(
     likelihood = result.likelihood
     if likelihood is None:
         likelihood = problem.log_likelihood(settings.formulation, settings.sigma)
-    return dataclasses.replace(result, likelihood=likelihood, bounds=settings.bounds)
+    result = dataclasses.replace(result, likelihood=likelihood, bounds=settings.bounds)
+    return _with_estimate(result)
+
+
+def _with_estimate(result):
+    """The uncertainty told the estimate and the parameter names it belongs to (for
+    :meth:`~ecfm_uq.inverse.Uncertainty.to_inputs`)."""
+    unc = result.uncertainty
+    if not unc.success:
+        return result
+    names = None if result.names is None else list(result.names)
+    unc = dataclasses.replace(unc, eps=np.array(result.eps, dtype=float), names=names)
+    return dataclasses.replace(result, uncertainty=unc)
 
 
 def _in_data_units(result, noise):
@@ -334,8 +346,11 @@ def _in_data_units(result, noise):
     unc = result.uncertainty
     changes = {
         "uncertainty": dataclasses.replace(
-            unc, jacobian=jacobian_in_data_units(unc.jacobian, noise), message=restate(unc.message)
-        ),
+            unc,
+            jacobian=jacobian_in_data_units(unc.jacobian, noise),
+            message=restate(unc.message),
+            sigma=noise.std() if unc.success and unc.noise_model == "known" else unc.sigma,
+        ),  # fmt: skip
         "message": restate(result.message),
     }
     for name in ("likelihood", "interval_likelihood"):

@@ -135,6 +135,7 @@ def sobol_indices(
     vectorized=False,
     interval="asymptotic",
     n_bootstrap=1000,
+    germ=False,
 ):
     """First-order and total Sobol indices of a model by sampling, with confidence intervals.
 
@@ -158,7 +159,8 @@ def sobol_indices(
         own ranges (as :func:`ecfm_uq.chaos.fit_pce` calls it); picklable for worker
         processes.
     inputs : bounds, Inputs or distributions
-        As in :func:`~ecfm_uq.chaos.fit_pce`; independent inputs only.
+        As in :func:`~ecfm_uq.chaos.fit_pce`; independent inputs, or dependent ones
+        with ``germ=True``.
     n : int
         Base sample size (a power of 2 for ``design="sobol"``).
     seed : int or numpy.random.Generator
@@ -185,6 +187,17 @@ def sobol_indices(
         standard errors then the resamples' standard deviations. No model runs are added.
     n_bootstrap : int
         Resamples of the bootstrap.
+    germ : bool
+        ``True``: the indices of the independent germ components :math:`\\xi_k` the
+        inputs are drawn from (``inputs.from_germ``), one per germ variable. For
+        independent inputs these are the inputs' own indices. For dependent inputs they
+        are not indices of the inputs (correlated inputs have no unique variance split):
+        under a Gaussian copula :math:`z = L\\xi` with :math:`L` the Cholesky factor of the
+        correlation in input order, so :math:`\\xi_1` carries all of the first input and
+        :math:`\\xi_k` the part of input :math:`k` not explained by inputs :math:`1..k-1`
+        (the order matters); for :class:`~ecfm_uq.chaos.StudentInputs` (e.g.
+        ``result.uncertainty.to_inputs("t")``) there is one more component, the shared
+        scale. ``False`` (default): dependent inputs are refused.
 
     Returns
     -------
@@ -218,10 +231,14 @@ def sobol_indices(
     inputs = as_inputs(inputs)
     if inputs is None:
         raise TypeError("`inputs` must be given: bounds (d, 2), Inputs or distributions")
-    if getattr(inputs, "dependent", False):
+    if not isinstance(germ, bool):
+        raise TypeError(f"`germ` must be True or False, got {germ!r}")
+    if getattr(inputs, "dependent", False) and not germ:
         raise ValueError(
             "Sobol indices are not defined for dependent `inputs` (a Gaussian copula): the "
-            "variance has no unique split among correlated inputs; pass independent inputs"
+            "variance has no unique split among correlated inputs; pass independent inputs, "
+            "or germ=True for the indices of the independent germ components (see the "
+            "docstring for what they mean)"
         )
     n = check_int("n", n, minimum=2)
     if isinstance(design, str) and design == "sobol" and n & (n - 1):

@@ -28,8 +28,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import special
+from scipy import special, stats
 
+from ...chaos.inputs import Inputs
+from ...chaos.student import StudentInputs
 from .status import FitStatus
 
 __all__ = ["InverseResult", "Uncertainty", "Verdict"]
@@ -77,6 +79,19 @@ class Uncertainty:
         Degrees of freedom of Student-t intervals (sigma estimated), else ``None``.
     jacobian : (n_eps, n_data) ndarray or None
         :math:`d\\hat\\epsilon/dv`, the estimate's derivative in the data it was fitted to.
+    sigma : float, (n_data,) ndarray or None
+        The noise standard deviation the covariance is built on, per observation: the
+        ``sigma`` given to :func:`~ecfm_uq.inverse.fit` (a number: that number), or the
+        residual estimate :math:`s = \\sqrt{\\|r\\|^2/(n - p)}` (``noise_model ==
+        "estimated"``, with :attr:`dof` :math:`= n - p`). One rule for an array ``sigma``:
+        ``.sigma`` is each observation's own standard deviation, the ``(n,)`` array given,
+        or the square roots of the diagonal of a covariance given (its correlations are in
+        the fit, not here). ``None`` where the fit has no such noise level (replicated
+        data, the random-force ECFM, a failed uncertainty).
+    eps : (n_eps,) ndarray or None
+        The estimate the covariance is centred on (the fit's ``eps``).
+    names : list of str or None
+        The parameter names (the problem's), for :meth:`to_inputs`.
     """
 
     success: bool
@@ -89,6 +104,9 @@ class Uncertainty:
     noise_model: str = "none"
     dof: int | None = None
     jacobian: np.ndarray | None = None
+    sigma: float | np.ndarray | None = None
+    eps: np.ndarray | None = None
+    names: list | None = None
 
     @classmethod
     def failed(cls, message):
@@ -99,6 +117,65 @@ class Uncertainty:
         """The two-sided ``level`` quantile of these intervals (:func:`interval_quantile`
         with :attr:`dof`)."""
         return interval_quantile(level, self.dof)
+
+    def to_inputs(self, kind="normal"):
+        """The fit's uncertainty as the input distribution of a chaos or Monte Carlo study.
+
+        Parameters
+        ----------
+        kind : {"normal", "t"}
+            ``"normal"``: :math:`N(\\hat\\epsilon, \\mathrm{cov})`, an
+            :class:`~ecfm_uq.chaos.Inputs` of normal marginals joined by a Gaussian copula
+            (the map from its independent standard normal germ is the linear
+            :math:`\\hat\\epsilon + \\mathrm{diag}(s) L\\xi`, :math:`LL^T` the
+            correlation). ``"t"``: the multivariate Student t with :attr:`dof` :math:`= n -
+            p` degrees of freedom, location :math:`\\hat\\epsilon` and scale matrix
+            ``cov`` (:class:`~ecfm_uq.chaos.StudentInputs`; the marginal posterior of a
+            linear model's parameters with sigma estimated under the Jeffreys prior); only
+            when sigma was estimated.
+
+        Returns
+        -------
+        Inputs or StudentInputs
+            Named by :attr:`names` (``eps0, eps1, ...`` without names); accepted by
+            :func:`~ecfm_uq.chaos.fit_pce`, :func:`~ecfm_uq.mc.sobol_indices` (``germ=True``
+            for correlated parameters) and, through ``.sample(n, seed)``,
+            :func:`~ecfm_uq.mc.monte_carlo`.
+
+        Raises
+        ------
+        ValueError
+            No covariance (the uncertainty failed or was not computed), an unknown
+            ``kind``, ``kind="t"`` with sigma given.
+        """
+        if not isinstance(kind, str) or kind not in ("normal", "t"):
+            raise ValueError(f"`kind` must be 'normal' or 't', got {kind!r}")
+        if not self.success or self.cov is None or self.eps is None:
+            raise ValueError(
+                f"to_inputs needs the fit's covariance, and this fit has none ({self.message}); "
+                "fit with uncertainty=True (the default) on data that determine every "
+                "parameter (fix or reparametrize a non-identifiable one)"
+            )
+        eps = np.asarray(self.eps, dtype=float)
+        cov = np.asarray(self.cov, dtype=float)
+        names = list(self.names) if self.names else [f"eps{k}" for k in range(eps.size)]
+        if kind == "t":
+            if self.dof is None:
+                raise ValueError(
+                    f"to_inputs(kind='t') is for a sigma estimated from the residual (n - p "
+                    f"degrees of freedom); this fit's noise is {self.noise_model!r}: use "
+                    "kind='normal'"
+                )
+            return StudentInputs(eps, cov, self.dof, names=names)
+        se = np.sqrt(np.diag(cov))
+        if not np.all(se > 0):
+            raise ValueError(
+                "to_inputs: the covariance has a zero variance (a parameter the data fix "
+                "exactly); drop it from the inputs"
+            )
+        corr = cov / np.outer(se, se)
+        marginals = [stats.norm(m, s) for m, s in zip(eps, se, strict=True)]
+        return Inputs(marginals, correlation=None if eps.size == 1 else corr, names=names)
 
 
 @dataclass(frozen=True)
@@ -150,6 +227,17 @@ class Verdict:
         return NotImplemented
 
     __hash__ = None
+
+
+#: the computation behind :meth:`InverseResult.predict`, registered by
+#: :mod:`ecfm_uq.inverse.statistics.prediction` on import (a layer below may not import
+#: the one above it; the package's ``__init__`` imports that module, so it is always set)
+_BAND_BUILDER = {}
+
+
+def register_band_builder(build):
+    """Make ``build(result, g, **options)`` the computation of :meth:`InverseResult.predict`."""
+    _BAND_BUILDER["predict"] = build
 
 
 def _empty_history():
@@ -216,6 +304,9 @@ class InverseResult:
         The bounds the fit ran with.
     names : list of str or None
         Parameter names, where the problem has them.
+    problem : ModelProblem or None
+        The :class:`~ecfm_uq.inverse.problems.model.ModelProblem` that was fitted (its model
+        gives :meth:`predict` its default quantity); ``None`` for the other problems.
     extra : dict
         Formulation-specific outputs, each key below (and no other):
 
@@ -303,6 +394,7 @@ class InverseResult:
     bounds: list | None = None
     names: list | None = None
     extra: dict = field(default_factory=dict)
+    problem: Any = None
 
     def __post_init__(self):
         def put(name, value):
@@ -338,6 +430,23 @@ class InverseResult:
             f"<InverseResult {self.method} {self.status.name}: eps="
             f"{np.array2string(self.eps, precision=6)}, consistent={consistent}>"
         )
+
+    def predict(self, g=None, *, level=0.95, kind="confidence", method="delta", **options):
+        """A quantity of interest at the estimate with its ``level`` band.
+
+        ``g(eps) -> array`` (default: the fitted :class:`~ecfm_uq.inverse.ModelProblem`'s
+        predictions of its data) with a confidence band (the uncertainty of the estimate)
+        or a prediction band (plus the noise of a new observation), by the delta method,
+        a PCE of ``g`` or posterior samples. The computation is
+        :func:`ecfm_uq.inverse.statistics.prediction.predict_band` (see it for every
+        argument and what each method computes); it is handed to this layer when
+        :mod:`ecfm_uq.inverse` is imported, so ``core`` imports nothing above it.
+
+        Returns
+        -------
+        Band
+        """
+        return _BAND_BUILDER["predict"](self, g, level=level, kind=kind, method=method, **options)
 
     def summary(self, level=0.95, profile=None):
         """A table of the fit, as statsmodels and lmfit print one.

@@ -306,7 +306,10 @@ def fit_model_problem(problem, eps0, s):
             else:
                 unc = estimate_uncertainty(None, out.x, r, s2, how, dof=dof, deps_dv=D)
                 if unc.jacobian is not None and noise.known:  # d eps/d(W v) as d eps/dv
-                    unc = dataclasses.replace(unc, jacobian=noise.pull_back(unc.jacobian))
+                    # and the noise as given (the whitened fit saw sigma = 1)
+                    unc = dataclasses.replace(
+                        unc, jacobian=noise.pull_back(unc.jacobian), sigma=noise.std()
+                    )
         else:
             unc = Uncertainty.failed("uncertainty not computed: as many parameters as data "
                                      "leave no residual to estimate sigma; pass `sigma`")  # fmt: skip
@@ -323,5 +326,5 @@ def fit_model_problem(problem, eps0, s):
         optimizer="least-squares", eps_history=out.eps_history,
         loss_history=out.loss_history, extra={"prediction": y.reshape(problem.shape)},
         uncertainty=unc, verdict=verdict, likelihood=likelihood, bounds=bounds,
-        names=problem.names,
+        names=problem.names, problem=problem,
     )  # fmt: skip

@@ -88,6 +88,19 @@ class NoiseModel:
             ).T
         return D / self.scale
 
+    def std(self):
+        """The standard deviation of each value: a float (``"scalar"``), the ``(n,)``
+        standard deviations (``"diagonal"``), the square roots of the covariance's diagonal
+        (``"covariance"``: each value's own noise, correlations left out) or ``None``
+        (``"unknown"``)."""
+        if self.kind == "scalar":
+            return float(self.scale)
+        if self.kind == "diagonal":
+            return np.array(self.scale, dtype=float)
+        if self.kind == "covariance":
+            return np.sqrt(np.einsum("ij,ij->i", self.chol, self.chol))
+        return None
+
     def describe(self):
         """A few words for messages."""
         if self.kind == "scalar":

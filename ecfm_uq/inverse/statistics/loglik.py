@@ -111,9 +111,14 @@ def least_squares_likelihood(rss_and_grad, n_data, n_eps, sigma, what, rss_only=
             return -np.inf, np.zeros(n_eps)
         return 0.5 * n_data * np.log(rss), 0.5 * n_data * g / rss
 
+    def value_only(eps):
+        rss = rss_only(eps)
+        return 0.5 * n_data * np.log(rss) if rss > 0.0 else -np.inf
+
     return LogLikelihood(
-        evaluate, n_eps, n_data, "profiled sigma", f"{what}, Gaussian noise, sigma profiled out"
-    )
+        evaluate, n_eps, n_data, "profiled sigma", f"{what}, Gaussian noise, sigma profiled out",
+        value_only=None if rss_only is None else value_only,
+    )  # fmt: skip
 
 
 def remember_last_point(residual):

@@ -14,6 +14,25 @@ times long (emcee's own rule of thumb); the effective sample size is
 ``n_walkers * n_kept / tau``. On a (nearly) linear model the posterior is the Laplace
 approximation :math:`N(\\hat\\epsilon, \\sigma^2 (J^TJ)^{-1})` of
 :func:`~ecfm_uq.inverse.fit` of a :class:`~ecfm_uq.inverse.SteadyProblem` with ``sigma``.
+
+A fit whose :math:`\\sigma` was estimated (its likelihood has sigma profiled out) is
+sampled with :math:`\\sigma` as an unknown too, under the Jeffreys prior
+:math:`p(\\sigma) \\propto 1/\\sigma` (flat in :math:`\\log\\sigma`), independent of
+:math:`p(\\epsilon)`. Integrating :math:`\\sigma` out,
+
+.. math::
+
+    p(\\epsilon \\mid v) \\propto p(\\epsilon)\\int_0^\\infty \\sigma^{-n}
+        e^{-\\|r(\\epsilon)\\|^2/2\\sigma^2}\\,\\frac{d\\sigma}{\\sigma}
+        \\propto p(\\epsilon)\\,\\|r(\\epsilon)\\|^{-n},
+
+which is exactly the profiled likelihood the fit carries, so the chain runs on it; then
+each sample's :math:`\\sigma` is drawn from its conditional,
+:math:`\\|r(\\epsilon)\\|^2/\\sigma^2 \\sim \\chi^2_n` (``PosteriorResult.sigma``). For a
+linear model with a flat prior the marginal posterior of :math:`\\epsilon` is then the
+multivariate t with :math:`n - p` degrees of freedom, location :math:`\\hat\\epsilon` and
+scale :math:`s^2(X^TX)^{-1}`, and :math:`\\sigma^2 \\sim \\|r(\\hat\\epsilon)\\|^2 /
+\\chi^2_{n-p}`.
 """
 
 from __future__ import annotations
@@ -59,6 +78,12 @@ class PosteriorResult:
     message : str
     nfev : int
         Log-posterior evaluations (model solves inside the prior's support).
+    sigma : (n_samples,) ndarray or None
+        The noise standard deviation of each sample, when sigma was estimated by the fit
+        (sampled under the Jeffreys prior, see the module docstring); ``None`` when it was
+        known.
+    sigma_prior : str
+        ``"jeffreys"`` when ``sigma`` is sampled, else ``""``.
     """
 
     chain: np.ndarray
@@ -73,6 +98,8 @@ class PosteriorResult:
     message: str
     status: FitStatus = FitStatus.CONVERGED
     nfev: int = 0
+    sigma: np.ndarray | None = None
+    sigma_prior: str = ""
 
     @property
     def converged(self):
@@ -125,10 +152,12 @@ def sample_posterior(
 
     ``sample_posterior(result, prior=..., ...)`` samples the likelihood a fit carries
     (``result.likelihood`` of :func:`~ecfm_uq.inverse.fit`): steady and dynamic least
-    squares with ``sigma`` known, and the random-force ECFM (its likelihood with the
-    estimated discrepancy covariance held fixed), starting at the estimate. Likelihoods
-    that are not a density of the data given eps are refused: sigma profiled out, the
-    replicated pseudo-likelihood, the force objectives.
+    squares with ``sigma`` known, the least squares of a ModelProblem or a SteadyProblem
+    with sigma estimated (sigma then sampled too, under the Jeffreys prior
+    :math:`p(\\sigma) \\propto 1/\\sigma`: ``PosteriorResult.sigma``), and the random-force
+    ECFM (its likelihood with the estimated discrepancy covariance held fixed), starting
+    at the estimate. Likelihoods that are not a density of the data given eps are
+    refused: the replicated pseudo-likelihood, the force objectives.
 
     Parameters
     ----------
@@ -172,8 +201,9 @@ def sample_posterior(
     from ...system import solve_steady
     from ..core.result import InverseResult
 
+    n_data = None  # sigma sampled (Jeffreys) for a profiled likelihood of this many data
     if isinstance(system, InverseResult):
-        log_like, eps0 = _result_likelihood(system, M_obs, v, sigma, eps0)
+        log_like, eps0, n_data = _result_likelihood(system, M_obs, v, sigma, eps0)
     else:
         sigma = check_positive("sigma", sigma)
         M_obs = as_operator("M_obs", M_obs, shape=(None, system.N))
@@ -212,9 +242,10 @@ def sample_posterior(
     def log_post(eps):
         lp = prior(eps)
         if not np.isfinite(lp):
-            return -np.inf
+            return -np.inf, np.nan
         nfev[0] += 1
-        return lp + log_like(eps)
+        ll = log_like(eps)
+        return lp + ll, ll  # the log-likelihood as a blob: the sum of squares of sigma
 
     rng = np.random.default_rng(seed)
     start = []
@@ -229,6 +260,13 @@ def sample_posterior(
     tau = np.asarray(sampler.get_autocorr_time(tol=0), dtype=float)
     burn = int(min(np.ceil(2 * tau.max()), n_steps // 2))
     samples = chain[burn:].reshape(-1, n)
+    sigma_draws = None
+    if n_data is not None:
+        # -log-likelihood = (n/2) log ||r||^2, so ||r||^2 = exp(-2 ll / n); then
+        # ||r||^2 / sigma^2 ~ chi2_n given eps (Jeffreys prior)
+        ll = np.asarray(sampler.get_blobs(), dtype=float)[burn:].reshape(-1)
+        rss = np.exp(-2.0 * ll / n_data)
+        sigma_draws = np.sqrt(rss / rng.chisquare(n_data, size=rss.size))
     converged = bool(n_steps >= MIN_TAU_MULTIPLES * tau.max())
     msg = (
         f"chain of {n_steps} steps = {n_steps / tau.max():.1f} autocorrelation times "
@@ -253,11 +291,14 @@ def sample_posterior(
         message=msg,
         status=FitStatus.CONVERGED if converged else FitStatus.MAX_ITERATIONS,
         nfev=nfev[0],
+        sigma=sigma_draws,
+        sigma_prior="" if sigma_draws is None else "jeffreys",
     )
 
 
 def _result_likelihood(result, *unused):
-    """``log p(v | eps)`` (up to a constant) of a fit, and its estimate as the start."""
+    """``log p(v | eps)`` (up to a constant) of a fit, its estimate as the start, and the
+    number of data when sigma is profiled out (sampled too), else ``None``."""
     if any(u is not None for u in unused):
         raise TypeError(
             "sample_posterior(result, ...) takes the data and sigma from the fit; pass only "
@@ -266,7 +307,15 @@ def _result_likelihood(result, *unused):
     like = getattr(result, "likelihood", None)
     if like is None or isinstance(like, str):
         raise ValueError(f"`result` has no likelihood to sample: {like or 'not made by fit'}")
-    if like.noise not in ("known sigma", "random forces"):
+    profiled = like.noise == "profiled sigma"
+    if profiled and like.residual is None:
+        raise ValueError(
+            f"`result`'s likelihood ({like.description}) profiles sigma out, which is not "
+            "a density of the data given eps; sigma is sampled with eps (Jeffreys prior) "
+            "only for fits whose likelihood carries its residual (ModelProblem, "
+            "SteadyProblem); refit with `sigma` known"
+        )
+    if like.noise not in ("known sigma", "random forces") and not profiled:
         raise ValueError(
             f"`result`'s likelihood ({like.description}) is not a density of the data given "
             "eps; refit with `sigma` known (formulation 'standard' or 'ecfm')"
@@ -279,4 +328,4 @@ def _result_likelihood(result, *unused):
         except failures:
             return -np.inf
 
-    return log_like, np.asarray(result.eps, dtype=float)
+    return log_like, np.asarray(result.eps, dtype=float), like.n_data if profiled else None

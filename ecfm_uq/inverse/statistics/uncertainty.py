@@ -359,8 +359,9 @@ def estimate_uncertainty(
     Returns
     -------
     Uncertainty
-        ``cov``, ``stderr``, ``intervals``, ``noise_model``, ``dof``, ``jacobian`` and
-        ``method``; or ``success=False`` with the ``message`` why when the covariance
+        ``cov``, ``stderr``, ``intervals``, ``noise_model``, ``dof``, ``jacobian``,
+        ``method``, ``eps`` and ``sigma`` (:math:`\\sqrt{\\Sigma}` for one noise level,
+        known or estimated; else ``None``); or ``success=False`` with the ``message`` why when the covariance
         cannot be computed (never NaN).
     """
     try:
@@ -391,6 +392,7 @@ def estimate_uncertainty(
     if block is not None:
         cov, D, eps = cov[block, block], D[block], eps[block]
     se, ci = confidence_intervals(eps, cov, dof=dof)
+    one_sigma = noise_model in ("known", "estimated") and np.ndim(Sigma) == 0
     return Uncertainty(
         True,
         cov=cov,
@@ -400,6 +402,8 @@ def estimate_uncertainty(
         noise_model=noise_model,
         dof=dof,
         jacobian=D,
+        sigma=float(np.sqrt(Sigma)) if one_sigma else None,
+        eps=eps.copy(),
     )
 
 
