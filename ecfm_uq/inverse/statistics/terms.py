@@ -22,11 +22,7 @@ information criterion (``"bic"`` or ``"aic"``) among the supports the path visit
 no term kept below the Bonferroni level ``alpha`` (the family-wise rate of false
 discoveries over all equations and terms). This is the sparse-regression half of a
 universal differential equation (Rackauckas et al. 2020), with the ECFM forces in place of
-a trained network's output.
-
-Only duck typing on ``result.forces`` (``times``, ``intervals``, ``values``, ``stderr``,
-``names``) and ``result.state`` (callable, ``names``): this module imports nothing from
-the problems or formulations.
+a trained network's output. Duck-typed on ``result.forces`` and ``result.state``.
 """
 
 from __future__ import annotations
@@ -292,7 +288,7 @@ def _select(X, y, weighted, method, threshold, criterion, floor):
     elif method == "stlsq":
         coef, se, _ = _wls(X, y, full, s2)
         top = max(np.nanmax(np.abs(coef) / se), floor) * 1.01
-        grid = np.geomspace(floor, top, 60)
+        grid = np.geomspace(floor, top, 40)
         paths = [(_stlsq(X, y, s2, th), th) for th in grid] + [(~full, np.inf)]
     else:
         order = _lars_order(X, y)
@@ -379,15 +375,12 @@ def discover_terms(
     n_terms, n_forced = len(names), F.shape[1]
     floor = float(ndtri(1.0 - alpha / (2.0 * n_terms * n_forced)))
 
-    coef = np.zeros((n_terms, n_forced))
-    stderr = np.full((n_terms, n_forced), np.nan)
+    coef, stderr = np.zeros((n_terms, n_forced)), np.zeros((n_terms, n_forced))
     selected = np.zeros((n_terms, n_forced), dtype=bool)
-    thr, icv, scale = (np.full(n_forced, np.nan) for _ in range(3))
-    n_used = []
+    thr, icv, scale, n_used = np.zeros(n_forced), np.zeros(n_forced), np.zeros(n_forced), []
     for i in range(n_forced):
         ok = np.isfinite(F[:, i]) & (np.isfinite(se[:, i]) if se is not None else True)
-        K = int(ok.sum())
-        n_used.append(K)
+        n_used.append(K := int(ok.sum()))
         if K <= n_terms:
             raise ValueError(
                 f"`result.forces` has {K} usable pieces for {forced_names[i]!r}, not more "
@@ -400,16 +393,5 @@ def discover_terms(
         )
         coef[:, i], stderr[:, i], _ = _wls(X, y, support, scale[i])
         selected[:, i] = support
-    return TermsResult(
-        names,
-        forced_names,
-        coef,
-        stderr,
-        selected,
-        thr,
-        icv,
-        scale,
-        min(n_used),
-        method,
-        criterion,
-    )
+    per_equation = (coef, stderr, selected, thr, icv, scale)
+    return TermsResult(names, forced_names, *per_equation, min(n_used), method, criterion)
