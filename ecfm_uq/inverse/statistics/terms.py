@@ -15,12 +15,14 @@ with :math:`\\theta_j` the library (default: the monomials of the states up to d
 the constant included) and :math:`\\bar\\Theta` its piece means by Gauss--Legendre
 quadrature on the fitted state. :func:`discover_terms` estimates a sparse :math:`\\xi`
 per forced component by weighted least squares (weights :math:`1/\\mathrm{se}(f_{ik})^2`):
-SINDy's sequentially thresholded least squares (Brunton, Proctor & Kutz 2016) with the
-threshold on :math:`|\\xi_j|/\\mathrm{se}(\\xi_j)` (``method="stlsq"``), or the LARS
-path (Efron et al. 2004, ``method="lars"``); either way the model is chosen by an
+the LARS path (Efron et al. 2004, ``method="lars"``, the default) or SINDy's sequentially
+thresholded least squares (Brunton, Proctor & Kutz 2016, ``method="stlsq"``) with the
+threshold on :math:`|\\xi_j|/\\mathrm{se}(\\xi_j)`; either way the model is chosen by an
 information criterion (``"bic"`` or ``"aic"``) among the supports the path visits, with
 no term kept below the Bonferroni level ``alpha`` (the family-wise rate of false
-discoveries over all equations and terms). This is the sparse-regression half of a
+discoveries over all equations and terms). LARS is the default: the piece means of
+monomials are nearly collinear, which shrinks the t-statistics of the full-library fit
+STLSQ starts from (measured in docs/discover_terms.md). This is the sparse-regression half of a
 universal differential equation (Rackauckas et al. 2020), with the ECFM forces in place of
 a trained network's output. Duck-typed on ``result.forces`` and ``result.state``.
 """
@@ -36,7 +38,7 @@ from scipy.special import ndtri
 
 __all__ = ["TermsResult", "discover_terms"]
 
-_METHODS = ("stlsq", "lars")
+_METHODS = ("lars", "stlsq")
 _CRITERIA = ("bic", "aic")
 
 
@@ -107,10 +109,8 @@ def _monomials(names, degree):
     lib = {"1": lambda y: np.ones(y.shape[0])}
     for d in range(1, degree + 1):
         for idx in combinations_with_replacement(range(len(names)), d):
-            parts = []
-            for j in sorted(set(idx)):
-                p = idx.count(j)
-                parts.append(names[j] if p == 1 else f"{names[j]}^{p}")
+            p = {j: idx.count(j) for j in sorted(set(idx))}
+            parts = [names[j] + (f"^{q}" if q > 1 else "") for j, q in p.items()]
             lib["*".join(parts)] = lambda y, idx=idx: np.prod(y[:, list(idx)], axis=1)
     return lib
 
@@ -157,20 +157,15 @@ def _library(library, state_names):
 def _forces(result):
     """``(values (K, n), stderr (K, n) or None, intervals (K, 2), names)`` of ``result``."""
     forces = getattr(result, "forces", None)
-    state = getattr(result, "state", None)
-    if forces is None or not hasattr(forces, "values") or not hasattr(forces, "intervals"):
+    if not (hasattr(forces, "values") and hasattr(forces, "intervals")) or not callable(
+        getattr(result, "state", None)
+    ):
         raise TypeError(
-            f"`result` ({type(result).__name__}) has no `forces` with `values` and "
-            "`intervals`: pass the result of an ECFM fit of an OdeProblem"
-        )
-    if state is None or not callable(state):
-        raise TypeError(
-            f"`result` ({type(result).__name__}) has no callable `state`: pass the result "
-            "of an ECFM fit of an OdeProblem (its forced solution, state(times))"
+            f"`result` ({type(result).__name__}) needs `forces` (with `values`, `intervals`) "
+            "and a callable `state`: pass the result of an ECFM fit of an OdeProblem"
         )
     F = np.asarray(forces.values, dtype=float)
-    if F.ndim == 1:
-        F = F[:, None]
+    F = F[:, None] if F.ndim == 1 else F
     iv = np.asarray(forces.intervals, dtype=float)
     if F.ndim != 2 or iv.shape != (F.shape[0], 2):
         raise ValueError(
@@ -233,11 +228,11 @@ def _wls(X, y, support, s2=1.0):
     return coef, se, float(r @ r)
 
 
-def _stlsq(X, y, s2, threshold):
-    """SINDy's sequentially thresholded least squares, on t-statistics."""
-    support = np.ones(X.shape[1], dtype=bool)
+def _stlsq(fit, p, threshold):
+    """SINDy's sequentially thresholded least squares on t-statistics (``fit``: ``_wls``)."""
+    support = np.ones(p, dtype=bool)
     while support.any():
-        coef, se, _ = _wls(X, y, support, s2)
+        coef, se, _ = fit(support)
         drop = support & ~(np.abs(coef) >= threshold * se)
         if not drop.any():
             break
@@ -258,9 +253,7 @@ def _lars_order(X, y):
         if not active:
             active.append(inactive.pop(int(np.argmax(np.abs(c[inactive])))))
         C = np.abs(c[active]).max()
-        s = np.sign(c[active])
-        s[s == 0] = 1.0
-        XA = Xn[:, active] * s
+        XA = Xn[:, active] * np.where(c[active] < 0, -1.0, 1.0)
         g = np.linalg.lstsq(XA.T @ XA, np.ones(len(active)), rcond=None)[0]
         AA = 1.0 / np.sqrt(max(g.sum(), 1e-300))
         u = XA @ (AA * g)
@@ -269,8 +262,8 @@ def _lars_order(X, y):
         for j in inactive:
             cand = [(C - c[j]) / (AA - a[j]), (C + c[j]) / (AA + a[j])]
             steps.append(min((g_ for g_ in cand if g_ > 1e-12), default=np.inf))
-        k = int(np.argmin(steps)) if inactive else 0
-        if not inactive or not np.isfinite(steps[k]):
+        k = int(np.argmin(steps + [np.inf]))
+        if k == len(steps) or not np.isfinite(steps[k]):
             break
         mu = mu + steps[k] * u
         active.append(inactive.pop(k))
@@ -283,21 +276,28 @@ def _select(X, y, weighted, method, threshold, criterion, floor):
     full = np.ones(p, dtype=bool)
     rss_full = _wls(X, y, full)[2]
     s2 = max(1.0, rss_full / (n - p)) if weighted else max(rss_full / (n - p), 1e-300)
+    fits = {}  # the thresholds' STLSQ runs share most of their supports
+
+    def fit(support):
+        key = support.tobytes()
+        if key not in fits:
+            fits[key] = _wls(X, y, support, s2)
+        return fits[key]
+
     if threshold is not None:
-        paths = [(_stlsq(X, y, s2, threshold), threshold)]
-    elif method == "stlsq":
-        coef, se, _ = _wls(X, y, full, s2)
-        top = max(np.nanmax(np.abs(coef) / se), floor) * 1.01
-        grid = np.geomspace(floor, top, 40)
-        paths = [(_stlsq(X, y, s2, th), th) for th in grid] + [(~full, np.inf)]
+        paths = [(_stlsq(fit, p, threshold), threshold)]
+    elif method == "stlsq":  # thresholds from near 0; the floor is checked below
+        coef, se, _ = fit(full)
+        grid = np.geomspace(0.1, max(np.nanmax(np.abs(coef) / se), floor) * 1.01, 50)
+        paths = [(_stlsq(fit, p, th), th) for th in grid] + [(~full, np.inf)]
     else:
         order = _lars_order(X, y)
         paths = [(np.isin(np.arange(p), order[:k]), np.nan) for k in range(len(order) + 1)]
     best = None
     for support, th in paths:
-        coef, se, rss = _wls(X, y, support, s2)
+        coef, se, rss = fit(support)
         if threshold is None and np.any(np.abs(coef[support]) < floor * se[support]):
-            continue  # LARS: a term below the Bonferroni floor
+            continue  # a term below the Bonferroni floor
         ic = rss / s2 + support.sum() * (np.log(n) if criterion == "bic" else 2.0)
         if best is None or ic < best[2] - 1e-12:
             best = (support, th, ic)
@@ -308,7 +308,7 @@ def discover_terms(
     result,
     library=None,
     *,
-    method="stlsq",
+    method="lars",
     threshold=None,
     criterion="bic",
     alpha=0.05,
@@ -327,12 +327,12 @@ def discover_terms(
         constant (``"1", "u", "v", "u^2", "u*v", "v^2"`` for states ``u, v``); an int
         for another degree; a dict ``name -> callable(y)`` with ``y`` (m, n_state) and
         values (m,); or a list of ``(name, callable)`` pairs or named functions.
-    method : {"stlsq", "lars"}, optional
-        Sequentially thresholded least squares on t-statistics (SINDy's, the default) or
-        the LARS path; each picks its model by ``criterion``.
+    method : {"lars", "stlsq"}, optional
+        The LARS path (the default) or sequentially thresholded least squares on
+        t-statistics (SINDy's); each picks its model by ``criterion``.
     threshold : float, optional
         ``"stlsq"`` only: a fixed t-statistic threshold (no criterion, no ``alpha``
-        floor). Default: the criterion's choice over thresholds from the floor up.
+        floor). Default: the criterion's choice over a path of thresholds.
     criterion : {"bic", "aic"}, optional
         :math:`\\chi^2/s^2 + k\\log K` or :math:`+2k` over the models the path visits.
     alpha : float, optional
@@ -362,7 +362,9 @@ def discover_terms(
         raise ValueError(f"`criterion` = {criterion!r}: choose one of {_CRITERIA}")
     if threshold is not None:
         if method != "stlsq":
-            raise ValueError("`threshold` applies to method='stlsq' only: leave it None")
+            raise ValueError(
+                "`threshold` applies to method='stlsq' only: pass method='stlsq' with it"
+            )
         if not np.isfinite(threshold) or threshold < 0:
             raise ValueError(f"`threshold` = {threshold!r}: give a t-statistic >= 0")
     if not 0 < alpha < 1:
