@@ -222,14 +222,19 @@ def test_summary_and_repr_show_the_selected_terms(lv):
 
 
 def test_pieces_without_a_value_are_left_out(lv):
+    """NaN values, and the ForceSeries' marks of a piece without a datum (value 0 and
+    stderr 0) or of a force the fit fixes (stderr ~0): left out, not given infinite weight."""
     fit = _logistic(lv)
     f = fit.forces
-    values = f.values.copy()
+    values, se = f.values.copy(), f.stderr.copy()
     values[::7, 0] = np.nan
-    res = discover_terms(Fit(Forces(f.times, f.intervals, values, f.stderr, f.names,
+    values[3::7, 0], se[3::7, 0] = 0.0, 0.0
+    values[0, 0], se[0, 0] = 5.0, 1e-12
+    res = discover_terms(Fit(Forces(f.times, f.intervals, values, se, f.names,
                                     f.components), fit.state))  # fmt: skip
     assert res.terms("u").keys() == {"u^2"}
-    assert res.n_pieces == PIECES - len(range(0, PIECES, 7))
+    assert abs(res.coef[3, 0] + K) < 0.01 * K
+    assert res.n_pieces == PIECES - len(range(0, PIECES, 7)) - len(range(3, PIECES, 7))
 
 
 def test_bad_input_names_the_argument(lv):
@@ -252,7 +257,7 @@ def test_bad_input_names_the_argument(lv):
         discover_terms(fit, "u^2")
     f = fit.forces
     with pytest.raises(ValueError, match="stderr"):
-        discover_terms(Fit(Forces(f.times, f.intervals, f.values, 0 * f.stderr, f.names,
+        discover_terms(Fit(Forces(f.times, f.intervals, f.values, -f.stderr, f.names,
                                   f.components), fit.state))  # fmt: skip
     short = Forces(f.times[:5], f.intervals[:5], f.values[:5], f.stderr[:5], f.names, f.components)
     with pytest.raises(ValueError, match="library"):

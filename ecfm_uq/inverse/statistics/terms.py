@@ -22,9 +22,8 @@ information criterion (``"bic"`` or ``"aic"``) among the supports the path visit
 no term kept below the Bonferroni level ``alpha`` (the family-wise rate of false
 discoveries over all equations and terms). LARS is the default: the piece means of
 monomials are nearly collinear, which shrinks the t-statistics of the full-library fit
-STLSQ starts from (measured in docs/discover_terms.md). This is the sparse-regression half of a
-universal differential equation (Rackauckas et al. 2020), with the ECFM forces in place of
-a trained network's output. Duck-typed on ``result.forces`` and ``result.state``.
+STLSQ starts from (docs/discover_terms.md). The sparse-regression half of a universal
+differential equation (Rackauckas et al. 2020), the ECFM forces in a network's place.
 """
 
 from __future__ import annotations
@@ -59,7 +58,7 @@ class TermsResult:
         Per equation: the t threshold of the chosen model (NaN for ``"lars"``), its
         criterion, and the errors' variance factor :math:`s^2`.
     n_pieces : int
-        The force pieces used (finite value and standard error).
+        The fewest force pieces an equation used.
     method, criterion : str
     """
 
@@ -178,11 +177,13 @@ def _forces(result):
     if se is not None:
         se = np.asarray(se, dtype=float)
         se = se[:, None] if se.ndim == 1 else se
-        if se.shape != F.shape or np.any(se <= 0):
+        if se.shape != F.shape or np.any(se < 0):
             raise ValueError(
-                f"`result.forces.stderr` (shape {se.shape}) must be positive, shaped as "
-                f"`values` {F.shape} (inf or NaN marks a piece without information)"
+                f"`result.forces.stderr` (shape {se.shape}) must be >= 0, shaped as "
+                f"`values` {F.shape} (0, inf or NaN marks a piece without information)"
             )
+        top = np.max(np.where(np.isfinite(se), se, 0.0), axis=0)
+        se = np.where(se > 1e-6 * top, se, np.nan)  # unconstrained, or fixed by the fit
     return F, se, iv, [str(n) for n in (getattr(forces, "names", None) or range(F.shape[1]))]
 
 
@@ -349,12 +350,12 @@ def discover_terms(
 
     Notes
     -----
-    With ``stderr`` given, the pieces are weighted by :math:`1/\\mathrm{se}^2` and the
-    errors' variance factor is :math:`s^2 = \\max(1, \\chi^2_{full}/(K - n_{terms}))`
-    (the stated errors, inflated if the full library cannot explain the forces to them);
-    without, :math:`s^2` is the full-library fit's residual variance. The forces' errors
-    are taken as independent (the contract carries no covariance). Pieces with a
-    non-finite value or standard error are left out.
+    With ``stderr``, weights :math:`1/\\mathrm{se}^2` and the errors' variance factor
+    :math:`s^2 = \\max(1, \\chi^2_{full}/(K - n_{terms}))` (inflated if the full library
+    cannot explain the forces to their errors); without, the full-library residual
+    variance. The errors are taken as independent. Pieces with a non-finite value or
+    standard error are left out, as are those with a standard error 0 or below 1e-6 of
+    the largest (no datum, or a force the fit fixes).
     """
     if method not in _METHODS:
         raise ValueError(f"`method` = {method!r}: choose one of {_METHODS}")
@@ -376,22 +377,21 @@ def discover_terms(
     Theta = _piece_means(result.state, intervals, funcs, names, int(nodes))
     n_terms, n_forced = len(names), F.shape[1]
     floor = float(ndtri(1.0 - alpha / (2.0 * n_terms * n_forced)))
-
+    weighted, se = se is not None, np.ones_like(F) if se is None else se
     coef, stderr = np.zeros((n_terms, n_forced)), np.zeros((n_terms, n_forced))
     selected = np.zeros((n_terms, n_forced), dtype=bool)
     thr, icv, scale, n_used = np.zeros(n_forced), np.zeros(n_forced), np.zeros(n_forced), []
     for i in range(n_forced):
-        ok = np.isfinite(F[:, i]) & (np.isfinite(se[:, i]) if se is not None else True)
+        ok = np.isfinite(F[:, i]) & np.isfinite(se[:, i])
         n_used.append(K := int(ok.sum()))
         if K <= n_terms:
             raise ValueError(
                 f"`result.forces` has {K} usable pieces for {forced_names[i]!r}, not more "
                 f"than the {n_terms} library terms: pass a smaller `library` or more data"
             )
-        w = 1.0 / se[ok, i] if se is not None else np.ones(K)
-        X, y = Theta[ok] * w[:, None], F[ok, i] * w
+        X, y = Theta[ok] / se[ok, i, None], F[ok, i] / se[ok, i]
         support, thr[i], icv[i], scale[i] = _select(
-            X, y, se is not None, method, threshold, criterion, floor
+            X, y, weighted, method, threshold, criterion, floor
         )
         coef[:, i], stderr[:, i], _ = _wls(X, y, support, scale[i])
         selected[:, i] = support
