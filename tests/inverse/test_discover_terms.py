@@ -3,7 +3,9 @@ logistic prey growth, whose forces are the terms the plain LV model lacks, avera
 monthly pieces (the piece means from integrals carried by the ODE solver itself, not by the
 module's quadrature)."""
 
+import re
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -262,3 +264,17 @@ def test_bad_input_names_the_argument(lv):
     short = Forces(f.times[:5], f.intervals[:5], f.values[:5], f.stderr[:5], f.names, f.components)
     with pytest.raises(ValueError, match="library"):
         discover_terms(Fit(short, fit.state))
+
+
+def test_the_docs_example_runs_and_prints_what_the_page_shows():
+    """docs/discover_terms.md: its example (forces from Simpson means, not the module's
+    Gauss-Legendre) names u^2 and prints the table the page shows."""
+    text = (Path(__file__).resolve().parents[2] / "docs" / "discover_terms.md").read_text()
+    code = re.findall(r"```python\n(.*?)```", text, re.S)[0]
+    shown = re.findall(r"```text\n(.*?)```", text, re.S)[0]
+    ns = {}
+    exec(compile(code.replace("print(res.summary())", ""), "discover_terms.md", "exec"), ns)
+    res = ns["res"]
+    assert res.terms("u").keys() == {"u^2"} and res.terms("v") == {}
+    assert abs(res.coef[3, 0] + K) < 0.01 * K
+    assert res.summary().strip() == shown.strip()
