@@ -48,20 +48,20 @@ class Fit:
 
 @pytest.fixture(scope="module")
 def lv():
-    """The logistic LV solution with the running integrals of u and u^2 as extra states,
-    and the monthly pieces' exact means of u and u^2."""
+    """The logistic LV solution with the running integrals of u, u^2 and u v as extra
+    states, and the monthly pieces' exact means of u, u^2 and u v."""
 
     def rhs(t, y):
         u, v = y[0], y[1]
-        return [A * u - K * u * u - B * u * v, C * u * v - D * v, u, u * u]
+        return [A * u - K * u * u - B * u * v, C * u * v - D * v, u, u * u, u * v]
 
     sol = solve_ivp(
-        rhs, (0, YEARS), [4.0, 1.0, 0.0, 0.0], method="DOP853", rtol=1e-11, atol=1e-12,
+        rhs, (0, YEARS), [4.0, 1.0, 0.0, 0.0, 0.0], method="DOP853", rtol=1e-11, atol=1e-12,
         dense_output=True,
     )  # fmt: skip
     edges = np.linspace(0.0, YEARS, PIECES + 1)
     Q = sol.sol(edges)
-    means = {"u": np.diff(Q[2]) / np.diff(edges), "u^2": np.diff(Q[3]) / np.diff(edges)}
+    means = {name: np.diff(Q[j]) / np.diff(edges) for j, name in [(2, "u"), (3, "u^2"), (4, "u*v")]}
     return sol.sol, np.column_stack([edges[:-1], edges[1:]]), means
 
 
@@ -91,7 +91,7 @@ def test_default_library_is_the_monomials_to_degree_two(lv):
         res.coef = None  # frozen
 
 
-@pytest.mark.parametrize("method", ["stlsq", "lars"])
+@pytest.mark.parametrize("method", ["stlsq+lars", "stlsq", "lars"])
 def test_the_logistic_term_is_named_in_the_prey_equation_only(lv, method):
     res = discover_terms(_logistic(lv), method=method)
     expect = np.zeros((6, 2), dtype=bool)
@@ -130,26 +130,43 @@ def test_exact_forces_recover_the_coefficient_to_quadrature_accuracy(lv):
     np.testing.assert_allclose(res.coef[0, 0], -K, rtol=1e-8)
 
 
-@pytest.mark.parametrize("method", ["stlsq", "lars"])
+@pytest.mark.parametrize("method", ["stlsq+lars", "stlsq", "lars"])
 def test_pure_noise_forces_name_nothing_in_90_percent_of_seeds(lv, method):
     zero = np.zeros(PIECES)
     found = [
         discover_terms(_fit(lv, zero, zero, 0.01, 0.02, seed=s), method=method).selected.any()
         for s in range(50)
     ]
-    assert sum(found) <= 5  # measured: stlsq 0 / 200 seeds, lars 8 / 200 (alpha = 0.05)
+    assert sum(found) <= 5  # measured over 200 seeds: 3 (stlsq+lars), 2 (stlsq), 2 (lars)
 
 
 def test_a_weak_missing_term_is_named_in_90_percent_of_seeds(lv):
     """-0.001 u^2 under noise 0.01 per piece (t about 9 with the term alone): the default
-    (LARS) names u^2 and nothing else in the u-equation (measured: 48 / 50 seeds; STLSQ
-    28 / 50, its full-library t-statistics shrunk by the collinear piece means)."""
+    names u^2 and nothing else in the u-equation (measured: 47 / 50 seeds; LARS alone 48,
+    STLSQ alone 28, its full-library t-statistics shrunk by the collinear piece means)."""
     f_u = -0.001 * lv[2]["u^2"]
     exact = [
         discover_terms(_fit(lv, f_u, 0.0, 0.01, 0.01, seed=s)).terms("u").keys() == {"u^2"}
         for s in range(50)
     ]
     assert sum(exact) >= 45
+
+
+def test_the_missing_term_beside_the_parameters_shift_is_named(lv):
+    """An ECFM fit of plain LV to logistic-LV data moves its own parameters to shrink the
+    forces (measured with the ODE ECFM: a 1 -> 0.656, b 0.5 -> 0.444), so its forces are
+    -k u^2 + (a - a_fit) u - (b - b_fit) u v. The default names exactly u, u^2, u*v with
+    those coefficients in >= 45 of 50 seeds (measured 49; STLSQ alone 49, LARS alone 0:
+    its forward order goes astray among the collinear piece means)."""
+    m = lv[2]
+    f_u = 0.344 * m["u"] - K * m["u^2"] - 0.0556 * m["u*v"]
+    right, coefs = 0, []
+    for s in range(50):
+        res = discover_terms(_fit(lv, f_u, 0.0, 0.017, 0.017, seed=s))
+        right += res.terms("u").keys() == {"u", "u^2", "u*v"} and res.terms("v") == {}
+        coefs.append(res.coef[[1, 3, 4], 0])
+    assert right >= 45
+    np.testing.assert_allclose(np.median(coefs, axis=0), [0.344, -K, -0.0556], rtol=0.02)
 
 
 def test_the_weights_discount_pieces_marked_uncertain(lv):
@@ -184,7 +201,8 @@ def test_a_fixed_threshold_of_zero_is_weighted_least_squares(lv):
     sm = pytest.importorskip("statsmodels.api")
     fit = _logistic(lv, rel=0.05)
     lib = {"1": lambda y: np.ones(len(y)), "u": lambda y: y[:, 0], "u^2": lambda y: y[:, 0] ** 2}
-    res = discover_terms(fit, lib, method="stlsq", threshold=0.0)
+    res = discover_terms(fit, lib, threshold=0.0)  # a threshold means STLSQ
+    assert res.method == "stlsq" and res.selected.all()
     X = np.column_stack([np.ones(PIECES), lv[2]["u"], lv[2]["u^2"]])
     ols = sm.WLS(fit.forces.values[:, 0], X, weights=fit.forces.stderr[:, 0] ** -2).fit()
     np.testing.assert_allclose(res.coef[:, 0], ols.params, rtol=1e-6, atol=1e-10)
@@ -220,7 +238,7 @@ def test_summary_and_repr_show_the_selected_terms(lv):
     res = discover_terms(_logistic(lv))
     text = res.summary()
     assert "du/dt" in text and "u^2" in text and "±" in text and "(no term selected)" in text
-    assert repr(res) == "TermsResult(lars, bic; u: u^2; v: none)"
+    assert repr(res) == "TermsResult(stlsq+lars, bic; u: u^2; v: none)"
 
 
 def test_pieces_without_a_value_are_left_out(lv):
@@ -249,6 +267,12 @@ def test_bad_input_names_the_argument(lv):
         discover_terms(fit, criterion="cv")
     with pytest.raises(ValueError, match="threshold"):
         discover_terms(fit, method="lars", threshold=2.0)
+    with pytest.raises(ValueError, match="threshold"):
+        discover_terms(fit, threshold=-1.0)
+    with pytest.raises(ValueError, match="alpha"):
+        discover_terms(fit, alpha=1.0)
+    with pytest.raises(ValueError, match="nodes"):
+        discover_terms(fit, nodes=0)
     with pytest.raises(TypeError, match="result"):
         discover_terms(object())
     with pytest.raises(TypeError, match="result"):
