@@ -232,6 +232,9 @@ def test_user_libraries_dict_pairs_and_named_functions(lv):
         res = discover_terms(fit, lib, criterion="aic")
         assert len(res.names) == 2 and res.selected[0, 0] and not res.selected[:, 1].any()
     assert discover_terms(fit, 3).names[-1] == "v^3"
+    zero = {"0": lambda y: 0 * y[:, 0], "u^2": u2}  # a term without information
+    for method in ("stlsq+lars", "stlsq", "lars"):
+        assert discover_terms(fit, zero, method=method).terms("u").keys() == {"u^2"}
 
 
 def test_summary_and_repr_show_the_selected_terms(lv):

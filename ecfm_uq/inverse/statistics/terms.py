@@ -43,7 +43,7 @@ _METHODS = ("stlsq+lars", "stlsq", "lars")
 _CRITERIA = ("bic", "aic")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class TermsResult:
     """The library terms :func:`discover_terms` selected for each forced component.
 
@@ -222,11 +222,11 @@ def _wls(X, y, support, s2=1.0):
         return coef, se, float(y @ y)
     Xs = X[:, support]
     norms = np.linalg.norm(Xs, axis=0)
-    norms[norms == 0] = 1.0
-    Q, R = np.linalg.qr(Xs / norms)
+    d = np.where(norms > 0, norms, 1.0)
+    Q, R = np.linalg.qr(Xs / d)
     Rinv = np.linalg.pinv(R)
-    coef[support] = (Rinv @ (Q.T @ y)) / norms
-    se[support] = np.sqrt(s2 * np.sum(Rinv**2, axis=1)) / norms
+    coef[support] = (Rinv @ (Q.T @ y)) / d
+    se[support] = np.where(norms > 0, np.sqrt(s2 * np.sum(Rinv**2, axis=1)) / d, np.inf)
     r = y - Xs @ coef[support]
     return coef, se, float(r @ r)
 
@@ -236,7 +236,7 @@ def _stlsq(fit, p, threshold):
     support = np.ones(p, dtype=bool)
     while support.any():
         coef, se, _ = fit(support)
-        drop = support & ~(np.abs(coef) >= threshold * se)
+        drop = support & ~(np.abs(coef) / se >= threshold)
         if not drop.any():
             break
         support &= ~drop
