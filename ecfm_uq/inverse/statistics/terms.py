@@ -144,11 +144,9 @@ def _library(library, state_names):
             f"`library` is a {type(library).__name__}: pass None (monomials to degree 2), "
             "a degree, a dict name -> callable(y) or a list of (name, callable)"
         )
-    if not items:
-        raise ValueError("`library` is empty: give at least one candidate term")
     names = [str(n) for n, _ in items]
-    if len(set(names)) != len(names):
-        raise ValueError(f"`library` repeats a term name: {names}")
+    if not names or len(set(names)) != len(names):
+        raise ValueError(f"`library` names {names}: give at least one term, each name once")
     for n, f in items:
         if not callable(f):
             raise TypeError(f"`library[{n!r}]` is not callable: give a function y -> (m,)")
@@ -186,7 +184,9 @@ def _forces(result):
             )
         top = np.max(np.where(np.isfinite(se), se, 0.0), axis=0)
         se = np.where(se > 1e-6 * top, se, np.nan)  # unconstrained, or fixed by the fit
-    return F, se, iv, [str(n) for n in (getattr(forces, "names", None) or range(F.shape[1]))]
+    names = getattr(forces, "names", None)
+    names = names if names is not None and len(names) == F.shape[1] else range(F.shape[1])
+    return F, se, iv, [str(n) for n in names]
 
 
 def _piece_means(state, intervals, funcs, names, nodes):
