@@ -21,7 +21,8 @@ Problem`                                                                        
 
 ``SteadyProblem`` also takes ``"ecfm-random"`` (the random-force ECFM, with ``sigma``).
 From a result: :func:`profile_likelihood` / :func:`profile_intervals` (profile-likelihood
-intervals and regions), :func:`likelihood_ratio_test`, ``result.summary()``.
+intervals and regions), :func:`likelihood_ratio_test`, ``result.summary()``; from an ECFM
+fit of an ODE, :func:`discover_terms` (which library terms its forces are).
 
 The package, read from the top: each layer imports only from itself and the layers below
 it (:file:`tests/inverse/test_layout.py` checks this), and nothing but :mod:`.coverage`
@@ -43,7 +44,8 @@ imports :mod:`.fitting`:
 ``statistics/``     what a fit says: ``uncertainty``, ``verdict``, ``loglik``, ``profile``
                     and ``profiler``, ``posterior``, ``diagnostics``, ``prediction``
                     (bands; ``InverseResult.predict`` in ``core`` reaches it through a
-                    function this package's import registers, not an upward import)
+                    function this package's import registers, not an upward import),
+                    ``terms`` (the missing term named from an ODE fit's forces)
 ``core/``           shared machinery: ``convergence`` (the one status decision),
                     ``drivers`` and ``optimizers`` (the optimizer calls), ``gradients``,
                     ``finite_differences``; the types handed around: ``settings`` (the
@@ -80,6 +82,7 @@ from .statistics.diagnostics import (
 from .statistics.loglik import LogLikelihood
 from .statistics.prediction import Band, predict_band
 from .statistics.profile import likelihood_ratio_test, profile_intervals, profile_likelihood
+from .statistics.terms import TermsResult, discover_terms
 
 __all__ = [
     "Band",
@@ -117,4 +120,6 @@ __all__ = [
     "standard_objective",
     "steady_coverage",
     "taylor_remainders",
+    "TermsResult",
+    "discover_terms",
 ]
