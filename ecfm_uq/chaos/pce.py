@@ -466,7 +466,7 @@ class PolynomialChaosExpansion:
                 out[key] = val
         return out
 
-    def plot_sobol(self, ax=None, names=None, component=()):
+    def plot_sobol(self, ax=None, names=None, component=(), germ=False):
         """Bars of the first-order and total Sobol indices of each input.
 
         Parameters
@@ -476,6 +476,10 @@ class PolynomialChaosExpansion:
             Input names on the axis (default: the inputs' names, ``w0, ...`` without inputs).
         component : int or tuple
             The output component drawn (``()`` for a scalar output).
+        germ : bool
+            Draw :meth:`sobol_germ` (the indices of the independent chaos variables, for
+            dependent inputs such as a fit's ``uncertainty.to_inputs()``: variable k is the
+            part of input k not explained by inputs ``0..k-1``) instead of refusing.
 
         Returns
         -------
@@ -484,8 +488,13 @@ class PolynomialChaosExpansion:
         if names is None:
             names = self.inputs.names if self.inputs is not None else None
             names = names or [f"w{k}" for k in range(self.dim)]
-        ax = sobol_bars(self.first_order(), self.total(), names, ax, component=component)
-        ax.set_title("Sobol indices of the PCE")
+        if germ:
+            first, total = self.sobol_germ("first"), self.sobol_germ("total")
+            names = [f"{n} | {', '.join(names[:k])}" if k else n for k, n in enumerate(names)]
+        else:
+            first, total = self.first_order(), self.total()
+        ax = sobol_bars(first, total, names, ax, component=component)
+        ax.set_title("Sobol indices of the PCE" + (" (germ: Cholesky order)" if germ else ""))
         return ax
 
     # -- evaluation and sampling -------------------------------------------------------
