@@ -113,7 +113,7 @@ class ModelProblem(InverseProblem):
                 ) from e
             raise ModelEvaluationError(msg) from e
         y = np.asarray(y)
-        if y.size != self.v.size or (y.shape != self.shape and y.ndim > 1):
+        if y.shape != self.shape and (y.size != self.v.size or y.ndim > 1):
             raise ValueError(
                 f"{_describe_call('model', eps)} returned shape {y.shape}; the data have "
                 f"shape {self.shape}: `model` must predict every observation"
@@ -130,9 +130,10 @@ class ModelProblem(InverseProblem):
             raise ModelEvaluationError(msg)
         return y
 
-    def jacobian(self, eps, y=None, *, columns=None, typical=None):
+    def jacobian(self, eps, y=None, *, columns=None, typical=None, method=None):
         """:math:`\\partial f/\\partial\\epsilon` at ``eps``, (n_data, n_eps) (or the
-        requested ``columns``), from ``jac`` or by finite differences."""
+        requested ``columns``), from ``jac`` or by finite differences (``method``, default
+        the problem's ``jac`` mode, overrides a differencing mode)."""
         eps = np.asarray(eps, dtype=float)
         if callable(self.jac):
             J = self._user_jacobian(eps)
@@ -141,7 +142,8 @@ class ModelProblem(InverseProblem):
             fun = self._complex_model
             return fd_jacobian(fun, eps, method="cs", typical=typical, columns=columns)
         return fd_jacobian(
-            self.predict, eps, method=self.jac, typical=typical, f0=y, columns=columns,
+            self.predict, eps, method=method or self.jac, typical=typical, f0=y,
+            columns=columns,
             map_points=None if self.executor is None else self._map,
         )  # fmt: skip
 
@@ -186,11 +188,21 @@ class ModelProblem(InverseProblem):
 
         return evaluate_samples(self.model, points, self.executor, name="model")
 
-    def residual_function(self, noise, *, typical=None):
+    def residual_function(self, noise, *, typical=None, accurate=False):
         """``eps -> (r, J, y)``: whitened residual :math:`W(f(\\epsilon) - v)`, its
-        Jacobian as a callable (computed when asked for) and the predictions."""
+        Jacobian as a callable (computed when asked for) and the predictions.
+
+        ``accurate``: one-sided differences (``jac="2-point"``) are replaced by central
+        ones (error :math:`O(\\varepsilon^{2/3})` instead of :math:`O(\\varepsilon^{1/2})`
+        relative): the Jacobian of the status test and of the final Gauss-Newton steps,
+        whose stationary point is then the optimum's to that accuracy, not to the
+        one-sided differences' (which shift it by :math:`(J^TJ)^{-1}\\Delta J^Tr`).
+        """
         v = self.v
-        calls = {"n": 0}
+        # the central-difference residual runs after the fit's: its first call is no
+        # longer the start, where a failing model is the user's error
+        calls = {"n": 1 if accurate else 0}
+        method = "3-point" if accurate and self.jac == "2-point" else None
 
         def residual(eps):
             # the first call (at eps0) raises the user's errors: nothing was computed yet
@@ -199,7 +211,7 @@ class ModelProblem(InverseProblem):
             r = noise.whiten(y - v)
 
             def J():
-                return noise.whiten(self.jacobian(eps, y, typical=typical))
+                return noise.whiten(self.jacobian(eps, y, typical=typical, method=method))
 
             return r, J, y
 
@@ -237,7 +249,7 @@ class ModelProblem(InverseProblem):
 
 def fit_model_problem(problem, eps0, s):
     """:func:`~ecfm_uq.inverse.fit` for a :class:`ModelProblem` (validated settings ``s``)."""
-    from ..core.drivers import least_squares_scaled
+    from ..core.drivers import least_squares_lm, least_squares_scaled
     from ..core.result import InverseResult, Uncertainty
     from ..core.status import FitStatus
     from ..statistics.loglik import gaussian_likelihood, remember_last_point
@@ -251,10 +263,11 @@ def fit_model_problem(problem, eps0, s):
             "enter them); a ModelProblem is a function: use formulation='standard', or "
             "build a SteadyProblem/DynamicInverseProblem for ECFM"
         )
-    if s.method not in ("auto", "least-squares", "trf"):
+    if s.method not in ("auto", "least-squares", "trf", "lm"):
         raise ValueError(
-            f"unknown `method` {s.method!r} for a ModelProblem; choose 'least-squares' "
-            "(trust-region reflective, the default)"
+            f"unknown `method` {s.method!r} for a ModelProblem; choose 'least-squares' (the "
+            "default: Levenberg-Marquardt without bounds, trust-region reflective with "
+            "them), 'lm' or 'trf'"
         )
     # run to round-off (scipy's 1e-8 stops ENSO and MGH09 at 1e-6 of NIST's values);
     # whether the end is an optimum is the relative-offset test's say
@@ -270,11 +283,37 @@ def fit_model_problem(problem, eps0, s):
         )
     if problem.names is not None and len(problem.names) != p:
         raise ValueError(f"`names` has {len(problem.names)} entries for {p} parameters")
+    lm = (
+        s.method != "trf"
+        and bounds is None
+        and isinstance(options["x_scale"], str)
+        and (options["x_scale"] == "jac")
+    )
+    if s.method == "lm" and not lm:
+        raise ValueError(
+            "method='lm' (Levenberg-Marquardt) takes no `bounds` and only x_scale='jac'; "
+            "use method='trf' for a bounded fit"
+        )
     noise = noise_model(s.sigma, n)
-    residual = remember_last_point(problem.residual_function(noise, typical=eps0))
+    # the driver keeps its own last point; the likelihood (profiles, tests) remembers one
+    raw = problem.residual_function(noise, typical=eps0)
+    residual = remember_last_point(raw)
+    # the status test and the last steps on central differences when the optimizer's are
+    # one-sided: a CONVERGED fit is then an optimum to the test's tolerance on any machine
+    check = None
+    if problem.jac == "2-point":
+        check = problem.residual_function(noise, typical=eps0, accurate=True)
     maxiter = 2000 if s.maxiter is None else s.maxiter
     try:
-        out = least_squares_scaled(residual, eps0, bounds, s.tol, maxiter, options)
+        if lm:
+            # one-sided differences in this process: MINPACK's own (compiled, steps
+            # sqrt(machine eps) |eps_j|) steer; the status test has the central ones
+            own = problem.jac == "2-point" and problem.executor is None
+            out = least_squares_lm(raw, eps0, s.tol, maxiter, options, check=check,
+                                   differences=own)  # fmt: skip
+        else:
+            out = least_squares_scaled(residual, eps0, bounds, s.tol, maxiter, options,
+                                       check=check)  # fmt: skip
     except ConvergenceError as e:
         raise ConvergenceError(f"fit: {e}") from e
     likelihood = gaussian_likelihood(
@@ -282,7 +321,7 @@ def fit_model_problem(problem, eps0, s):
         residual_columns=lambda e, cols: noise.whiten(problem.jacobian(e, columns=cols,
                                                                        typical=eps0)),
     )  # fmt: skip
-    if out.payload is None:
+    if out.payload is None or out.jacobian is None:
         return InverseResult(
             eps=out.x, loss=np.inf, message=out.message, nit=out.nit, nfev=out.nfev,
             status=out.status, method="standard", optimizer="least-squares",
@@ -290,8 +329,8 @@ def fit_model_problem(problem, eps0, s):
             verdict=model_verdict(None, None, noise, p, bounds, out.x, failed=out.message),
             likelihood=likelihood, bounds=bounds, names=problem.names,
         )  # fmt: skip
-    r, J, y = residual(out.x)
-    J = J()
+    # the residual and Jacobian the status test judged (no second Jacobian)
+    r, J, y = out.residual, np.asarray(out.jacobian, dtype=float), out.payload
     unc = Uncertainty.failed("not computed (uncertainty=False)")
     if s.uncertainty:
         if noise.known:
