@@ -118,8 +118,10 @@ class ModelProblem(InverseProblem):
                 f"{_describe_call('model', eps)} returned shape {y.shape}; the data have "
                 f"shape {self.shape}: `model` must predict every observation"
             )
-        y = y.ravel()
-        if not all_finite(y):
+        y = y.reshape(-1)
+        if not np.isfinite(y @ y):  # NaN and inf (and overflow) propagate: test each then
+            if all_finite(y):
+                return y
             bad = np.flatnonzero(~np.isfinite(y))
             msg = (
                 f"{_describe_call('model', eps)} returned {bad.size} non-finite value(s) "
@@ -204,11 +206,13 @@ class ModelProblem(InverseProblem):
         calls = {"n": 1 if accurate else 0}
         method = "3-point" if accurate and self.jac == "2-point" else None
 
+        whiten = noise.whiten if noise.known else None  # unknown sigma: W = I
+
         def residual(eps):
             # the first call (at eps0) raises the user's errors: nothing was computed yet
             calls["n"] += 1
             y = self.predict(eps, first=calls["n"] == 1)
-            r = noise.whiten(y - v)
+            r = y - v if whiten is None else whiten(y - v)
 
             def J():
                 return noise.whiten(self.jacobian(eps, y, typical=typical, method=method))
