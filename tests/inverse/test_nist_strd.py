@@ -90,5 +90,17 @@ def test_certified_values_or_an_honest_failure(name, start, route):
     np.testing.assert_allclose(res.eps, P.certified, rtol=1e-6, atol=0)
     assert res.uncertainty.success, res.uncertainty.message
     assert res.uncertainty.method == "gauss-newton"
-    np.testing.assert_allclose(res.uncertainty.stderr, P.certified_sd, rtol=1e-3, atol=0)
+    stderr = res.uncertainty.stderr
+    if P.rss < 1e-20:
+        # Lanczos1: the residuals (~8e-14) are round-off of the model's evaluation (a few
+        # ulps of its largest term, ~2.5: 5e-16 each), so s^2 = RSS/(n-p) carries a
+        # relative error of ~2 * 5e-16 / 8e-14 ~ 1e-2 that no optimizer removes: the RSS
+        # at estimates equal to 1e-9 varies 1.4278e-25..1.4313e-25 between runs, against
+        # NIST's 1.4308e-25 (extended precision). What the fit determines is sqrt(diag
+        # (J^T J)^-1), the standard errors per unit s: check those against NIST's at 1e-3
+        # (NIST's s from its certified RSS), and the RSS to that round-off bound
+        r = P.y - P.f(res.eps)
+        assert abs(r @ r / P.rss - 1) < 1e-2
+        stderr = stderr * np.sqrt(P.rss / (r @ r))
+    np.testing.assert_allclose(stderr, P.certified_sd, rtol=1e-3, atol=0)
     assert res.optimality is not None and res.optimality <= 1e-6
