@@ -315,6 +315,17 @@ def fit_model_problem(problem, eps0, s):
             own = problem.jac == "2-point" and problem.executor is None
             out = least_squares_lm(raw, eps0, s.tol, maxiter, options, check=check,
                                    differences=own)  # fmt: skip
+            if out.status is FitStatus.STALLED and s.method != "lm":
+                # LM stopped short of an optimum on its own (e.g. NIST BoxBOD from start 1
+                # with differences: its first steps send the rate off to infinity): the
+                # trust region from eps0, the same status test; the better of the two
+                trf = least_squares_scaled(residual, eps0, None, s.tol, maxiter, options,
+                                           check=check)  # fmt: skip
+                trf.nfev += out.nfev
+                if trf.status is FitStatus.CONVERGED or trf.loss < out.loss:
+                    trf.message = (f"Levenberg-Marquardt stalled ({out.message}); "
+                                   f"trust-region reflective from eps0: {trf.message}")  # fmt: skip
+                    out = trf
         else:
             out = least_squares_scaled(residual, eps0, bounds, s.tol, maxiter, options,
                                        check=check)  # fmt: skip
