@@ -6,8 +6,10 @@ data, with the data's shape. Its Jacobian is the user's ``jac(eps)``, or differe
 (:mod:`ecfm_uq.inverse.core.finite_differences`: one-sided, central or complex steps sized
 to each parameter), its model runs optionally through an executor (a ``dask.distributed``
 client for expensive models). :func:`~ecfm_uq.inverse.fit` runs the standard formulation on
-it (trust-region least squares on the whitened residual :math:`W(f(\\epsilon) - v)`,
-:mod:`ecfm_uq.inverse.problems.noise_model`), and the result has everything a fit offers:
+it (least squares on the whitened residual :math:`W(f(\\epsilon) - v)`,
+:mod:`ecfm_uq.inverse.problems.noise_model`: MINPACK's Levenberg-Marquardt without bounds,
+trust-region reflective with them, then the status test on central differences where the
+fit's are one-sided), and the result has everything a fit offers:
 the status from the optimality conditions, Gauss-Newton standard errors, profile intervals,
 likelihood-ratio tests, posterior samples and the verdict (a chi-squared test with
 ``sigma``; none without).
