@@ -464,9 +464,27 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     # step; inf would turn its norms into nan)
     rejected = np.full(m, 1e150)
     best = {"loss": np.inf}
+    # MINPACK's differencing (lmdif's fdjac2): column j at base + h_j e_j, h_j =
+    # sqrt(machine eps) |base_j| (sqrt(eps) at 0), right after each iterate; recognized
+    # exactly, they count as one Jacobian per iterate and stay out of the path
+    fd = {"base": eps0.copy(), "j": 0, "njev": 0}
+    root_eps = np.sqrt(np.finfo(float).eps)
+
+    def differencing(x):
+        base, j = fd["base"], fd["j"]
+        if j < base.size:
+            h = root_eps * abs(base[j]) or root_eps
+            if x[j] == base[j] + h and np.array_equal(np.delete(x, j), np.delete(base, j)):
+                fd["j"] += 1
+                fd["njev"] += fd["j"] == base.size
+                return True
+        fd["base"], fd["j"] = x.copy(), 0
+        return False
 
     def fun(x):
         ev = evaluate(x)
+        if differences and differencing(x):
+            return rejected if ev is None else ev[0]
         if ev is None:
             return rejected
         r = ev[0]
@@ -499,7 +517,7 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
         maxfev=maxiter * (eps0.size + 1) if differences else maxiter, **kw,
     )  # fmt: skip
     x = np.asarray(x, dtype=float)
-    nit = int(info.get("njev", 0))
+    nit = int(info.get("njev", fd["njev"]))
     msg = f"Levenberg-Marquardt (MINPACK): {mesg}"
     if failures:
         msg += f" ({len(failures)} model evaluations failed; first: {failures[0]})"
