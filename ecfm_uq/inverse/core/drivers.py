@@ -444,8 +444,8 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     last = {"key": None, "ev": None}
     counts = {"nfev": 0}
 
-    def evaluate(x):
-        key = x.tobytes()
+    def evaluate(x, key=None):
+        key = x.tobytes() if key is None else key
         if key != last["key"]:
             counts["nfev"] += 1
             try:
@@ -466,25 +466,30 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     best = {"loss": np.inf}
     # MINPACK's differencing (lmdif's fdjac2): column j at base + h_j e_j, h_j =
     # sqrt(machine eps) |base_j| (sqrt(eps) at 0), right after each iterate; recognized
-    # exactly, they count as one Jacobian per iterate and stay out of the path
-    fd = {"base": eps0.copy(), "j": 0, "njev": 0}
-    root_eps = np.sqrt(np.finfo(float).eps)
+    # bit for bit, they count as one Jacobian per iterate and stay out of the path
+    root_eps = float(np.sqrt(np.finfo(float).eps))
+    fd = {"base": None, "j": 0, "next": None, "njev": 0}
 
-    def differencing(x):
+    def expect_next():
         base, j = fd["base"], fd["j"]
         if j < base.size:
-            h = root_eps * abs(base[j]) or root_eps
-            if x[j] == base[j] + h and np.array_equal(np.delete(x, j), np.delete(base, j)):
-                fd["j"] += 1
-                fd["njev"] += fd["j"] == base.size
-                return True
-        fd["base"], fd["j"] = x.copy(), 0
-        return False
+            e = base.copy()
+            e[j] = base[j] + (root_eps * abs(base[j]) or root_eps)
+            fd["next"] = e.tobytes()
+        else:
+            fd["next"] = None
 
     def fun(x):
-        ev = evaluate(x)
-        if differences and differencing(x):
-            return rejected if ev is None else ev[0]
+        key = x.tobytes()
+        ev = evaluate(x, key)
+        if differences:
+            if key == fd["next"]:  # a column of MINPACK's Jacobian
+                fd["j"] += 1
+                fd["njev"] += fd["j"] == x.size
+                expect_next()
+                return rejected if ev is None else ev[0]
+            fd["base"], fd["j"] = x.copy(), 0
+            expect_next()
         if ev is None:
             return rejected
         r = ev[0]
