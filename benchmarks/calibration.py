@@ -6,7 +6,9 @@ Jacobian given: issue 28's size, two parameters), fitted from the same start
 * ``fit``: ``ecfm_uq.inverse.fit(ModelProblem(model, y), eps0)`` (trust-region least
   squares with one-sided differences, then the optimality test, Gauss-Newton standard
   errors and the verdict) against ``scipy.optimize.least_squares(model - y, eps0)`` (the
-  same Jacobian mode, its default) followed by the same covariance by hand;
+  same Jacobian mode, its default) followed by the same covariance by hand, and against
+  ``scipy.optimize.curve_fit(f, x, y, p0)`` (MINPACK's Levenberg-Marquardt, its
+  covariance included: the fastest fit scipy offers);
 * ``profile``: ``profile_likelihood(result)`` (95 % profile-t intervals of both
   parameters) against a profile computed with scipy alone: each parameter fixed, the
   others refitted by warm-started ``least_squares``, the threshold crossing by Brent.
@@ -15,8 +17,9 @@ Each is timed as the best of ``--repeat`` runs in this one process, ours and sci
 turns (the machine is shared: best-of is the least noisy statistic, and alternating keeps a
 change of load from favouring either side); the estimates and intervals are compared too.
 
-Last lines: ``calibration fit/scipy time ratio: <float>`` and ``calibration
-profile/scipy-profile time ratio: <float>``.
+Last lines: ``calibration fit/scipy time ratio: <float>``, ``calibration
+profile/scipy-profile time ratio: <float>`` and ``calibration fit/curve_fit time ratio:
+<float>`` (all measured in this run).
 
 Run: ``python benchmarks/calibration.py [--repeat 30]``.
 """
@@ -45,6 +48,10 @@ def scipy_fit(y):
     n, p = y.size, START.size
     cov = 2 * ls.cost / (n - p) * np.linalg.inv(ls.jac.T @ ls.jac)
     return ls, np.sqrt(np.diag(cov))
+
+
+def curve_fit(y):
+    return optimize.curve_fit(lambda x, a, b: a * np.exp(-b * x), X, y, p0=START)
 
 
 def scipy_profile(y, ls, se, level=0.95):
@@ -97,13 +104,16 @@ def main(argv=None):
     problem = ModelProblem(model, y)
     fit(problem, START)  # first call: imports
 
-    (t_fit, t_sp), (res, (ls, se)) = best_of(
-        [lambda: fit(problem, START), lambda: scipy_fit(y)], args.repeat
+    (t_fit, t_sp, t_cf), (res, (ls, se), (popt, pcov)) = best_of(
+        [lambda: fit(problem, START), lambda: scipy_fit(y), lambda: curve_fit(y)], args.repeat
     )
     print(f"estimates: ecfm_uq {res.eps.round(8)}, scipy {ls.x.round(8)}")
     print(f"  largest relative difference {np.max(np.abs(res.eps / ls.x - 1)):.1e}; "
           f"standard errors {np.max(np.abs(res.uncertainty.stderr / se - 1)):.1e}")  # fmt: skip
-    print(f"fit: ecfm_uq {1e3 * t_fit:.2f} ms, scipy least_squares {1e3 * t_sp:.2f} ms")
+    print(f"  curve_fit: estimates {np.max(np.abs(res.eps / popt - 1)):.1e}, standard errors "
+          f"{np.max(np.abs(res.uncertainty.stderr / np.sqrt(np.diag(pcov)) - 1)):.1e}")  # fmt: skip
+    print(f"fit: ecfm_uq {1e3 * t_fit:.2f} ms, scipy least_squares {1e3 * t_sp:.2f} ms, "
+          f"curve_fit {1e3 * t_cf:.2f} ms")  # fmt: skip
 
     rep = max(3, args.repeat // 5)
     (t_prof, t_sprof), (summary, ref) = best_of(
@@ -117,6 +127,7 @@ def main(argv=None):
     print(f"profile: ecfm_uq {t_prof:.3f} s, scipy-only {t_sprof:.3f} s")
     print(f"calibration fit/scipy time ratio: {t_fit / t_sp:.2f}")
     print(f"calibration profile/scipy-profile time ratio: {t_prof / t_sprof:.2f}")
+    print(f"calibration fit/curve_fit time ratio: {t_fit / t_cf:.2f}")
 
 
 if __name__ == "__main__":

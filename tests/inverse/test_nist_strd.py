@@ -70,8 +70,9 @@ def test_complex_step_derivatives_match_central_differences():
 @pytest.mark.parametrize(("name", "start"), CASES)
 def test_certified_values_or_an_honest_failure(name, start, route):
     """The model as a function with complex-step derivatives (54 of 54 certified) or
-    one-sided differences (the Lanczos and Bennett5 fits stop short of NIST's digits and
-    say so), and BFGS on the Galerkin form, all judged by the same optimality test: BFGS
+    one-sided differences (54 of 54 too: Levenberg-Marquardt steers on them, the status
+    test and the last Gauss-Newton steps use central ones, so Lanczos3 no longer ends
+    CONVERGED 3e-6 from NIST's values on some CPUs' BLAS kernels), and BFGS on the Galerkin form, all judged by the same optimality test: BFGS
     stops short on many (honest failures), twice reporting success where the model has
     gone flat in a parameter (BoxBOD start 2, Rat43 start 1: a rate at +inf, a column of
     J at 1e-88), which the test refuses (the Gauss-Newton step on the scaled columns is
@@ -90,5 +91,17 @@ def test_certified_values_or_an_honest_failure(name, start, route):
     np.testing.assert_allclose(res.eps, P.certified, rtol=1e-6, atol=0)
     assert res.uncertainty.success, res.uncertainty.message
     assert res.uncertainty.method == "gauss-newton"
-    np.testing.assert_allclose(res.uncertainty.stderr, P.certified_sd, rtol=1e-3, atol=0)
+    stderr = res.uncertainty.stderr
+    if P.rss < 1e-20:
+        # Lanczos1: the residuals (~8e-14) are round-off of the model's evaluation (a few
+        # ulps of its largest term, ~2.5: 5e-16 each), so s^2 = RSS/(n-p) carries a
+        # relative error of ~2 * 5e-16 / 8e-14 ~ 1e-2 that no optimizer removes: the RSS
+        # at estimates equal to 1e-9 varies 1.4278e-25..1.4313e-25 between runs, against
+        # NIST's 1.4308e-25 (extended precision). What the fit determines is sqrt(diag
+        # (J^T J)^-1), the standard errors per unit s: check those against NIST's at 1e-3
+        # (NIST's s from its certified RSS), and the RSS to that round-off bound
+        r = P.y - P.f(res.eps)
+        assert abs(r @ r / P.rss - 1) < 1e-2
+        stderr = stderr * np.sqrt(P.rss / (r @ r))
+    np.testing.assert_allclose(stderr, P.certified_sd, rtol=1e-3, atol=0)
     assert res.optimality is not None and res.optimality <= 1e-6

@@ -30,6 +30,7 @@ __all__ = [
     "MINIMIZE_METHODS",
     "Outcome",
     "check_minimize_method",
+    "least_squares_lm",
     "least_squares_scaled",
     "minimize_scaled",
     "verify_least_squares",
@@ -96,6 +97,10 @@ class Outcome:
     failures: list = field(default_factory=list)
     final_error: Exception | None = None
     optimality: float | None = None
+    #: the residual and its Jacobian at ``x`` that the status test judged (reused by the
+    #: caller for the standard errors: no second Jacobian)
+    residual: np.ndarray | None = None
+    jacobian: np.ndarray | None = None
 
     @property
     def success(self):
@@ -235,10 +240,11 @@ def verify_least_squares(out, residual, bounds, exhausted, *, polish, tol=OFFSET
     if opt.converged != said or not opt.converged or "polished" in msg:
         msg += f" [{'converged' if opt.converged else 'NOT converged'}: {opt.message}]"
     out.message, out.optimality = msg, opt.value
+    out.residual, out.jacobian = r, J
     return out
 
 
-def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options):
+def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options, check=None):
     """``scipy.optimize.least_squares`` (trust-region reflective, ``x_scale="jac"``, the
     exact Jacobian) on the residuals divided by their norm at ``eps0``.
 
@@ -260,6 +266,12 @@ def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options):
         ``polish`` (default True: Levenberg-Marquardt steps when the test fails), and any
         keyword of ``scipy.optimize.least_squares`` (``ftol``, ``xtol``, ``gtol``,
         ``x_scale``, ``loss``...).
+    check : callable, optional
+        The residual the status test and the polish use, ``eps -> (r, J, payload)``
+        (default ``residual``): the same residual with a more accurate Jacobian (central
+        differences where the optimizer's are one-sided), so that a point the test calls
+        an optimum is one to the test's tolerance, not to the one-sided differences'
+        error (:func:`least_squares_lm`).
 
     Returns
     -------
@@ -351,9 +363,194 @@ def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options):
             raise ConvergenceError(failures[-1])
         return ev
 
-    out = verify_least_squares(out, cached, bounds, res.status == 0, polish=polish, tol=tol)
+    judge = cached if check is None else _counted(check, counts)
+    out = verify_least_squares(out, judge, bounds, res.status == 0, polish=polish, tol=tol)
     out.nfev = counts["nfev"]
     if out.loss < hist_loss[-1]:
+        hist_eps.append(np.array(out.x))
+        hist_loss.append(out.loss)
+    out.eps_history, out.loss_history = np.array(hist_eps), np.array(hist_loss)
+    return out
+
+
+def _counted(check, counts):
+    """``check`` (a residual with an accurate Jacobian, evaluated at once) counting its
+    model evaluations into ``counts["nfev"]``."""
+
+    def judge(eps):
+        counts["nfev"] += 1
+        r, J, payload = check(np.array(eps, dtype=float))
+        return r, (J() if callable(J) else J), payload
+
+    return judge
+
+
+#: options of the Levenberg-Marquardt driver (MINPACK's lmder through scipy's leastsq)
+LM_KEYWORDS = ("polish", "ftol", "xtol", "gtol", "x_scale")
+
+
+def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differences=False):
+    """MINPACK's Levenberg-Marquardt (``scipy.optimize.leastsq``, lmder: compiled, the
+    Jacobian from ``residual``), then the status test of :func:`verify_least_squares`.
+
+    The unbounded fit of :func:`least_squares_scaled` at the speed of
+    ``scipy.optimize.curve_fit``: MINPACK scales the parameters by the column norms of
+    the Jacobian (``x_scale="jac"``) and takes the same kind of step; its own
+    stopping message is kept, and the status is decided after it, from the optimality
+    measured at its final point (with ``check``'s Jacobian when given), never from
+    MINPACK's ``info``.
+
+    Parameters
+    ----------
+    residual : callable
+        ``eps -> (r (n,), J (n, p) or a callable of no argument, payload)``; may raise
+        ConvergenceError (the trial point is rejected: the damping grows).
+    eps0 : (p,) ndarray
+    tol : float or None
+        Relative-offset tolerance of the status test.
+    maxiter : int
+        Residual evaluations allowed (MINPACK's ``maxfev``).
+    options : dict
+        ``polish`` (default True), ``ftol``, ``xtol``, ``gtol`` (MINPACK's; default 1e-15:
+        run to round-off, the status test judges), ``x_scale`` (only ``"jac"``).
+    check : callable, optional
+        The residual of the status test and the polish (see :func:`least_squares_scaled`).
+    differences : bool
+        MINPACK differences the residual itself (lmdif: one-sided, step
+        :math:`\\sqrt{\\varepsilon}\\,|\\epsilon_j|`, in compiled code) instead of
+        asking ``residual`` for its Jacobian: the steering Jacobian of a one-sided
+        difference mode, at ``curve_fit``'s cost. The status test's Jacobian is then
+        ``check``'s (required).
+
+    Returns
+    -------
+    Outcome
+
+    Raises
+    ------
+    ConvergenceError
+        When the model cannot be solved at ``eps0``.
+    """
+    options = dict(options)
+    polish = bool(options.pop("polish", True))
+    if options.pop("x_scale", "jac") != "jac":
+        raise ValueError("least_squares_lm scales by the Jacobian only (x_scale='jac')")
+    unknown = sorted(set(options) - set(LM_KEYWORDS))
+    if unknown:
+        raise TypeError(f"`options` {unknown} are not options of Levenberg-Marquardt")
+    tol = OFFSET_TOL if tol is None else tol
+    eps0 = np.array(eps0, dtype=float)
+    hist_eps, hist_loss, failures = [], [], []
+    last = {"key": None, "ev": None}
+    counts = {"nfev": 0}
+
+    def evaluate(x, key=None):
+        key = x.tobytes() if key is None else key
+        if key != last["key"]:
+            counts["nfev"] += 1
+            try:
+                ev = list(residual(x.copy()))
+            except ConvergenceError as e:
+                failures.append(str(e))
+                ev = None
+            last["key"], last["ev"] = key, ev
+        return last["ev"]
+
+    first = evaluate(eps0)
+    if first is None:
+        raise ConvergenceError(f"the model cannot be solved at eps0={eps0}: {failures[0]}")
+    m = np.size(first[0])
+    # a rejected trial point: a residual far above any other (MINPACK then shrinks the
+    # step; inf would turn its norms into nan)
+    rejected = np.full(m, 1e150)
+    best = {"loss": np.inf}
+    # MINPACK's differencing (lmdif's fdjac2): column j at base + h_j e_j, h_j =
+    # sqrt(machine eps) |base_j| (sqrt(eps) at 0), right after each iterate; recognized
+    # bit for bit, they count as one Jacobian per iterate and stay out of the path
+    root_eps = float(np.sqrt(np.finfo(float).eps))
+    fd = {"base": None, "j": 0, "next": None, "njev": 0}
+
+    def expect_next():
+        base, j = fd["base"], fd["j"]
+        if j < base.size:
+            e = base.copy()
+            e[j] = base[j] + (root_eps * abs(base[j]) or root_eps)
+            fd["next"] = e.tobytes()
+        else:
+            fd["next"] = None
+
+    def fun(x):
+        key = x.tobytes()
+        ev = evaluate(x, key)
+        if differences:
+            if key == fd["next"]:  # a column of MINPACK's Jacobian
+                fd["j"] += 1
+                fd["njev"] += fd["j"] == x.size
+                expect_next()
+                return rejected if ev is None else ev[0]
+            fd["base"], fd["j"] = x.copy(), 0
+            expect_next()
+        if ev is None:
+            return rejected
+        r = ev[0]
+        z = 0.5 * float(r @ r)
+        if z < best["loss"]:
+            best["loss"] = z
+            hist_eps.append(x.copy())
+            hist_loss.append(z)
+        return r
+
+    def jac(x):
+        ev = evaluate(x)
+        if ev is None:  # not reached: MINPACK asks for J only at accepted points
+            return np.zeros((m, x.size))
+        if callable(ev[1]):
+            try:  # a lazy Jacobian (differenced by the problem): only where asked for
+                ev[1] = ev[1]()
+            except ConvergenceError as e:
+                failures.append(str(e))
+                return np.zeros((m, x.size))
+        return ev[1]
+
+    if differences and check is None:
+        raise ValueError("differences=True needs `check`, the status test's Jacobian")
+    kw = {"ftol": 1e-15, "xtol": 1e-15, "gtol": 1e-15}
+    kw.update(options)
+    x, _, info, mesg, ier = sopt.leastsq(
+        fun, eps0, Dfun=None if differences else jac, full_output=True,
+        # the budget counts residuals, not the p more of each differenced Jacobian
+        maxfev=maxiter * (eps0.size + 1) if differences else maxiter, **kw,
+    )  # fmt: skip
+    x = np.asarray(x, dtype=float)
+    nit = int(info.get("njev", fd["njev"]))
+    msg = f"Levenberg-Marquardt (MINPACK): {mesg}"
+    if failures:
+        msg += f" ({len(failures)} model evaluations failed; first: {failures[0]})"
+    ev = evaluate(x)
+    if ev is None:
+        e = ConvergenceError(failures[-1])
+        return Outcome(x, np.inf, None, None, FitStatus.MODEL_FAILURE, msg, nit,
+                       counts["nfev"], np.array(hist_eps), np.array(hist_loss), failures, e)  # fmt: skip
+    r = ev[0]
+    out = Outcome(
+        x, 0.5 * float(r @ r), None, ev[2],
+        FitStatus.CONVERGED if ier in (1, 2, 3, 4) else FitStatus.MAX_ITERATIONS, msg, nit,
+        counts["nfev"], np.array(hist_eps), np.array(hist_loss), failures,
+    )  # fmt: skip
+
+    def cached(e):
+        ev = evaluate(np.array(e, dtype=float))
+        if ev is None:
+            raise ConvergenceError(failures[-1])
+        if callable(ev[1]):
+            ev[1] = ev[1]()
+        return ev
+
+    judge = cached if check is None else _counted(check, counts)
+    out = verify_least_squares(out, judge, None, ier == 5, polish=polish, tol=tol)
+    out.grad = None if out.jacobian is None else out.jacobian.T @ out.residual
+    out.nfev = counts["nfev"]
+    if out.loss < best["loss"]:
         hist_eps.append(np.array(out.x))
         hist_loss.append(out.loss)
     out.eps_history, out.loss_history = np.array(hist_eps), np.array(hist_loss)

@@ -38,12 +38,12 @@ _ETA = {
 
 def fd_steps(x, method="2-point", typical=None):
     """The step :math:`h_j` of each parameter (see the module's table)."""
-    x = np.asarray(x, dtype=float)
-    size = np.abs(x)
+    size = np.array(np.abs(np.asarray(x, dtype=float)))  # an array also for a scalar x
     if typical is not None:
-        size = np.maximum(size, np.abs(np.asarray(typical, dtype=float)))
-    size = np.where(size > 0, size, 1.0)
-    return _ETA[method] * size
+        np.maximum(size, np.abs(np.asarray(typical, dtype=float)), out=size)
+    size[size == 0] = 1.0
+    size *= _ETA[method]
+    return size
 
 
 def _offsets(method):
@@ -97,11 +97,13 @@ def fd_jacobian(fun, x, *, method="2-point", steps=None, typical=None, f0=None, 
         # the common case (an optimizer's Jacobian at a point it evaluated): no stencil
         base = np.asarray(f0, dtype=float).ravel()
         J = np.empty((base.size, cols.size))
-        for c, j in enumerate(cols):
+        for c, j in enumerate(cols.tolist()):
             e = x.copy()
-            e[j] = x[j] + h[j]
+            xj = float(x[j])
+            e[j] = xj + float(h[j])
             # the step actually taken (x + h rounded) divides, not h
-            J[:, c] = (np.asarray(fun(e), dtype=float).ravel() - base) / (e[j] - x[j])
+            np.subtract(np.asarray(fun(e), dtype=float).reshape(-1), base, out=J[:, c])
+            J[:, c] /= float(e[j]) - xj
         return J
     offsets = _offsets(method)
     points = []

@@ -6,8 +6,10 @@ data, with the data's shape. Its Jacobian is the user's ``jac(eps)``, or differe
 (:mod:`ecfm_uq.inverse.core.finite_differences`: one-sided, central or complex steps sized
 to each parameter), its model runs optionally through an executor (a ``dask.distributed``
 client for expensive models). :func:`~ecfm_uq.inverse.fit` runs the standard formulation on
-it (trust-region least squares on the whitened residual :math:`W(f(\\epsilon) - v)`,
-:mod:`ecfm_uq.inverse.problems.noise_model`), and the result has everything a fit offers:
+it (least squares on the whitened residual :math:`W(f(\\epsilon) - v)`,
+:mod:`ecfm_uq.inverse.problems.noise_model`: MINPACK's Levenberg-Marquardt without bounds,
+trust-region reflective with them, then the status test on central differences where the
+fit's are one-sided), and the result has everything a fit offers:
 the status from the optimality conditions, Gauss-Newton standard errors, profile intervals,
 likelihood-ratio tests, posterior samples and the verdict (a chi-squared test with
 ``sigma``; none without).
@@ -113,13 +115,15 @@ class ModelProblem(InverseProblem):
                 ) from e
             raise ModelEvaluationError(msg) from e
         y = np.asarray(y)
-        if y.size != self.v.size or (y.shape != self.shape and y.ndim > 1):
+        if y.shape != self.shape and (y.size != self.v.size or y.ndim > 1):
             raise ValueError(
                 f"{_describe_call('model', eps)} returned shape {y.shape}; the data have "
                 f"shape {self.shape}: `model` must predict every observation"
             )
-        y = y.ravel()
-        if not all_finite(y):
+        y = y.reshape(-1)
+        if not np.isfinite(y @ y):  # NaN and inf (and overflow) propagate: test each then
+            if all_finite(y):
+                return y
             bad = np.flatnonzero(~np.isfinite(y))
             msg = (
                 f"{_describe_call('model', eps)} returned {bad.size} non-finite value(s) "
@@ -130,9 +134,10 @@ class ModelProblem(InverseProblem):
             raise ModelEvaluationError(msg)
         return y
 
-    def jacobian(self, eps, y=None, *, columns=None, typical=None):
+    def jacobian(self, eps, y=None, *, columns=None, typical=None, method=None):
         """:math:`\\partial f/\\partial\\epsilon` at ``eps``, (n_data, n_eps) (or the
-        requested ``columns``), from ``jac`` or by finite differences."""
+        requested ``columns``), from ``jac`` or by finite differences (``method``, default
+        the problem's ``jac`` mode, overrides a differencing mode)."""
         eps = np.asarray(eps, dtype=float)
         if callable(self.jac):
             J = self._user_jacobian(eps)
@@ -141,7 +146,8 @@ class ModelProblem(InverseProblem):
             fun = self._complex_model
             return fd_jacobian(fun, eps, method="cs", typical=typical, columns=columns)
         return fd_jacobian(
-            self.predict, eps, method=self.jac, typical=typical, f0=y, columns=columns,
+            self.predict, eps, method=method or self.jac, typical=typical, f0=y,
+            columns=columns,
             map_points=None if self.executor is None else self._map,
         )  # fmt: skip
 
@@ -186,20 +192,32 @@ class ModelProblem(InverseProblem):
 
         return evaluate_samples(self.model, points, self.executor, name="model")
 
-    def residual_function(self, noise, *, typical=None):
+    def residual_function(self, noise, *, typical=None, accurate=False):
         """``eps -> (r, J, y)``: whitened residual :math:`W(f(\\epsilon) - v)`, its
-        Jacobian as a callable (computed when asked for) and the predictions."""
+        Jacobian as a callable (computed when asked for) and the predictions.
+
+        ``accurate``: one-sided differences (``jac="2-point"``) are replaced by central
+        ones (error :math:`O(\\varepsilon^{2/3})` instead of :math:`O(\\varepsilon^{1/2})`
+        relative): the Jacobian of the status test and of the final Gauss-Newton steps,
+        whose stationary point is then the optimum's to that accuracy, not to the
+        one-sided differences' (which shift it by :math:`(J^TJ)^{-1}\\Delta J^Tr`).
+        """
         v = self.v
-        calls = {"n": 0}
+        # the central-difference residual runs after the fit's: its first call is no
+        # longer the start, where a failing model is the user's error
+        calls = {"n": 1 if accurate else 0}
+        method = "3-point" if accurate and self.jac == "2-point" else None
+
+        whiten = noise.whiten if noise.known else None  # unknown sigma: W = I
 
         def residual(eps):
             # the first call (at eps0) raises the user's errors: nothing was computed yet
             calls["n"] += 1
             y = self.predict(eps, first=calls["n"] == 1)
-            r = noise.whiten(y - v)
+            r = y - v if whiten is None else whiten(y - v)
 
             def J():
-                return noise.whiten(self.jacobian(eps, y, typical=typical))
+                return noise.whiten(self.jacobian(eps, y, typical=typical, method=method))
 
             return r, J, y
 
@@ -237,7 +255,7 @@ class ModelProblem(InverseProblem):
 
 def fit_model_problem(problem, eps0, s):
     """:func:`~ecfm_uq.inverse.fit` for a :class:`ModelProblem` (validated settings ``s``)."""
-    from ..core.drivers import least_squares_scaled
+    from ..core.drivers import least_squares_lm, least_squares_scaled
     from ..core.result import InverseResult, Uncertainty
     from ..core.status import FitStatus
     from ..statistics.loglik import gaussian_likelihood, remember_last_point
@@ -251,10 +269,11 @@ def fit_model_problem(problem, eps0, s):
             "enter them); a ModelProblem is a function: use formulation='standard', or "
             "build a SteadyProblem/DynamicInverseProblem for ECFM"
         )
-    if s.method not in ("auto", "least-squares", "trf"):
+    if s.method not in ("auto", "least-squares", "trf", "lm"):
         raise ValueError(
-            f"unknown `method` {s.method!r} for a ModelProblem; choose 'least-squares' "
-            "(trust-region reflective, the default)"
+            f"unknown `method` {s.method!r} for a ModelProblem; choose 'least-squares' (the "
+            "default: Levenberg-Marquardt without bounds, trust-region reflective with "
+            "them), 'lm' or 'trf'"
         )
     # run to round-off (scipy's 1e-8 stops ENSO and MGH09 at 1e-6 of NIST's values);
     # whether the end is an optimum is the relative-offset test's say
@@ -270,11 +289,48 @@ def fit_model_problem(problem, eps0, s):
         )
     if problem.names is not None and len(problem.names) != p:
         raise ValueError(f"`names` has {len(problem.names)} entries for {p} parameters")
+    lm = (
+        s.method != "trf"
+        and bounds is None
+        and isinstance(options["x_scale"], str)
+        and (options["x_scale"] == "jac")
+    )
+    if s.method == "lm" and not lm:
+        raise ValueError(
+            "method='lm' (Levenberg-Marquardt) takes no `bounds` and only x_scale='jac'; "
+            "use method='trf' for a bounded fit"
+        )
     noise = noise_model(s.sigma, n)
-    residual = remember_last_point(problem.residual_function(noise, typical=eps0))
+    # the driver keeps its own last point; the likelihood (profiles, tests) remembers one
+    raw = problem.residual_function(noise, typical=eps0)
+    residual = remember_last_point(raw)
+    # the status test and the last steps on central differences when the optimizer's are
+    # one-sided: a CONVERGED fit is then an optimum to the test's tolerance on any machine
+    check = None
+    if problem.jac == "2-point":
+        check = problem.residual_function(noise, typical=eps0, accurate=True)
     maxiter = 2000 if s.maxiter is None else s.maxiter
     try:
-        out = least_squares_scaled(residual, eps0, bounds, s.tol, maxiter, options)
+        if lm:
+            # one-sided differences in this process: MINPACK's own (compiled, steps
+            # sqrt(machine eps) |eps_j|) steer; the status test has the central ones
+            own = problem.jac == "2-point" and problem.executor is None
+            out = least_squares_lm(raw, eps0, s.tol, maxiter, options, check=check,
+                                   differences=own)  # fmt: skip
+            if out.status is FitStatus.STALLED and s.method != "lm":
+                # LM stopped short of an optimum on its own (e.g. NIST BoxBOD from start 1
+                # with differences: its first steps send the rate off to infinity): the
+                # trust region from eps0, the same status test; the better of the two
+                trf = least_squares_scaled(residual, eps0, None, s.tol, maxiter, options,
+                                           check=check)  # fmt: skip
+                trf.nfev += out.nfev
+                if trf.status is FitStatus.CONVERGED or trf.loss < out.loss:
+                    trf.message = (f"Levenberg-Marquardt stalled ({out.message}); "
+                                   f"trust-region reflective from eps0: {trf.message}")  # fmt: skip
+                    out = trf
+        else:
+            out = least_squares_scaled(residual, eps0, bounds, s.tol, maxiter, options,
+                                       check=check)  # fmt: skip
     except ConvergenceError as e:
         raise ConvergenceError(f"fit: {e}") from e
     likelihood = gaussian_likelihood(
@@ -282,7 +338,7 @@ def fit_model_problem(problem, eps0, s):
         residual_columns=lambda e, cols: noise.whiten(problem.jacobian(e, columns=cols,
                                                                        typical=eps0)),
     )  # fmt: skip
-    if out.payload is None:
+    if out.payload is None or out.jacobian is None:
         return InverseResult(
             eps=out.x, loss=np.inf, message=out.message, nit=out.nit, nfev=out.nfev,
             status=out.status, method="standard", optimizer="least-squares",
@@ -290,8 +346,8 @@ def fit_model_problem(problem, eps0, s):
             verdict=model_verdict(None, None, noise, p, bounds, out.x, failed=out.message),
             likelihood=likelihood, bounds=bounds, names=problem.names,
         )  # fmt: skip
-    r, J, y = residual(out.x)
-    J = J()
+    # the residual and Jacobian the status test judged (no second Jacobian)
+    r, J, y = out.residual, np.asarray(out.jacobian, dtype=float), out.payload
     unc = Uncertainty.failed("not computed (uncertainty=False)")
     if s.uncertainty:
         if noise.known:

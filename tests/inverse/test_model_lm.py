@@ -1,0 +1,99 @@
+"""The ModelProblem fit's drivers (issue 38 item 5, issue 37 item 7): MINPACK's
+Levenberg-Marquardt without bounds, the trust region with them, one status test after
+either, judged on central differences when the fit's are one-sided.
+
+Truth: scipy's ``curve_fit`` (MINPACK, independent of this library's status and
+uncertainty code), NIST's certified values and complex-step derivatives.
+"""
+
+import warnings
+
+import numpy as np
+import pytest
+from _nist_strd import load
+from scipy import optimize
+
+from ecfm_uq.inverse import FitStatus, ModelProblem, fit
+
+X = np.linspace(0.0, 5.0, 22)
+START = np.array([1.0, 1.0])
+
+
+def decay(e):
+    return e[0] * np.exp(-e[1] * X)
+
+
+@pytest.fixture(scope="module")
+def data():
+    return decay(np.array([2.0, 0.7])) + 0.05 * np.random.default_rng(0).standard_normal(X.size)
+
+
+def test_levenberg_marquardt_and_trust_region_give_curve_fits_answer(data):
+    """The default (LM, no bounds) and method='trf' end at one optimum, curve_fit's, with
+    its standard errors; both by the same test (relative offset <= 1e-6)."""
+    lm = fit(ModelProblem(decay, data), START)
+    trf = fit(ModelProblem(decay, data), START, method="trf")
+    popt, pcov = optimize.curve_fit(lambda x, a, b: a * np.exp(-b * x), X, data, p0=START)
+    for res in (lm, trf):
+        assert res.status is FitStatus.CONVERGED and res.optimality <= 1e-6, res.message
+    assert "Levenberg-Marquardt" in lm.message and "Levenberg-Marquardt" not in trf.message
+    # each within c sqrt(p) standard errors of the optimum (its status's certificate):
+    # c <= 1e-6 and SE/eps ~ 0.02 put both within 3e-8 relative; curve_fit stops on its
+    # own 1.5e-8 relative tolerances
+    np.testing.assert_allclose(lm.eps, trf.eps, rtol=1e-7)
+    np.testing.assert_allclose(lm.eps, popt, rtol=1e-6)
+    # s^2 (J^T J)^-1 with central differences at the estimate vs curve_fit's (MINPACK's
+    # one-sided Jacobian: ~1e-7 relative error)
+    np.testing.assert_allclose(lm.uncertainty.stderr, np.sqrt(np.diag(pcov)), rtol=1e-5)
+
+
+def test_lm_is_for_unbounded_fits_and_bounds_take_the_trust_region(data):
+    with pytest.raises(ValueError, match="method='trf'"):
+        fit(ModelProblem(decay, data), START, method="lm", bounds=[(0, 5), (0, 5)])
+    boxed = fit(ModelProblem(decay, data), [1.0, 0.5], bounds=[(0, 5), (0, 0.6)])
+    assert boxed.success and boxed.eps[1] == pytest.approx(0.6)
+    assert "Levenberg-Marquardt (MINPACK)" not in boxed.message
+
+
+def test_lm_budget_spent_is_max_iterations(data):
+    res = fit(ModelProblem(decay, data), START, maxiter=3)
+    assert res.status is FitStatus.MAX_ITERATIONS and not res.success
+    assert "NOT converged" in res.message
+
+
+@pytest.mark.parametrize("start", [0, 1])
+def test_one_sided_fits_are_judged_on_central_differences(start):
+    """NIST Lanczos3 with one-sided differences: their Jacobian's error moves the point
+    where J^T r = 0 by ~3e-6 relative (and OPENBLAS_CORETYPE=Haswell then ended CONVERGED
+    there, 1e-6 asked). The status test and the last steps use central differences, so a
+    CONVERGED fit is the complex-step fit's optimum to what both statuses certify, and its
+    standard errors (from the judged, central Jacobian) are the complex-step ones."""
+    P = load("Lanczos3")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        fd = fit(ModelProblem(P.f, P.y), P.starts[start])
+        cs = fit(ModelProblem(P.f, P.y, jac="cs"), P.starts[start])
+    assert fd.success and cs.success, fd.message
+    # each estimate within c sqrt(p) standard errors of the optimum (Cauchy-Schwarz on
+    # the Gauss-Newton step, c its relative offset); central differences' own error
+    # (~1e-10 relative) is far below
+    p = P.certified.size
+    certified = (fd.optimality + cs.optimality) * np.sqrt(p) * cs.uncertainty.stderr
+    assert np.all(np.abs(fd.eps - cs.eps) <= certified), (fd.eps - cs.eps, certified)
+    np.testing.assert_allclose(fd.eps, P.certified, rtol=1e-6)
+    # one-sided differences' standard errors were 5e-6 off the complex-step ones
+    np.testing.assert_allclose(fd.uncertainty.stderr, cs.uncertainty.stderr, rtol=1e-6)
+
+
+def test_a_stalled_levenberg_marquardt_falls_back_to_the_trust_region():
+    """NIST BoxBOD from start 1 with one-sided differences: MINPACK's first steps send the
+    rate to infinity (STALLED, rank-deficient J); the trust region from the start reaches
+    the certified values."""
+    P = load("BoxBOD")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        res = fit(ModelProblem(P.f, P.y), P.starts[0])
+        lm = fit(ModelProblem(P.f, P.y), P.starts[0], method="lm")
+    assert lm.status is FitStatus.STALLED
+    assert res.success and "Levenberg-Marquardt stalled" in res.message
+    np.testing.assert_allclose(res.eps, P.certified, rtol=1e-6)
