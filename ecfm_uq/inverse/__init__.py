@@ -9,6 +9,8 @@ the :class:`Verdict` on whether the model explains the data):
 problem                     formulations (``fit(problem, eps0, formulation=...)``)  paper
 ==========================  =====================================================  ================
 :class:`ModelProblem`       ``"standard"`` (a model that is a Python function)     --
+:class:`OdeProblem`         ``"standard"``, ``"ecfm"`` (a user's ODE, readings     --
+                            at any times; forces piecewise constant in time)
 :class:`SteadyProblem`      ``"standard"``, ``"ecfm"``, ``"noisy-ecfm"``            Eqs. traditional,
                                                                                    ecfm,
                                                                                    kpp_inv,
@@ -34,9 +36,10 @@ imports :mod:`.fitting`:
                     (standard and exact ECFM, reduced), ``noisy`` and ``noise`` (all at
                     once, the paper's noise bounds), ``discrepancy`` and ``sparse_forces``
                     (random-force ECFM), ``dynamic_fit``, ``replicated`` and ``forces``
-                    (pseudo-likelihood)
+                    (pseudo-likelihood), ``ode_forces`` (ECFM of an ODE)
 ``problems/``       a model and its data behind one interface (``interface``): ``model``
-                    (a Python function), ``galerkin`` (steady, replicated), ``dynamic``;
+                    (a Python function), ``ode`` (a user's ODE, forward sensitivities),
+                    ``galerkin`` (steady, replicated), ``dynamic``;
                     ``noise_model`` and ``whitening`` (``sigma`` as given);
                     ``pseudo_likelihood`` and ``moments`` (the replicated data's
                     likelihood)
@@ -45,13 +48,15 @@ imports :mod:`.fitting`:
 ``core/``           shared machinery: ``convergence`` (the one status decision),
                     ``drivers`` and ``optimizers`` (the optimizer calls), ``gradients``,
                     ``finite_differences``; the types handed around: ``settings`` (the
-                    validated arguments), ``result`` (the one frozen result), ``status``,
+                    validated arguments), ``result`` (the one frozen result), ``series``
+                    (an ODE's forces and trajectory), ``status``,
                     ``summary_table``
 ==================  ======================================================================
 """
 
 from .core.optimizers import adam
 from .core.result import InverseResult, Uncertainty, Verdict
+from .core.series import ForceSeries, OdeTrajectory
 from .core.status import FitStatus
 from .coverage import likelihood_coverage, steady_coverage
 from .fitting import fit
@@ -67,6 +72,7 @@ from .problems.moments import (
     negative_log_pseudo_likelihood,
     sensor_moments,
 )
+from .problems.ode import OdeProblem
 from .problems.pseudo_likelihood import PseudoLikelihood
 from .statistics.diagnostics import (
     condition_number,
@@ -81,6 +87,9 @@ from .statistics.profile import likelihood_ratio_test, profile_intervals, profil
 __all__ = [
     "FitStatus",
     "ModelProblem",
+    "OdeProblem",
+    "ForceSeries",
+    "OdeTrajectory",
     "ReplicatedProblem",
     "SteadyProblem",
     "Uncertainty",
