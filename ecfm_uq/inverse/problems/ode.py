@@ -177,6 +177,10 @@ class OdeProblem(InverseProblem):
     jac : (callable, callable), optional
         ``(jac_y, jac_eps)``: ``jac_y(t, y, eps) -> (n_state, n_state)`` and
         ``jac_eps(t, y, eps) -> (n_state, n_eps)``; else differenced.
+    forced : sequence of int, optional
+        For ``formulation="ecfm"``: the state component each observed column's force
+        drives (one per column of ``data``); default the observed components (required
+        with ``observe`` as a matrix).
     vectorized : bool
         Without ``jac``: ``rhs`` also takes ``y`` of shape ``(n_state, k)`` with ``eps`` of
         shape ``(n_eps, k)`` and returns ``(n_state, k)`` (one column per evaluation, as
@@ -203,7 +207,7 @@ class OdeProblem(InverseProblem):
     formulations = ("standard", "ecfm")
 
     def __init__(self, rhs, y0, t, data, *, t0, observe=None, rtol=1e-8, atol=None,
-                 method="DOP853", jac=None, vectorized=False,
+                 method="DOP853", jac=None, vectorized=False, forced=None,
                  sensitivity_error_control=False, names=None, state_names=None):  # fmt: skip
         if not callable(rhs):
             raise TypeError(f"`rhs` must be a callable rhs(t, y, eps) -> dy/dt, got {rhs!r}")
@@ -260,6 +264,7 @@ class OdeProblem(InverseProblem):
             jac = tuple(jac)
         self.jac = jac
         self.vectorized = bool(vectorized)
+        self.forced = None if forced is None else np.asarray(forced)
         self.sensitivity_error_control = bool(sensitivity_error_control)
         self.names = None if names is None else [str(n) for n in names]
         self._state_names = None if state_names is None else [str(n) for n in state_names]
