@@ -129,8 +129,6 @@ class ExactForces:
         """
         pb = self.problem
         n, p = pb.n_state, eps.size
-        d = pb.v
-        H = pb.H()
         nd = pb.n_data
         y = pb.initial_state(eps).astype(float)
         Y_eps = pb.initial_sensitivity(eps)
@@ -181,7 +179,7 @@ class ExactForces:
             # output: once c itself is)
             tight = 10 * (pb.rtol * scale + np.max(pb.atol))
             accept = tight if dense else np.sqrt(pb.rtol) * scale
-            for it in range(MAX_NEWTON):
+            for _ in range(MAX_NEWTON):
                 sol, Yb, Sb = solve_with_sensitivities(
                     pb, eps, span, y, S0, T_eps, G, force=EF @ f, dense=dense,
                     t_eval=[span[1]],
@@ -408,7 +406,7 @@ def _statistics(problem, forces, final, eps, s):
     where = "no force passes the Bonferroni bound"
     if hits:
         worst = sorted(hits, key=lambda h: -abs(h[2]))[:3]
-        where = "significant forces (|z| > %.2f, Bonferroni): " % bound + ", ".join(
+        where = f"significant forces (|z| > {bound:.2f}, Bonferroni): " + ", ".join(
             f"{n} on [{a:g}, {b:g}] (z = {zz:.1f})" for n, (a, b), zz in worst
         )
     parts = [f"chi2 of the forces = {chi2:.3g} on {dof} degrees of freedom, p = {p_value:.3g} "
