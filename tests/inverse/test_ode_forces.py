@@ -193,3 +193,20 @@ def test_false_alarm_rate_and_power_study(times):
     print(f"false alarms {false:.2f}, power {power:.2f}, located {located:.2f}")
     assert 0.01 <= false <= 0.10
     assert power >= 0.95
+
+
+def test_extra_keys_documented_and_no_likelihood_for_profiles():
+    import re
+
+    from ecfm_uq.inverse import InverseResult, profile_likelihood
+
+    doc = InverseResult.__doc__
+    rows = "".join(doc[doc.index("extra : dict") :].split("=====")[2:-1])
+    keys = {m for line in rows.splitlines() for m in re.findall(r"``(\w+)``", line[:38])}
+    data = simulate(ANNUAL[:6]) * (1 + 0.02 * np.random.default_rng(3).standard_normal((6, 2)))
+    pb = problem(ANNUAL[:6], data, rtol=1e-7)
+    for kw in ({}, {"formulation": "ecfm", "sigma": 0.5}):
+        res = fit(pb, TRUTH * 1.02, **kw)
+        assert set(res.extra) <= keys, set(res.extra) - keys
+    with pytest.raises(ValueError, match="likelihood"):
+        profile_likelihood(res)
