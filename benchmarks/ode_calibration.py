@@ -9,7 +9,7 @@ six unknowns (a, b, c, d and the initial hare and lynx), rtol = 1e-10, from the 
   one augmented DOP853 solve, then the optimality test, Gauss-Newton standard errors and
   the verdict) against ``scipy.optimize.least_squares`` on ``solve_ivp(DOP853, rtol=1e-10)``
   with its default two-point Jacobian (seven solves per Jacobian), and the same covariance
-  by hand. The differenced-sensitivity variant (no ``jac``, ``vectorized=True``) is timed
+  by hand. The differenced-sensitivity variant (no ``jac``; ``rhs`` takes columns) is timed
   too.
 * ``profile``: ``profile_likelihood(result)`` (95 % profile-t intervals of all six)
   against a profile with scipy alone: each parameter fixed, the others refitted by
@@ -134,7 +134,7 @@ def main(argv=None):
     problem = OdeProblem(rhs, y0, t, data, t0=t[0], rtol=RTOL, atol=ATOL,
                          jac=(jac_y, jac_eps), names=NAMES, state_names=["hare", "lynx"])  # fmt: skip
     differenced = OdeProblem(rhs, y0, t, data, t0=t[0], rtol=RTOL, atol=ATOL,
-                             vectorized=True, names=NAMES)  # fmt: skip
+                             names=NAMES)  # fmt: skip
     fit(problem, START)  # first call: imports
 
     (t_fit, t_sp, t_fd), (res, (ls, se), res_fd) = best_of(

@@ -85,7 +85,7 @@ def test_differenced_sensitivities_give_the_same_estimate():
 @pytest.mark.parametrize("mode", ["jac", "vectorized", "loop"])
 def test_sensitivities_match_finite_differences(mode):
     kw = {"jac": {"jac": (lv_jac_y, lv_jac_eps)}, "vectorized": {"jac": None, "vectorized": True},
-          "loop": {"jac": None}}[mode]  # fmt: skip
+          "loop": {"jac": None, "vectorized": False}}[mode]  # fmt: skip
     pb = problem(noisy_data(), **kw)
     e = pb.check(TRUTH * 1.02)
     J = pb.predict_jacobian(e)
@@ -98,6 +98,23 @@ def test_sensitivities_match_finite_differences(mode):
         F[:, j] = (pb.predict(ep) - pb.predict(em)) / (2 * h)
     scale = np.max(np.abs(F), axis=0)
     assert np.max(np.abs(J - F) / scale) < 1e-5
+
+
+def test_vectorized_rhs_is_detected_and_a_scalar_one_falls_back():
+    data = noisy_data()
+    pb = problem(data, jac=None)
+    pb.check(TRUTH)
+    assert pb.vectorized  # lv takes columns
+
+    def scalar_only(t, y, e):
+        u, v = float(y[0]), float(y[1])
+        return np.array([e[0] * u - e[1] * u * v, e[2] * u * v - e[3] * v])
+
+    pb = OdeProblem(scalar_only, y0_of, T, data, t0=0.0)
+    pb.check(TRUTH)
+    assert not pb.vectorized
+    with pytest.raises(ValueError, match="vectorized=True"):
+        OdeProblem(scalar_only, y0_of, T, data, t0=0.0, vectorized=True).check(TRUTH)
 
 
 def test_nan_readings_are_skipped_like_rows_removed():

@@ -181,11 +181,14 @@ class OdeProblem(InverseProblem):
         For ``formulation="ecfm"``: the state component each observed column's force
         drives (one per column of ``data``); default the observed components (required
         with ``observe`` as a matrix).
-    vectorized : bool
-        Without ``jac``: ``rhs`` also takes ``y`` of shape ``(n_state, k)`` with ``eps`` of
-        shape ``(n_eps, k)`` and returns ``(n_state, k)`` (one column per evaluation, as
-        ``solve_ivp(vectorized=True)``), so the sensitivities' differences are one call
-        per step stage instead of one per parameter.
+    vectorized : bool or None
+        Without ``jac``: whether ``rhs`` also takes ``y`` of shape ``(n_state, k)`` with
+        ``eps`` of shape ``(n_eps, k)`` and returns ``(n_state, k)`` (one column per
+        evaluation, as ``solve_ivp(vectorized=True)``), so the sensitivities'
+        differences are one call per step stage, not one per parameter. ``None``
+        (default) detects it at the fit's start (:meth:`check`: the columns of one call
+        equal single calls), else one call per parameter; ``True`` refuses an ``rhs``
+        that does not; ``False`` never tries.
     sensitivity_error_control : bool
         Whether the integrator's error test includes the sensitivities (default
         ``False``, as CVODES: the steps the state needs carry them, and differenced
@@ -207,7 +210,7 @@ class OdeProblem(InverseProblem):
     formulations = ("standard", "ecfm")
 
     def __init__(self, rhs, y0, t, data, *, t0, observe=None, rtol=1e-8, atol=None,
-                 method="DOP853", jac=None, vectorized=False, forced=None,
+                 method="DOP853", jac=None, vectorized=None, forced=None,
                  sensitivity_error_control=False, names=None, state_names=None):  # fmt: skip
         if not callable(rhs):
             raise TypeError(f"`rhs` must be a callable rhs(t, y, eps) -> dy/dt, got {rhs!r}")
@@ -263,6 +266,11 @@ class OdeProblem(InverseProblem):
                 )
             jac = tuple(jac)
         self.jac = jac
+        if vectorized not in (None, True, False):
+            raise TypeError(
+                f"`vectorized` must be None (detect), True or False, got {vectorized!r}"
+            )
+        self._vectorized_asked = vectorized
         self.vectorized = bool(vectorized)
         self.forced = None if forced is None else np.asarray(forced)
         self.sensitivity_error_control = bool(sensitivity_error_control)
@@ -408,23 +416,8 @@ class OdeProblem(InverseProblem):
             raise ValueError(f"`state_names` has {len(self._state_names)} entries for {y.size}")
         if self.names is not None and len(self.names) != eps0.size:
             raise ValueError(f"`names` has {len(self.names)} entries for {eps0.size} parameters")
-        if self.vectorized and self.jac is None:
-            k = 3
-            Yk = np.repeat(y[:, None], k, axis=1)
-            Ek = np.repeat(eps0[:, None], k, axis=1)
-            try:
-                F = np.asarray(self.rhs(self.t0, Yk, Ek), dtype=float)
-            except Exception as e:
-                raise type(e)(
-                    f"vectorized=True: `rhs(t0, Y, E)` with Y ({y.size}, {k}) and E "
-                    f"({eps0.size}, {k}) raised {type(e).__name__}: {e}; pass "
-                    "vectorized=False"
-                ) from e
-            if F.shape != (y.size, k) or not np.allclose(F, dy[:, None], rtol=1e-12, atol=0):
-                raise ValueError(
-                    f"vectorized=True: `rhs(t0, Y, E)` returned shape {F.shape} (expected "
-                    f"({y.size}, {k}), each column rhs(t0, y, eps)); pass vectorized=False"
-                )
+        if self.jac is None and self._vectorized_asked is not False:
+            self.vectorized = self._check_vectorized(y, eps0)
         if self.jac is not None:
             Jy = np.asarray(self.jac[0](self.t0, y, eps0))
             Je = np.asarray(self.jac[1](self.t0, y, eps0))
@@ -434,6 +427,31 @@ class OdeProblem(InverseProblem):
                     f"({y.size}, {y.size}) (d rhs/dy) and ({y.size}, {eps0.size}) (d rhs/deps)"
                 )
         return eps0
+
+    def _check_vectorized(self, y, eps0):
+        """Whether ``rhs`` evaluates columns: ``rhs(t0, Y, E)`` with ``Y`` (n, k) and ``E``
+        (p, k) of distinct columns equals the k single calls. ``vectorized=True`` raises
+        when not; ``None`` (auto) falls back to one call per parameter."""
+        k = 3
+        scale = 1.0 + 1e-3 * np.arange(1, k + 1)
+        Yk, Ek = y[:, None] * scale, eps0[:, None] * scale[::-1]
+        single = np.column_stack(
+            [np.asarray(self.rhs(self.t0, Yk[:, j], Ek[:, j]), dtype=float) for j in range(k)]
+        )
+        try:
+            with np.errstate(all="ignore"):
+                F = np.asarray(self.rhs(self.t0, Yk, Ek), dtype=float)
+            ok = F.shape == (y.size, k) and np.allclose(F, single, rtol=1e-12, atol=1e-300)
+            why = f"returned shape {F.shape}, or columns other than rhs(t0, y_j, eps_j)"
+        except Exception as e:  # a user callback that does not take columns
+            ok, why = False, f"raised {type(e).__name__}: {e}"
+        if not ok and self._vectorized_asked:
+            raise ValueError(
+                f"vectorized=True: `rhs(t0, Y, E)` with Y ({y.size}, {k}) and E "
+                f"({eps0.size}, {k}) {why}; expected ({y.size}, {k}), one column per "
+                "evaluation: pass vectorized=False"
+            )
+        return ok
 
     def initial_sensitivity(self, eps):
         """:math:`\\partial y_0/\\partial\\epsilon` (n_state, p): zeros for a fixed ``y0``,
