@@ -14,8 +14,8 @@ problem                formulation                      method (``"auto"`` first
 ModelProblem           ``"standard"``                   ``"least-squares"`` (trust-region
                                                         on the whitened residual,
                                                         derivatives differenced or given)
-OdeProblem             ``"standard"``, ``"ecfm"``       ``"least-squares"`` (trust-region;
-                                                        Jacobian from forward
+OdeProblem             ``"standard"``, ``"ecfm"``,      ``"least-squares"`` (trust-region;
+                       ``"ecfm-random"`` (sigma)        Jacobian from forward
                                                         sensitivities, ECFM forces
                                                         piecewise constant between data
                                                         times)
@@ -136,7 +136,7 @@ def _check_sigma(sigma, kind, formulation, problem):
 #: the formulations of each problem kind, by name (what each one is: the table above)
 FORMULATIONS = {
     "model": ("standard",),
-    "ode": ("standard", "ecfm"),
+    "ode": ("standard", "ecfm", "ecfm-random"),
     "steady": ("standard", "ecfm", "ecfm-random", "noisy-ecfm"),
     "dynamic": ("standard", "ecfm"),
     "replicated": ("standard", "inner-outer", "penalty", "ecfm"),
@@ -160,7 +160,7 @@ def _check_formulation(kind, settings):
     if settings.formulation not in names:
         hint = ""
         if settings.formulation == "ecfm-random":
-            hint = "; the random-force ECFM is defined for a SteadyProblem"
+            hint = "; the random-force ECFM is defined for a SteadyProblem and an OdeProblem"
         raise ValueError(
             f"unknown `formulation` {settings.formulation!r} for a {kind} problem; choose "
             f"one of {list(names)}{hint}"
@@ -304,8 +304,10 @@ def fit(
     if kind == "ode":
         if formulation == "standard":
             from .problems.ode import fit_ode_standard as fitter
-        else:
+        elif formulation == "ecfm":
             from .formulations.ode_forces import fit_ode_ecfm as fitter
+        else:
+            from .formulations.ode_random import fit_ode_random as fitter
         return fitter(problem, eps0, settings)
     if kind == "steady" and (formulation == "noisy-ecfm" or method == "all-at-once"):
         from .formulations.noisy import fit_all_at_once as fitter

@@ -213,3 +213,43 @@ def test_extra_keys_documented_and_no_likelihood_for_profiles():
         assert set(res.extra) <= keys, set(res.extra) - keys
     with pytest.raises(ValueError, match="likelihood"):
         profile_likelihood(res)
+
+
+def test_force_response_matches_finite_differences_of_the_forced_solution():
+    from ecfm_uq.inverse.formulations.ode_random import force_response, forced_solution
+
+    data = simulate(ANNUAL[:7]) * (1 + 0.02 * np.random.default_rng(4).standard_normal((7, 2)))
+    pb = problem(ANNUAL[:7], data, rtol=1e-11)
+    e = pb.check(TRUTH * 1.02)
+    ef = ExactForces(pb, forced_components(pb))
+    A = force_response(pb, ef, e)
+    zero = np.zeros((ef.K, ef.m))
+
+    def readings(f):
+        return forced_solution(pb, ef, e, f.reshape(ef.K, ef.m))[0][pb.mask]
+
+    F = _fd_of(readings, zero.ravel(), rel=1e-4)
+    assert np.max(np.abs(A - F)) < 1e-6 * np.max(np.abs(F))
+    # the exact-match forces, put back in, reproduce the data
+    out = ef.solve(e)
+    got, state = forced_solution(pb, ef, e, out["forces"], out["jump"])
+    np.testing.assert_allclose(got, data, rtol=1e-8)
+    np.testing.assert_allclose(state(ANNUAL[1:7]), data[1:], rtol=1e-8)
+
+
+def test_random_forces_tau_zero_on_exact_data_and_detected_harvest():
+    times = ANNUAL[:11]
+    clean = simulate(times)
+    sigma = 0.03 * np.abs(clean)
+    res = fit(problem(times, clean, rtol=1e-9), TRUTH * 1.02, formulation="ecfm-random",
+              sigma=sigma)  # fmt: skip
+    assert res.success and res.extra["tau"] == 0.0 and res.verdict.consistent
+    np.testing.assert_allclose(res.eps, TRUTH, rtol=1e-6)
+    data = simulate(times, harvest=0.6)
+    data = data + 0.03 * np.abs(data) * np.random.default_rng(5).standard_normal(data.shape)
+    bad = fit(problem(times, data, rtol=1e-8), TRUTH * 1.02, formulation="ecfm-random",
+              sigma=sigma)  # fmt: skip
+    assert bad.extra["tau"] > 0 and bad.verdict.consistent is False
+    assert bad.forces.values.shape == (10, 2) and np.all(bad.forces.stderr >= 0)
+    with pytest.raises(ValueError, match="sigma"):
+        fit(problem(times, data), TRUTH, formulation="ecfm-random")

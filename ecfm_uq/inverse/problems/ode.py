@@ -147,7 +147,7 @@ def solve_with_sensitivities(problem, eps, t_span, y_start, S0, T_eps, G=None, f
             f"[{t_span[0]:g}, {t_span[1]:g}]: {sol.message}"
         )
     Z = sol.y.T
-    return sol, Z[:, :n], Z[:, n:].reshape(-1, n, q)
+    return sol, Z[:, :n], Z[:, n:].reshape(Z.shape[0], n, q)
 
 
 class OdeProblem(InverseProblem):
@@ -207,7 +207,7 @@ class OdeProblem(InverseProblem):
         are checked at the fit's ``eps0`` (:meth:`check`).
     """
 
-    formulations = ("standard", "ecfm")
+    formulations = ("standard", "ecfm", "ecfm-random")
 
     def __init__(self, rhs, y0, t, data, *, t0, observe=None, rtol=1e-8, atol=None,
                  method="DOP853", jac=None, vectorized=None, forced=None,
