@@ -190,9 +190,8 @@ def test_false_alarms_and_harvest_detection_small():
     ids=["annual", "monthly"],
 )
 def test_false_alarm_rate_and_power_study(times, seeds):
-    """R = 100 data sets, 3 % noise: the test's size in [0.01, 0.10] on the correct model
-    (and its p-values not far from uniform); a harvest du/dt -= 0.6 u on [5, 8) left out
-    of the model flagged in >= 95 %."""
+    """R = 100 data sets, 3 % noise: the test's size in [0.01, 0.10] on the correct
+    model; a harvest du/dt -= 0.6 u on [5, 8) left out of the model flagged in >= 95 %."""
     false, _, failed = alarm_rates(times, 100, 0.03, 0.0, seed=seeds[0])
     power, located, failed_h = alarm_rates(times, 100, 0.03, 0.6, seed=seeds[1])
     print(f"false alarms {false:.2f}, power {power:.2f}, located {located:.2f}, not "
