@@ -45,10 +45,14 @@ d\\hat\\epsilon/dd` (:math:`d\\hat\\epsilon/dd = -J^+\\,\\partial r/\\partial d`
 so their covariance is :math:`T\\Sigma T^T`. The verdict is the chi-squared test of the
 forces in that covariance, :math:`f^T(T\\Sigma T^T)^+f \\sim \\chi^2_{\\text{rank}}` (rank:
 forces minus parameters), as the exact-match ECFM of a steady problem tests the forces'
-effect on the data against the noise. Each force's z-score :math:`f_{kj}/s_{kj}` is
-compared with the Bonferroni bound :math:`\\Phi^{-1}(1 - \\alpha/(2m))` over the ``m``
-forces: the component and time window of each one that passes it are named
-(``extra["significant_forces"]``).
+effect on the data against the noise. Where: the integrated force of each component,
+:math:`\\sum_{k\\in w}\\Delta t_k f_{kj}` (the state change the model lacks), over windows
+:math:`w` of 1, 2, 4, ... consecutive intervals (starts half a window apart), and the
+initial jump, each with its z-score in the same covariance, compared with the Bonferroni
+bound :math:`\\Phi^{-1}(1 - \\alpha/(2M))` over the ``M`` windows tested: the component
+and time span of the significant windows that contain no smaller significant one
+(touching ones merged, with their largest z) are named (``extra["significant_forces"]``). Single intervals lose power as the sampling
+gets denser (a month's force is small against the noise); their sums do not.
 """
 
 from __future__ import annotations
@@ -386,26 +390,12 @@ def _statistics(problem, forces, final, eps, s):
     stderr = se[off:].reshape(forces.K, m)
     kw.update(stderr=stderr, jump_stderr=se[:off] if forces.jump else None)
     series = ForceSeries(**kw)
-    # per-force z-scores, Bonferroni over the free forces
-    # a force the fit fixes (e.g. the first interval's, by a fitted initial state) has
-    # no noise of its own: no z-score (0), not a huge one
-    zs = np.zeros(free.size)
-    noisy = se_r[rows] > 1e-6 * np.max(se_r[rows], initial=0.0)
-    zs[rows[noisy]] = f_r[noisy] / se_r[rows][noisy]
-    bound = float(special.ndtri(1 - s.alpha / (2 * max(int(noisy.sum()), 1))))
-    hits = []
-    for idx in np.flatnonzero(np.abs(zs) > bound):
-        j = idx % m
-        if forces.jump and idx < m:
-            hits.append((names[j], (problem.t0, problem.t0), float(zs[idx])))
-        else:
-            k = (idx - off) // m
-            hits.append((names[j], (float(intervals[k, 0]), float(intervals[k, 1])),
-                         float(zs[idx])))  # fmt: skip
-    where = "no force passes the Bonferroni bound"
+    hits, bound = _significant_windows(problem, forces, names, intervals, rows, f_r, Tw,
+                                       s.alpha)  # fmt: skip
+    where = "no force window passes the Bonferroni bound"
     if hits:
         worst = sorted(hits, key=lambda h: -abs(h[2]))[:3]
-        where = f"significant forces (|z| > {bound:.2f}, Bonferroni): " + ", ".join(
+        where = f"significant forces (|z| > {bound:.2f}, Bonferroni over windows): " + ", ".join(
             f"{n} on [{a:g}, {b:g}] (z = {zz:.1f})" for n, (a, b), zz in worst
         )
     parts = [f"chi2 of the forces = {chi2:.3g} on {dof} degrees of freedom, p = {p_value:.3g} "
@@ -414,3 +404,57 @@ def _statistics(problem, forces, final, eps, s):
                      details={"chi2": chi2, "dof": dof, "bonferroni_z": bound})  # fmt: skip
     extra = {"significant_forces": hits, "force_cov": cov_r / np.outer(w[rows], w[rows])}
     return series, unc, verdict, extra
+
+
+def _significant_windows(problem, forces, names, intervals, rows, f_r, Tw, alpha):
+    """Where the forces are significant: the integrated force :math:`\\sum_{k\\in w}
+    \\Delta t_k f_{kj}` of each component over windows of 1, 2, 4, ... consecutive
+    intervals (starts half a window apart; and the initial jump), its z-score against its
+    standard deviation from the data noise, Bonferroni over every window tested. A window
+    with no noise of its own (a force the fit fixes, e.g. the first interval's by a fitted
+    initial state) gets no z-score. Returned: the significant windows that contain no
+    smaller significant window of the same component, touching ones merged (with their
+    largest z), ``(name, (start, end), z)``, and the bound."""
+    m, K = forces.m, forces.K
+    off = m if forces.jump else 0
+    pos = np.full(off + K * m, -1)
+    pos[rows] = np.arange(rows.size)
+    sq = np.sqrt(forces.dt)
+    coef, where = [], []
+    for j in range(m):
+        if forces.jump and pos[j] >= 0:
+            c = np.zeros(rows.size)
+            c[pos[j]] = 1.0
+            coef.append(c)
+            where.append((j, problem.t0, problem.t0))
+        L = 1
+        while L <= K:
+            for a in range(0, K - L + 1, max(1, L // 2)):
+                c = np.zeros(rows.size)
+                for k in range(a, a + L):
+                    if pos[off + k * m + j] >= 0:
+                        c[pos[off + k * m + j]] = sq[k]
+                coef.append(c)
+                where.append((j, intervals[a, 0], intervals[a + L - 1, 1]))
+            L *= 2
+    C = np.array(coef)
+    g = C @ f_r
+    sd = np.linalg.norm(C @ Tw, axis=1)
+    noisy = sd > 1e-6 * np.max(sd, initial=0.0)
+    z = np.zeros(g.size)
+    z[noisy] = g[noisy] / sd[noisy]
+    bound = float(special.ndtri(1 - alpha / (2 * max(int(noisy.sum()), 1))))
+    sig = [(where[i], float(z[i])) for i in np.flatnonzero(np.abs(z) > bound)]
+    minimal = sorted(
+        (j, a, b, zz) for (j, a, b), zz in sig
+        if not any(jj == j and a <= aa and bb <= b and (aa, bb) != (a, b)
+                   for (jj, aa, bb), _ in sig)
+    )  # fmt: skip
+    hits = []  # touching or overlapping minimal windows of a component merged, largest |z|
+    for j, a, b, zz in minimal:
+        if hits and hits[-1][0] == names[j] and a <= hits[-1][1][1]:
+            name, (a0, b0), z0 = hits[-1]
+            hits[-1] = (name, (a0, max(b0, float(b))), z0 if abs(z0) >= abs(zz) else zz)
+        else:
+            hits.append((names[j], (float(a), float(b)), zz))
+    return hits, bound
