@@ -117,3 +117,17 @@ def test_nonlinear_page_example_matches_collocation():
     minus = ns["solve_steady"](system, [50.0 - h], tol=1e-12).Theta
     fd = (plus - minus) / (2 * h)
     assert np.abs(ns["dTheta"][:, :, 0] - fd).max() <= 1e-5 * np.abs(fd).max()
+
+
+def test_ode_page_example_gives_the_numbers_it_shows():
+    """docs/ode.md: Lotka-Volterra on the lynx-hare pelts; the least-squares estimates
+    and standard errors printed on the page."""
+    text = (DOCS / "ode.md").read_text()
+    code = re.findall(r"```python\n(.*?)```", text, re.S)[0]
+    ns = {}
+    exec(compile(code.replace("print(res.summary())", ""), "ode.md", "exec"), ns)
+    res = ns["res"]
+    assert res.success, res.message
+    np.testing.assert_allclose(res.eps, [0.481199, 0.0248318, 0.027533, 0.926018, 34.9143,
+                                         3.86187], rtol=2e-5)  # fmt: skip
+    np.testing.assert_allclose(res.uncertainty.stderr[:2], [0.035088, 0.001638], rtol=1e-4)

@@ -9,6 +9,8 @@ the :class:`Verdict` on whether the model explains the data):
 problem                     formulations (``fit(problem, eps0, formulation=...)``)  paper
 ==========================  =====================================================  ================
 :class:`ModelProblem`       ``"standard"`` (a model that is a Python function)     --
+:class:`OdeProblem`         ``"standard"``, ``"ecfm"`` (a user's ODE, readings     --
+                            at any times; forces piecewise constant in time)
 :class:`SteadyProblem`      ``"standard"``, ``"ecfm"``, ``"noisy-ecfm"``            Eqs. traditional,
                                                                                    ecfm,
                                                                                    kpp_inv,
@@ -35,9 +37,11 @@ imports :mod:`.fitting`:
                     (standard and exact ECFM, reduced), ``noisy`` and ``noise`` (all at
                     once, the paper's noise bounds), ``discrepancy`` and ``sparse_forces``
                     (random-force ECFM), ``dynamic_fit``, ``replicated`` and ``forces``
-                    (pseudo-likelihood)
+                    (pseudo-likelihood), ``ode_forces`` and ``ode_random`` (exact-match and
+                    random-force ECFM of an ODE)
 ``problems/``       a model and its data behind one interface (``interface``): ``model``
-                    (a Python function), ``galerkin`` (steady, replicated), ``dynamic``;
+                    (a Python function), ``ode`` (a user's ODE, forward sensitivities),
+                    ``galerkin`` (steady, replicated), ``dynamic``;
                     ``noise_model`` and ``whitening`` (``sigma`` as given);
                     ``pseudo_likelihood`` and ``moments`` (the replicated data's
                     likelihood)
@@ -49,13 +53,15 @@ imports :mod:`.fitting`:
 ``core/``           shared machinery: ``convergence`` (the one status decision),
                     ``drivers`` and ``optimizers`` (the optimizer calls), ``gradients``,
                     ``finite_differences``; the types handed around: ``settings`` (the
-                    validated arguments), ``result`` (the one frozen result), ``status``,
+                    validated arguments), ``result`` (the one frozen result), ``series``
+                    (an ODE's forces and trajectory), ``status``,
                     ``summary_table``
 ==================  ======================================================================
 """
 
 from .core.optimizers import adam
 from .core.result import InverseResult, Uncertainty, Verdict
+from .core.series import ForceSeries, OdeTrajectory
 from .core.status import FitStatus
 from .coverage import likelihood_coverage, steady_coverage
 from .fitting import fit
@@ -71,6 +77,7 @@ from .problems.moments import (
     negative_log_pseudo_likelihood,
     sensor_moments,
 )
+from .problems.ode import OdeProblem
 from .problems.pseudo_likelihood import PseudoLikelihood
 from .statistics.diagnostics import (
     condition_number,
@@ -88,6 +95,9 @@ __all__ = [
     "Band",
     "FitStatus",
     "ModelProblem",
+    "OdeProblem",
+    "ForceSeries",
+    "OdeTrajectory",
     "ReplicatedProblem",
     "SteadyProblem",
     "Uncertainty",

@@ -14,6 +14,11 @@ problem                formulation                      method (``"auto"`` first
 ModelProblem           ``"standard"``                   ``"least-squares"`` (trust-region
                                                         on the whitened residual,
                                                         derivatives differenced or given)
+OdeProblem             ``"standard"``, ``"ecfm"``,      ``"least-squares"`` (trust-region;
+                       ``"ecfm-random"`` (sigma)        Jacobian from forward
+                                                        sensitivities, ECFM forces
+                                                        piecewise constant between data
+                                                        times)
 SteadyProblem          ``"standard"``, ``"ecfm"``       ``"least-squares"`` (trust-region
                                                         on the residual and its exact
                                                         Jacobian), any gradient method
@@ -63,9 +68,11 @@ def _problem_kind(problem):
     from .problems.dynamic import DynamicInverseProblem
     from .problems.galerkin import ReplicatedProblem, SteadyProblem
     from .problems.model import ModelProblem
+    from .problems.ode import OdeProblem
 
     for cls, kind in (
         (ModelProblem, "model"),
+        (OdeProblem, "ode"),
         (SteadyProblem, "steady"),
         (DynamicInverseProblem, "dynamic"),
         (ReplicatedProblem, "replicated"),
@@ -73,8 +80,8 @@ def _problem_kind(problem):
         if isinstance(problem, cls):
             return kind
     raise TypeError(
-        "`problem` must be a ModelProblem, SteadyProblem, DynamicInverseProblem or "
-        f"ReplicatedProblem, got {type(problem).__name__}; e.g. "
+        "`problem` must be a ModelProblem, OdeProblem, SteadyProblem, "
+        f"DynamicInverseProblem or ReplicatedProblem, got {type(problem).__name__}; e.g. "
         "fit(ModelProblem(model, data), eps0) for a model that is a Python function"
     )
 
@@ -101,6 +108,8 @@ def _check_sigma(sigma, kind, formulation, problem):
     if kind == "model":
         noise = noise_model(sigma, problem.n_data)  # raises naming `sigma` and its shapes
         return sigma if noise.kind == "scalar" else noise
+    if kind == "ode":  # per reading present (NaN where missing), per component, covariance
+        return problem.noise(sigma)
     if kind == "replicated":  # never silently ignored
         raise ValueError(
             f"`sigma` is not taken by a ReplicatedProblem (formulation={formulation!r}): the "
@@ -127,6 +136,7 @@ def _check_sigma(sigma, kind, formulation, problem):
 #: the formulations of each problem kind, by name (what each one is: the table above)
 FORMULATIONS = {
     "model": ("standard",),
+    "ode": ("standard", "ecfm", "ecfm-random"),
     "steady": ("standard", "ecfm", "ecfm-random", "noisy-ecfm"),
     "dynamic": ("standard", "ecfm"),
     "replicated": ("standard", "inner-outer", "penalty", "ecfm"),
@@ -150,7 +160,7 @@ def _check_formulation(kind, settings):
     if settings.formulation not in names:
         hint = ""
         if settings.formulation == "ecfm-random":
-            hint = "; the random-force ECFM is defined for a SteadyProblem"
+            hint = "; the random-force ECFM is defined for a SteadyProblem and an OdeProblem"
         raise ValueError(
             f"unknown `formulation` {settings.formulation!r} for a {kind} problem; choose "
             f"one of {list(names)}{hint}"
@@ -274,7 +284,7 @@ def fit(
         maxiter = check_int("maxiter", maxiter, minimum=1)
     if not isinstance(uncertainty, bool | numbers.Integral):
         raise TypeError(f"`uncertainty` must be True or False, got {uncertainty!r}")
-    n_eps = problem.system.n_eps if kind != "model" else np.size(eps0)
+    n_eps = problem.system.n_eps if kind not in ("model", "ode") else np.size(eps0)
     settings = FitSettings(
         formulation=formulation,
         method=method,
@@ -291,6 +301,14 @@ def fit(
         from .problems.model import fit_model_problem
 
         return _with_estimate(fit_model_problem(problem, eps0, settings))
+    if kind == "ode":
+        if formulation == "standard":
+            from .problems.ode import fit_ode_standard as fitter
+        elif formulation == "ecfm":
+            from .formulations.ode_forces import fit_ode_ecfm as fitter
+        else:
+            from .formulations.ode_random import fit_ode_random as fitter
+        return _with_estimate(fitter(problem, eps0, settings))
     if kind == "steady" and (formulation == "noisy-ecfm" or method == "all-at-once"):
         from .formulations.noisy import fit_all_at_once as fitter
     elif formulation == "ecfm-random":

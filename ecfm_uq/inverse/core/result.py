@@ -279,6 +279,9 @@ class InverseResult:
         The solution :math:`\\Theta` at the estimate (with the forces where the formulation
         has them): ``(N, P)`` for the steady least-squares and minimize fits and the
         replicated fits, the stacked unknowns ``theta`` of the all-at-once SLSQP fits;
+        an :class:`~ecfm_uq.inverse.core.series.OdeTrajectory` (the fitted, forced
+        solution with its dense output) for an
+        :class:`~ecfm_uq.inverse.problems.ode.OdeProblem`;
         ``None`` for a :class:`~ecfm_uq.inverse.problems.model.ModelProblem`, the
         random-force ECFM and the dynamic fits (whose trajectory is
         ``problem.solve(result.eps, formulation)``; not kept, it is large).
@@ -286,7 +289,9 @@ class InverseResult:
         The constraint forces :math:`\\lambda` at the estimate: ``(C,)`` for the steady
         and replicated ECFM fits (the posterior mean for the random-force ECFM; zeros for
         the replicated ``"standard"`` pseudo-likelihood, which holds them at zero),
-        ``(n_steps + 1, C)`` for the dynamic ECFM; ``None`` where the formulation has no
+        ``(n_steps + 1, C)`` for the dynamic ECFM, a
+        :class:`~ecfm_uq.inverse.core.series.ForceSeries` (a labelled time series) for the
+        ECFM of an :class:`~ecfm_uq.inverse.problems.ode.OdeProblem`; ``None`` where the formulation has no
         forces (``"standard"``, a :class:`~ecfm_uq.inverse.problems.model.ModelProblem`).
     uncertainty : Uncertainty
     verdict : Verdict or None
@@ -313,8 +318,16 @@ class InverseResult:
         ============================  ========================  =========================
         key                           formulation               meaning
         ============================  ========================  =========================
-        ``prediction``                ModelProblem              the model at ``eps``, in
-                                                                the data's shape
+        ``prediction``                ModelProblem,             the model at ``eps``, in
+                                      OdeProblem                the data's shape
+        ``n_missing``                 OdeProblem                readings skipped (NaN)
+        ``significant_forces``        OdeProblem ECFM (sigma)   ``(component, (t_start,
+                                                                t_end), z)`` of each
+                                                                force interval whose
+                                                                z-score passes the
+                                                                Bonferroni bound
+        ``force_cov``                 OdeProblem ECFM (sigma)   covariance of the forces
+                                                                (readings order)
         ``discrepancy``               all-at-once (SLSQP)       model minus data at the
                                                                 optimum, ``(C,)``
         ``mean_discrepancy``,         all-at-once               its sample mean and

@@ -61,6 +61,9 @@ def summary_table(result, level=0.95, profile=None):
     lines.append(rule)
     opt = "" if result.optimality is None else f", optimality {result.optimality:.2e}"
     lines.append(f"status: {result.status.name}{opt}; {result.nfev} model evaluations")
+    missing = result.extra.get("n_missing")
+    if missing:
+        lines.append(f"data: {missing} missing reading(s) (NaN) skipped")
     if unc is not None and not unc.success and unc.message:
         lines.append(f"uncertainty: {unc.message}")
     elif unc is not None and unc.success:

@@ -1,0 +1,258 @@
+"""The exact-match ECFM of an OdeProblem: forces piecewise constant between data times,
+against finite differences (their Jacobians), a known added force (the forces recovered
+at any sampling density), the data themselves (exact match), and Monte Carlo (the false
+alarm rate and the power of the forces' chi-squared test)."""
+
+import matplotlib
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from ecfm_uq.inverse import ForceSeries, OdeProblem, OdeTrajectory, fit
+from ecfm_uq.inverse.formulations.ode_forces import ExactForces, forced_components
+
+matplotlib.use("Agg")
+
+TRUTH = np.array([0.5, 0.025, 0.025, 0.8, 30.0, 4.0])
+JAC = None
+
+
+def lv(t, y, e):
+    u, v = y[0], y[1]
+    return np.array([e[0] * u - e[1] * u * v, e[2] * u * v - e[3] * v])
+
+
+def lv_jac_y(t, y, e):
+    u, v = y
+    return np.array([[e[0] - e[1] * v, -e[1] * u], [e[2] * v, e[2] * u - e[3]]])
+
+
+def lv_jac_eps(t, y, e):
+    u, v = y
+    return np.array([[u, -u * v, 0, 0, 0, 0], [0, 0, u * v, -v, 0, 0]])
+
+
+def y0_of(e):
+    return e[4:6]
+
+
+def simulate(times, eps=TRUTH, harvest=0.0, window=(5.0, 8.0), push=None):
+    """The states at ``times`` of LV, with a harvest ``du/dt -= harvest * u`` on
+    ``window`` and/or a constant added force ``push`` (n_state,) throughout."""
+    add = np.zeros(2) if push is None else np.asarray(push, float)
+
+    def rhs(t, y):
+        h = harvest if window[0] <= t < window[1] else 0.0
+        return lv(t, y, eps) + add - np.array([h * y[0], 0.0])
+
+    cuts = sorted({times[0], times[-1], *[w for w in window if times[0] < w < times[-1]]})
+    y, out = np.asarray(eps[4:6], float), []
+    for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+        sel = times[(times >= a) & ((times < b) | (b == times[-1]))]
+        s = solve_ivp(rhs, (a, b), y, method="DOP853", rtol=1e-12, atol=1e-12,
+                      t_eval=sel, dense_output=True)  # fmt: skip
+        out.append(s.y.T)
+        y = s.sol(b)
+    return np.vstack(out)
+
+
+def problem(times, data, rtol=1e-9, **kw):
+    kw.setdefault("jac", (lv_jac_y, lv_jac_eps))
+    return OdeProblem(lv, y0_of, times, data, t0=kw.pop("t0", times[0]), rtol=rtol,
+                      atol=kw.pop("atol", rtol), state_names=["hare", "lynx"], **kw)  # fmt: skip
+
+
+ANNUAL = np.arange(0.0, 13.0)
+
+
+def _fd_of(fun, x, rel=1e-6):
+    cols = []
+    for j in range(x.size):
+        h = rel * max(abs(x[j]), 1.0)
+        xp, xm = x.copy(), x.copy()
+        xp[j] += h
+        xm[j] -= h
+        cols.append((fun(xp) - fun(xm)) / (2 * h))
+    return np.column_stack(cols)
+
+
+@pytest.mark.parametrize("t0", [0.0, -0.5])  # a datum at t0 (initial jump) or not
+@pytest.mark.parametrize("jac", ["exact", "differenced"])
+def test_force_jacobians_match_finite_differences(t0, jac):
+    times = ANNUAL if jac == "exact" else ANNUAL[:7]  # the differenced solves cost more
+    data = simulate(times) * (1 + 0.02 * np.random.default_rng(0).standard_normal((times.size, 2)))
+    data[4, 1] = np.nan
+    kw = {} if jac == "exact" else {"jac": None, "vectorized": True}
+    pb = problem(times, data, rtol=1e-11, t0=t0, **kw)
+    e = pb.check(TRUTH * 1.03)
+    ef = ExactForces(pb, forced_components(pb))
+    out = ef.solve(e, with_data=True)
+    F = _fd_of(lambda x: ExactForces(pb, ef.F).solve(x)["r"], e)
+    scale = np.max(np.abs(F), axis=0)
+    assert np.max(np.abs(out["J"] - F) / scale) < 1e-5
+    d0, cols = pb.readings, [0, 5, 11]  # the first reading (the jump), a few later
+
+    def of_data(d):
+        full = pb.v.copy()
+        full[pb.mask] = d
+        return ExactForces(pb.with_data(full), ef.F).solve(e)["r"]
+
+    G = np.column_stack([_fd_of(lambda x, k=k: of_data(np.r_[d0[:k], x, d0[k + 1 :]]),
+                                d0[k : k + 1], rel=1e-5)[:, 0] for k in cols])  # fmt: skip
+    assert np.max(np.abs(out["R_d"][:, cols] - G)) < 1e-5 * np.max(np.abs(G))
+    # the missing lynx reading at t = 4: its force on [3, 4) is 0, free of the data
+    row = 9  # after the jump's two rows and three intervals', or four intervals' rows
+    assert out["r"][row] == 0.0 and np.all(out["J"][row] == 0.0)
+
+
+@pytest.mark.parametrize("step", [1.0, 0.25])
+def test_a_constant_added_force_is_recovered_at_any_sampling(step):
+    times = np.arange(0.0, 6.0 + step / 2, step)
+    push = np.array([1.5, -0.4])
+    data = simulate(times, push=push)
+    pb = problem(times, data, rtol=1e-11)
+    e = pb.check(TRUTH)
+    out = ExactForces(pb, forced_components(pb)).solve(e)
+    np.testing.assert_allclose(out["forces"], np.tile(push, (times.size - 1, 1)), atol=1e-6)
+    np.testing.assert_allclose(out["jump"], 0.0, atol=1e-9)
+
+
+def test_noise_free_data_give_zero_forces_and_the_truth():
+    data = simulate(ANNUAL)
+    res = fit(problem(ANNUAL, data), TRUTH * 1.05, formulation="ecfm")
+    assert res.success, res.message
+    np.testing.assert_allclose(res.eps, TRUTH, rtol=1e-5)
+    assert np.max(np.abs(res.forces.values)) < 1e-5
+    assert res.verdict.consistent is None and res.uncertainty.success is False
+
+
+def test_forced_solution_meets_the_data_and_series_interface():
+    data = simulate(ANNUAL, harvest=0.4) * (
+        1 + 0.02 * np.random.default_rng(1).standard_normal((13, 2))
+    )
+    data[6, 0] = np.nan
+    res = fit(
+        problem(ANNUAL, data),
+        TRUTH * 1.02,
+        formulation="ecfm",
+        sigma=0.02 * np.abs(simulate(ANNUAL)),
+    )
+    assert res.success, res.message
+    f, state = res.forces, res.state
+    assert isinstance(f, ForceSeries) and isinstance(state, OdeTrajectory)
+    assert f.values.shape == (12, 2) and f.stderr.shape == (12, 2) and f.times.shape == (12,)
+    np.testing.assert_array_equal(f.intervals[:, 1], ANNUAL[1:])
+    assert f.names == ["hare", "lynx"] and state.names == ["hare", "lynx"]
+    assert f.values[5, 0] == 0.0 and f.stderr[5, 0] == 0.0  # hare missing at t = 6
+    Y = state(ANNUAL)
+    ok = np.isfinite(data)
+    np.testing.assert_allclose(Y[ok], data[ok], rtol=1e-6)
+    ax = f.plot()
+    assert ax.get_xlabel() == "t"
+    assert res.uncertainty.success and res.verdict.consistent is not None
+    assert res.extra["force_cov"].shape[0] == res.extra["force_cov"].shape[1]
+
+
+def alarm_rates(times, R, rel, harvest, seed, rtol=1e-7):
+    """Shares of R synthetic data sets (relative noise ``rel``, known) whose forces'
+    chi-squared test rejects at alpha = 0.05, whose Bonferroni z-scores name the hare
+    inside the harvest window, and whose fit did not converge."""
+    rng = np.random.default_rng(seed)
+    clean = simulate(times, harvest=harvest)
+    sigma = rel * np.abs(clean)
+    rejected = located = failed = 0
+    for _ in range(R):
+        data = clean + sigma * rng.standard_normal(clean.shape)
+        res = fit(problem(times, data, rtol=rtol), TRUTH * 1.02, formulation="ecfm", sigma=sigma)
+        failed += not res.success
+        rejected += res.verdict.consistent is False
+        located += any(n == "hare" and a >= 4.0 and b <= 9.0 for n, (a, b), _ in
+                       res.extra["significant_forces"])  # fmt: skip
+    return rejected / R, located / R, failed / R
+
+
+def test_false_alarms_and_harvest_detection_small():
+    """R = 4 on a cheap annual configuration (11 years, rtol 1e-5): at most one false
+    alarm (binomial p = 0.014 for two or more at alpha = 0.05), the missing harvest
+    flagged in every set."""
+    times = ANNUAL[:11]
+    false, _, failed = alarm_rates(times, 4, 0.03, 0.0, seed=1, rtol=1e-5)
+    power, located, failed_h = alarm_rates(times, 4, 0.03, 0.6, seed=2, rtol=1e-5)
+    assert failed == failed_h == 0
+    assert false <= 1 / 4
+    assert power == 1.0 and located >= 0.5
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("times", "seeds"),
+    [(np.arange(0.0, 21.0), (10, 11)), (np.arange(0.0, 10.0 + 1e-9, 1 / 12), (20, 21))],
+    ids=["annual", "monthly"],
+)
+def test_false_alarm_rate_and_power_study(times, seeds):
+    """R = 100 data sets, 3 % noise: the test's size in [0.01, 0.10] on the correct
+    model; a harvest du/dt -= 0.6 u on [5, 8) left out of the model flagged in >= 95 %."""
+    false, _, failed = alarm_rates(times, 100, 0.03, 0.0, seed=seeds[0])
+    power, located, failed_h = alarm_rates(times, 100, 0.03, 0.6, seed=seeds[1])
+    print(f"false alarms {false:.2f}, power {power:.2f}, located {located:.2f}, not "
+          f"converged {failed:.2f} / {failed_h:.2f}")  # fmt: skip
+    assert failed <= 0.02 and failed_h <= 0.05
+    assert 0.01 <= false <= 0.10
+    assert power >= 0.95 and located >= 0.9
+
+
+def test_extra_keys_documented_and_no_likelihood_for_profiles():
+    import re
+
+    from ecfm_uq.inverse import InverseResult, profile_likelihood
+
+    doc = InverseResult.__doc__
+    rows = "".join(doc[doc.index("extra : dict") :].split("=====")[2:-1])
+    keys = {m for line in rows.splitlines() for m in re.findall(r"``(\w+)``", line[:38])}
+    data = simulate(ANNUAL[:6]) * (1 + 0.02 * np.random.default_rng(3).standard_normal((6, 2)))
+    pb = problem(ANNUAL[:6], data, rtol=1e-7)
+    for kw in ({}, {"formulation": "ecfm", "sigma": 0.5}):
+        res = fit(pb, TRUTH * 1.02, **kw)
+        assert set(res.extra) <= keys, set(res.extra) - keys
+    with pytest.raises(ValueError, match="likelihood"):
+        profile_likelihood(res)
+
+
+def test_force_response_matches_finite_differences_of_the_forced_solution():
+    from ecfm_uq.inverse.formulations.ode_random import force_response, forced_solution
+
+    data = simulate(ANNUAL[:7]) * (1 + 0.02 * np.random.default_rng(4).standard_normal((7, 2)))
+    pb = problem(ANNUAL[:7], data, rtol=1e-11)
+    e = pb.check(TRUTH * 1.02)
+    ef = ExactForces(pb, forced_components(pb))
+    A = force_response(pb, ef, e)
+    zero = np.zeros((ef.K, ef.m))
+
+    def readings(f):
+        return forced_solution(pb, ef, e, f.reshape(ef.K, ef.m))[0][pb.mask]
+
+    F = _fd_of(readings, zero.ravel(), rel=1e-4)
+    assert np.max(np.abs(A - F)) < 1e-6 * np.max(np.abs(F))
+    # the exact-match forces, put back in, reproduce the data
+    out = ef.solve(e)
+    got, state = forced_solution(pb, ef, e, out["forces"], out["jump"])
+    np.testing.assert_allclose(got, data, rtol=1e-8)
+    np.testing.assert_allclose(state(ANNUAL[1:7]), data[1:], rtol=1e-8)
+
+
+def test_random_forces_tau_zero_on_exact_data_and_detected_harvest():
+    times = ANNUAL[:11]
+    clean = simulate(times)
+    sigma = 0.03 * np.abs(clean)
+    res = fit(problem(times, clean, rtol=1e-9), TRUTH * 1.02, formulation="ecfm-random",
+              sigma=sigma)  # fmt: skip
+    assert res.success and res.extra["tau"] == 0.0 and res.verdict.consistent
+    np.testing.assert_allclose(res.eps, TRUTH, rtol=1e-6)
+    data = simulate(times, harvest=0.6)
+    data = data + 0.03 * np.abs(data) * np.random.default_rng(5).standard_normal(data.shape)
+    bad = fit(problem(times, data, rtol=1e-8), TRUTH * 1.02, formulation="ecfm-random",
+              sigma=sigma)  # fmt: skip
+    assert bad.extra["tau"] > 0 and bad.verdict.consistent is False
+    assert bad.forces.values.shape == (10, 2) and np.all(bad.forces.stderr >= 0)
+    with pytest.raises(ValueError, match="sigma"):
+        fit(problem(times, data), TRUTH, formulation="ecfm-random")
