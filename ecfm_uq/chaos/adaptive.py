@@ -32,10 +32,17 @@ __all__ = ["hyperbolic_indices"]
 # hyperbolic enumeration has q = 0.5): sparse candidate sets of high degree for few
 # interactions, the full total-degree set where it is affordable.
 _ADAPTIVE_Q = (0.5, 0.75, 1.0)
-# A candidate set is affordable when its selection's work n P min(n, P) stays below this
-# (about a second of LAR path on one core) and it has at most _candidate_cap(n)
-# columns; the degree loop stops when no q-norm is affordable.
+# A candidate set is affordable when its selection's work n P min(n, P) stays below
+# _ADAPTIVE_WORK * max(1, n / _ADAPTIVE_WORK_RUNS) and it has at most _candidate_cap(n)
+# columns; the degree loop stops when no q-norm is affordable. Up to 1 000 runs the
+# limit is v0.4's fixed 1e9 (about a second of selection on one core). Beyond, it grows
+# with n: v0.4 kept it fixed, so the affordable sets shrank as n grew (P <= sqrt(1e9 / n):
+# 316 candidates at n = 10^4, 100 at 10^5) and more data gave a worse fit (issue 37, the
+# 8-input borehole: Sobol errors 8e-5 at n = 10^4, 1e-3 at 10^5). Per run the work is
+# now capped, P min(n, P) <= 10^6, so every set affordable at n is affordable at any
+# larger n (P <= 1 000 candidates from n >= 1 000 on) and the time grows like n.
 _ADAPTIVE_WORK = 1e9
+_ADAPTIVE_WORK_RUNS = 1000
 # At most max(_ADAPTIVE_PER_RUN * n, _ADAPTIVE_MIN_CAP) candidates in one set: beyond, the
 # LAR path (n / 2 steps at most) rarely finds better sets and each selection's Gram block
 # grows as P^2; small designs still see OpenTURNS' few hundred (q = 0.5, degree 10).
@@ -96,7 +103,7 @@ def _affordable(n, P, K=0, solver="lars"):
     held = K + P + 1  # at most: the design's columns, the Gram's rows
     return (
         P <= _candidate_cap(n, solver)
-        and n * P * min(n, P) <= _ADAPTIVE_WORK
+        and n * P * min(n, P) <= _ADAPTIVE_WORK * max(1.0, n / _ADAPTIVE_WORK_RUNS)
         and 8.0 * (2 * n * held + 3 * held * held) <= _SELECTION_SHARE * memory_budget()
     )
 
@@ -116,7 +123,10 @@ class _GrowingDesign:
         self.n = len(omega)
         self.position = {}
         self.alpha = np.zeros((1, len(germs)), dtype=np.int64)
-        self.B = np.ones((self.n, 1))
+        # the columns live in a buffer grown by doubling (B is a view of its first ones):
+        # appending to a copied array cost a copy of all columns per extension
+        self._buffer = np.ones((self.n, 1))
+        self.B = self._buffer
         self.G = np.array([[float(self.n)]])
         self.XtY = Y.sum(axis=0, keepdims=True)
         self.degree, self.tables = -1, None
@@ -147,7 +157,12 @@ class _GrowingDesign:
             G[k0:, k0:] = Bn.T @ Bn
             self.G = G
             self.XtY = np.vstack([self.XtY, Bn.T @ self.Y])
-            self.B = np.hstack([self.B, Bn])
+            if k1 > self._buffer.shape[1]:
+                buffer = np.empty((self.n, max(k1, 3 * self._buffer.shape[1] // 2)))
+                buffer[:, :k0] = self.B
+                self._buffer = buffer
+            self._buffer[:, k0:k1] = Bn
+            self.B = self._buffer[:, :k1]
             self.alpha = np.vstack([self.alpha, new_alpha])
             for k, a in enumerate(new):
                 self.position[a] = k0 + k
@@ -169,7 +184,13 @@ class _GrowingDesign:
         max_steps = min(len(pos), max(n // 2, 2))
         steps = min(max_steps, max(int(first_steps), 8))
         return _grow_path(
-            lambda steps: _lar_order_gram(Gc, c, steps), self.B, pos, y, steps, max_steps
+            lambda steps: _lar_order_gram(Gc, c, steps),
+            self.B,
+            pos,
+            y,
+            steps,
+            max_steps,
+            gram=(self.G, self.XtY[:, j]),
         )
 
 
