@@ -96,7 +96,7 @@ def _loo_nested_rows(rows, y, R, z):
     n, s = len(y), R.shape[0]
     sum_e2 = np.zeros(s)
     for a, b in _row_blocks(n, 4 * s):
-        Q = sla.solve_triangular(R, rows(a, b).T, trans="T").T
+        Q = sla.solve_triangular(R, rows(a, b).T, trans="T", check_finite=False).T
         fitted = np.cumsum(Q * z[None, :], axis=1)
         h = np.cumsum(Q**2, axis=1)
         one_h = 1.0 - h
