@@ -169,6 +169,58 @@ def _sparse_select(Psi, y, candidates, n, solver, first_steps=None):
     return _grow_path(path, Psi, candidates, y, steps, max_steps)
 
 
+class _NestedLooRows:
+    """Corrected LOO errors of nested fits in Gram form, extended as a path grows.
+
+    For the columns ``cols`` of ``design`` (column 0 the constant) with Gram matrix
+    :math:`G` and :math:`b = \\Psi^T y`: :math:`R^T R = G_{cols, cols}` (Cholesky, up to the
+    first dependent column), :math:`z = R^{-T} b_{cols}`, and the errors of
+    :func:`_loo_nested` with :math:`Q = X R^{-1}`. A later call with a longer ``cols``
+    (the same prefix: a path run further) evaluates the new columns only,
+    :math:`Q_{:, k_0:s} = X_{:, :s} (R^{-1})_{:s, k_0:s}`, continuing each run's hat
+    diagonal and fitted value from the ones kept after the last call (two n-vectors), in
+    blocks of rows: no (n, s) array is held.
+    """
+
+    def __init__(self, design, y, G, b):
+        self.design, self.y, self.G, self.b = design, y, G, b
+        n = len(y)
+        self.h = np.zeros(n)
+        self.fitted = np.zeros(n)
+        self.sum_e2 = np.zeros(0)
+
+    def errors(self, cols):
+        """(R, z, corrected) of the nested fits on the leading columns of ``cols``."""
+        y, n = self.y, len(self.y)
+        R = _cholesky_prefix(self.G[np.ix_(cols, cols)])
+        s = R.shape[0]
+        z = sla.solve_triangular(R, self.b[cols[:s]], trans="T")
+        Rinv = sla.solve_triangular(R, np.eye(s))
+        k0 = len(self.sum_e2)
+        if s > k0:
+            sel = cols[:s]
+            W = Rinv[:, k0:]
+            new = np.zeros(s - k0)
+            for a, b in _row_blocks(n, 4 * s):
+                Q = self.design[a:b][:, sel] @ W
+                fitted = self.fitted[a:b, None] + np.cumsum(Q * z[None, k0:], axis=1)
+                h = self.h[a:b, None] + np.cumsum(Q**2, axis=1)
+                one_h = 1.0 - h
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    e = np.where(one_h > 1e-10, (y[a:b, None] - fitted) / one_h, np.inf)
+                new += np.sum(e**2, axis=0)
+                self.fitted[a:b] = fitted[:, -1]
+                self.h[a:b] = h[:, -1]
+            self.sum_e2 = np.concatenate([self.sum_e2, new])
+        var = np.var(y) if np.var(y) > 0 else 1.0
+        loo = self.sum_e2[:s] / n / var
+        trace = np.cumsum(np.sum(np.triu(Rinv) ** 2, axis=0))
+        k = np.arange(1, s + 1)
+        with np.errstate(divide="ignore"):
+            T = np.where(k < n, n / np.maximum(n - k, 1) * (1.0 + trace), np.inf)
+        return R, z, loo * T
+
+
 def _grow_path(path, design, positions, y, steps, max_steps, gram=None):
     """Run ``path`` in growing pieces and refit the best nested set: (columns, coef, LOO).
 
@@ -182,23 +234,22 @@ def _grow_path(path, design, positions, y, steps, max_steps, gram=None):
 
     ``gram``: optional ``(G, b)``, the design's Gram matrix and :math:`\\Psi^T y`. When the
     selected columns hold more than ``_QR_BYTES``, the refits use the Cholesky factor of
-    their Gram block instead of a QR of the (n, s) columns, and the leave-one-out errors
-    are summed in blocks of rows (:func:`_loo_nested_rows`): the same errors, a Cholesky
-    of (s, s) and a triangular solve instead of an (n, s) Householder QR, which at
-    n = 10^5 runs was most of the adaptive fit's time.
+    their Gram block instead of a QR of the (n, s) columns and the leave-one-out errors
+    are summed in blocks of rows (:class:`_NestedLooRows`): the same errors for a
+    Cholesky of (s, s) and products with (block, s) rows instead of an (n, s)
+    Householder QR (most of the adaptive fit's time at n = 10^5 runs). The path then grows
+    by a quarter of its steps, at least 16, and only the new columns are scored: doubling
+    and rescoring all columns cost four times the piece for steps that rarely win.
     """
-    n = len(y)
+    n, nested = len(y), None
     while True:
         active = path(steps)
         cols = [0] + [int(positions[j]) for j in active]
         if gram is not None and 8.0 * n * len(cols) > _QR_BYTES:
-            G, b = gram
-            R = _cholesky_prefix(G[np.ix_(cols, cols)])
-            s = R.shape[0]
-            z = sla.solve_triangular(R, b[cols[:s]], trans="T")
-            sel = cols[:s]
-            corrected = _loo_nested_rows(lambda a, b_, sel=sel: design[a:b_][:, sel], y, R, z)
-            Q = None
+            if nested is None:
+                nested = _NestedLooRows(design, y, *gram)
+            R, z, corrected = nested.errors(cols)
+            s, Q = R.shape[0], None
         else:
             Q, R = sla.qr(design[:, cols], mode="economic")
             d = np.abs(np.diag(R))
@@ -212,7 +263,9 @@ def _grow_path(path, design, positions, y, steps, max_steps, gram=None):
         # grow the path while the best set lies in the last quarter of the steps run
         if steps >= max_steps or len(active) < steps or s < len(active) + 1 or 4 * k <= 3 * s:
             break
-        steps = min(2 * steps, max_steps)
+        # in Gram form only the new columns are scored: grow by a quarter (at least 16),
+        # as the path usually runs on, a few steps past its best set, by `first_steps`
+        steps = min(2 * steps if nested is None else steps + max(16, steps // 4), max_steps)
     if Q is None:
         coef = sla.solve_triangular(R[:k, :k], z[:k])
     else:

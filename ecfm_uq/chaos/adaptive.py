@@ -123,9 +123,9 @@ class _GrowingDesign:
         self.n = len(omega)
         self.position = {}
         self.alpha = np.zeros((1, len(germs)), dtype=np.int64)
-        # the columns live in a buffer grown by doubling (B is a view of its first ones):
-        # appending to a copied array cost a copy of all columns per extension
-        self._buffer = np.ones((self.n, 1))
+        # the columns live in a column-major buffer grown by half (B is a view of its first
+        # ones): appending to a copied array cost a copy of all columns per extension
+        self._buffer = np.ones((self.n, 1), order="F")
         self.B = self._buffer
         self.G = np.array([[float(self.n)]])
         self.XtY = Y.sum(axis=0, keepdims=True)
@@ -138,11 +138,16 @@ class _GrowingDesign:
             new_alpha = np.array(new, dtype=np.int64)
             p = int(new_alpha.max())
             if p > self.degree:
-                self.tables = [g.table(self.omega[:, d], p) for d, g in enumerate(self.germs)]
+                # transposed, (p + 1, n): a column's values per input are one row to gather
+                self.tables = [
+                    np.ascontiguousarray(g.table(self.omega[:, d], p).T)
+                    for d, g in enumerate(self.germs)
+                ]
                 self.degree = p
-            Bn = self.tables[0][:, new_alpha[:, 0]]
+            BnT = self.tables[0][new_alpha[:, 0]]
             for d in range(1, len(self.germs)):
-                Bn *= self.tables[d][:, new_alpha[:, d]]
+                BnT *= self.tables[d][new_alpha[:, d]]
+            Bn = BnT.T  # (n, new), column-major
             k0, k1 = self.B.shape[1], self.B.shape[1] + len(new)
             check_allocation(
                 8.0 * (self.n * k1 + 2 * k1 * k1),
@@ -158,7 +163,7 @@ class _GrowingDesign:
             self.G = G
             self.XtY = np.vstack([self.XtY, Bn.T @ self.Y])
             if k1 > self._buffer.shape[1]:
-                buffer = np.empty((self.n, max(k1, 3 * self._buffer.shape[1] // 2)))
+                buffer = np.empty((self.n, max(k1, 3 * self._buffer.shape[1] // 2)), order="F")
                 buffer[:, :k0] = self.B
                 self._buffer = buffer
             self._buffer[:, k0:k1] = Bn
