@@ -43,8 +43,10 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import math  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
 import warnings  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 from scipy import stats  # noqa: E402
@@ -52,63 +54,16 @@ from scipy.stats import qmc  # noqa: E402
 
 from ecfm_uq.chaos import adaptive, fit_pce  # noqa: E402
 
-BOREHOLE = np.array(
-    [
-        (0.05, 0.15),  # r_w
-        (100.0, 50000.0),  # r
-        (63070.0, 115600.0),  # T_u
-        (990.0, 1110.0),  # H_u
-        (63.1, 116.0),  # T_l
-        (700.0, 820.0),  # H_l
-        (1120.0, 1680.0),  # L
-        (9855.0, 12045.0),  # K_w
-    ]
-)
+# the borehole function and its quadrature indices are the tests' (tests/_models.py)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from _models import BOREHOLE_BOUNDS as BOREHOLE  # noqa: E402
+from _models import borehole, borehole_indices  # noqa: E402
+
 # Quadrature nodes per input of the reference (see the module docstring).
 REFERENCE_NODES = (10, 100, 5, 2, 8, 2, 8, 8)
 # Measured on main (v0.4, commit 360e218) with this design, before the change: n, largest
 # index error, CPU seconds of the fit (one thread).
 V04 = ((1000, 2.60e-5, None), (10000, 7.97e-5, None), (100000, 1.04e-3, 2.45))
-
-
-def borehole(X):
-    rw, r, Tu, Hu, Tl, Hl, L, Kw = np.asarray(X, dtype=float).T
-    lg = np.log(r / rw)
-    return 2 * np.pi * Tu * (Hu - Hl) / (lg * (1 + 2 * L * Tu / (lg * rw**2 * Kw) + Tu / Tl))
-
-
-def borehole_reference(nodes=REFERENCE_NODES):
-    """First-order and total indices by tensor Gauss-Legendre quadrature: (S, T)."""
-    dim = len(nodes)
-    pts, ws = [], []
-    for (lo, hi), m in zip(BOREHOLE, nodes, strict=True):
-        x, w = np.polynomial.legendre.leggauss(m)
-        pts.append(lo + (hi - lo) * (x + 1) / 2)
-        ws.append(w / 2)
-    grid = np.meshgrid(*pts, indexing="ij")
-    Y = borehole(np.stack([g.ravel() for g in grid], axis=1)).reshape(nodes)
-    del grid
-
-    def integrate(A, axes):
-        for d in sorted(axes, reverse=True):
-            A = np.tensordot(A, ws[d], axes=([d], [0]))
-        return A
-
-    Yc = Y - integrate(Y, range(dim))
-    Y2 = Yc**2
-    V = integrate(Y2, range(dim))
-    S, T = np.empty(dim), np.empty(dim)
-    for i in range(dim):
-        others = [d for d in range(dim) if d != i]
-        S[i] = ws[i] @ integrate(Yc, others) ** 2 / V
-        # E over the others of the variance in x_i
-        cond = (
-            np.tensordot(Y2, ws[i], axes=([i], [0])) - np.tensordot(Yc, ws[i], axes=([i], [0])) ** 2
-        )
-        for k in reversed(range(dim - 1)):
-            cond = np.tensordot(cond, ws[others[k]], axes=([k], [0]))
-        T[i] = cond / V
-    return S, T
 
 
 def design(n, seed=0):
@@ -125,7 +80,7 @@ def fit(X, Y, bounds):
 
 
 def run_borehole(ns, old):
-    S0, T0 = borehole_reference()
+    S0, T0 = borehole_indices(REFERENCE_NODES)
     print("borehole, 8 uniform inputs, LHS seed 0; reference indices by quadrature")
     print(f"  S = {np.array2string(S0, precision=6)}")
     print(f"  T = {np.array2string(T0, precision=6)}")

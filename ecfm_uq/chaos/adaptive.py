@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from ..memory import check_allocation, memory_budget
+from ..threads import library_threads
 from ._paths import (
     _SELECTION_SHARE,
     _grow_path,
@@ -263,6 +264,7 @@ def _select_adaptive_column(design, j, solver, early_stop, max_degree):
     return sel, coef, err, choice, trace
 
 
+@library_threads()  # many mid-sized products: a threaded BLAS only synchronizes (ecfm_uq.threads)
 def _select_adaptive(germs, omega, Y, early_stop, max_degree, solver):
     """:func:`_select_adaptive_column` for each column of Y (n, m), on one union basis.
 
