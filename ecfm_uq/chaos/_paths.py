@@ -202,15 +202,27 @@ class _NestedLooRows:
             W = Rinv[:, k0:]
             new = np.zeros(s - k0)
             for a, b in _row_blocks(n, 4 * s):
-                Q = self.design[a:b][:, sel] @ W
-                fitted = self.fitted[a:b, None] + np.cumsum(Q * z[None, k0:], axis=1)
-                h = self.h[a:b, None] + np.cumsum(Q**2, axis=1)
-                one_h = 1.0 - h
+                X = self.design[a:b][:, sel]
+                if k0:
+                    Q = X @ W
+                else:  # all columns: the triangular solve, half the products
+                    Q = sla.solve_triangular(R, X.T, trans="T", check_finite=False).T
+                # in place: r = y - fitted and 1 - h of the nested fits, then (r / (1 - h))^2
+                r = Q * z[None, k0:]
+                np.cumsum(r, axis=1, out=r)
+                r += self.fitted[a:b, None]
+                self.fitted[a:b] = r[:, -1]
+                np.subtract(y[a:b, None], r, out=r)
+                np.multiply(Q, Q, out=Q)
+                np.cumsum(Q, axis=1, out=Q)
+                Q += self.h[a:b, None]
+                self.h[a:b] = Q[:, -1]
+                np.subtract(1.0, Q, out=Q)
                 with np.errstate(divide="ignore", invalid="ignore"):
-                    e = np.where(one_h > 1e-10, (y[a:b, None] - fitted) / one_h, np.inf)
-                new += np.sum(e**2, axis=0)
-                self.fitted[a:b] = fitted[:, -1]
-                self.h[a:b] = h[:, -1]
+                    np.divide(r, Q, out=r)
+                r[Q <= 1e-10] = np.inf
+                np.multiply(r, r, out=r)
+                new += np.sum(r, axis=0)
             self.sum_e2 = np.concatenate([self.sum_e2, new])
         var = np.var(y) if np.var(y) > 0 else 1.0
         loo = self.sum_e2[:s] / n / var

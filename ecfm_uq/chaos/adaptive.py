@@ -130,7 +130,7 @@ class _GrowingDesign:
         self.B = self._buffer
         self.G = np.array([[float(self.n)]])
         self.XtY = Y.sum(axis=0, keepdims=True)
-        self.degree, self.tables = -1, None
+        self.degree, self.tables, self.unit = -1, None, None
 
     def extend(self, alpha):
         """Add the multi-indices ``alpha`` (rows) not met yet; return their positions."""
@@ -145,9 +145,15 @@ class _GrowingDesign:
                     for d, g in enumerate(self.germs)
                 ]
                 self.degree = p
+                self.unit = [bool(np.all(t[0] == 1.0)) for t in self.tables]
             BnT = self.tables[0][new_alpha[:, 0]]
             for d in range(1, len(self.germs)):
-                BnT *= self.tables[d][new_alpha[:, d]]
+                if self.unit[d]:
+                    # a zero degree multiplies by exactly 1: only the columns using input d
+                    use = np.flatnonzero(new_alpha[:, d])
+                    BnT[use] *= self.tables[d][new_alpha[use, d]]
+                else:
+                    BnT *= self.tables[d][new_alpha[:, d]]
             Bn = BnT.T  # (n, new), column-major
             k0, k1 = self.B.shape[1], self.B.shape[1] + len(new)
             check_allocation(
