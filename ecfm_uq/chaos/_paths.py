@@ -28,7 +28,7 @@ _CHOLESKY_RTOL = 1e-6
 # _grow_path refits in its Gram form (Cholesky of the selected columns' Gram, leave-one-out
 # in blocks of rows) when the selected columns of the design hold more than this; below,
 # by a QR of those columns, as before.
-_QR_BYTES = 64 * 2**20
+_QR_BYTES = 16 * 2**20
 
 
 def _loo_nested(Q, R, y):
