@@ -21,6 +21,7 @@ import numpy as np
 from ..memory import check_allocation, memory_budget
 from ..threads import library_threads
 from ._paths import (
+    _QR_BYTES,
     _SELECTION_SHARE,
     _grow_path,
     _lar_order_gram,
@@ -170,7 +171,10 @@ class _GrowingDesign:
             self.G = G
             self.XtY = np.vstack([self.XtY, Bn.T @ self.Y])
             if k1 > self._buffer.shape[1]:
-                buffer = np.empty((self.n, max(k1, 3 * self._buffer.shape[1] // 2)), order="F")
+                width = max(k1, 3 * self._buffer.shape[1] // 2)
+                if 8.0 * self.n * (k0 + width) > _SELECTION_SHARE * memory_budget():
+                    width = k1  # no room to spare: v0.4's peak, old and new columns once
+                buffer = np.empty((self.n, width), order="F")
                 buffer[:, :k0] = self.B
                 self._buffer = buffer
             self._buffer[:, k0:k1] = Bn
@@ -235,6 +239,7 @@ def _select_adaptive_column(design, j, solver, early_stop, max_degree):
     # chain may stall for a degree or two, e.g. odd degrees of an even function)
     chain_best = dict.fromkeys(_ADAPTIVE_Q, np.inf)
     worse = dict.fromkeys(_ADAPTIVE_Q, 0)
+    chain_terms = dict.fromkeys(_ADAPTIVE_Q, 0)  # terms of each chain's best set
     live = list(_ADAPTIVE_Q)
     for p in range(1, max_degree + 1):
         previous = None
@@ -245,10 +250,15 @@ def _select_adaptive_column(design, j, solver, early_stop, max_degree):
                 live = [r for r in live if r < q]
                 break
             if previous is not None and len(alpha) == previous[0]:
-                err = previous[1]  # the same set as at the smaller q
+                err, terms = previous[1], previous[2]  # the same set as at the smaller q
             else:
                 pos = design.extend(alpha)
                 first = 32 if best is None else len(best[1]) + 16
+                if chain_terms[q] and 8.0 * n * first > _QR_BYTES:
+                    # refits in Gram form score only a grown path's new columns: start
+                    # from this chain's best size, not the best of all chains (a q = 0.5
+                    # set rarely needs as many terms as the total-degree winner)
+                    first = min(first, chain_terms[q] + 16)
                 if solver == "lars":
                     cols, coef, err = design.select(j, pos, first)
                 else:
@@ -257,9 +267,10 @@ def _select_adaptive_column(design, j, solver, early_stop, max_degree):
                 trace.append((p, q, len(alpha), err))
                 if best is None or err < best[2]:
                     best = (design.alpha[cols], coef, err, (p, q, len(alpha)))
-            previous = (len(alpha), err)
+                terms = len(cols)
+            previous = (len(alpha), err, terms)
             if err < chain_best[q]:
-                chain_best[q], worse[q] = err, 0
+                chain_best[q], worse[q], chain_terms[q] = err, 0, terms
             else:
                 worse[q] += 1
                 if worse[q] >= early_stop:
