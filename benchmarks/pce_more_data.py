@@ -62,7 +62,7 @@ from _models import borehole, borehole_indices  # noqa: E402
 # Quadrature nodes per input of the reference (see the module docstring).
 REFERENCE_NODES = (10, 100, 5, 2, 8, 2, 8, 8)
 # Measured on main (v0.4, commit 360e218) with this design, before the change: n, largest
-# index error, CPU seconds of the fit (one thread).
+# index error, CPU seconds of the fit in a fresh process (one thread; 2.2-3.1 s over 6 runs).
 V04 = ((1000, 2.60e-5, None), (10000, 7.97e-5, None), (100000, 1.04e-3, 2.45))
 
 
