@@ -19,7 +19,9 @@ import math
 import numpy as np
 
 from ..memory import check_allocation, memory_budget
+from ..threads import library_threads
 from ._paths import (
+    _QR_BYTES,
     _SELECTION_SHARE,
     _grow_path,
     _lar_order_gram,
@@ -32,10 +34,17 @@ __all__ = ["hyperbolic_indices"]
 # hyperbolic enumeration has q = 0.5): sparse candidate sets of high degree for few
 # interactions, the full total-degree set where it is affordable.
 _ADAPTIVE_Q = (0.5, 0.75, 1.0)
-# A candidate set is affordable when its selection's work n P min(n, P) stays below this
-# (about a second of LAR path on one core) and it has at most _candidate_cap(n)
-# columns; the degree loop stops when no q-norm is affordable.
+# A candidate set is affordable when its selection's work n P min(n, P) stays below
+# _ADAPTIVE_WORK * max(1, n / _ADAPTIVE_WORK_RUNS) and it has at most _candidate_cap(n)
+# columns; the degree loop stops when no q-norm is affordable. Up to 1 000 runs the
+# limit is v0.4's fixed 1e9 (about a second of selection on one core). Beyond, it grows
+# with n: v0.4 kept it fixed, so the affordable sets shrank as n grew (P <= sqrt(1e9 / n):
+# 316 candidates at n = 10^4, 100 at 10^5) and more data gave a worse fit (issue 37, the
+# 8-input borehole: Sobol errors 8e-5 at n = 10^4, 1e-3 at 10^5). Per run the work is
+# now capped, P min(n, P) <= 10^6, so every set affordable at n is affordable at any
+# larger n (P <= 1 000 candidates from n >= 1 000 on) and the time grows like n.
 _ADAPTIVE_WORK = 1e9
+_ADAPTIVE_WORK_RUNS = 1000
 # At most max(_ADAPTIVE_PER_RUN * n, _ADAPTIVE_MIN_CAP) candidates in one set: beyond, the
 # LAR path (n / 2 steps at most) rarely finds better sets and each selection's Gram block
 # grows as P^2; small designs still see OpenTURNS' few hundred (q = 0.5, degree 10).
@@ -96,7 +105,7 @@ def _affordable(n, P, K=0, solver="lars"):
     held = K + P + 1  # at most: the design's columns, the Gram's rows
     return (
         P <= _candidate_cap(n, solver)
-        and n * P * min(n, P) <= _ADAPTIVE_WORK
+        and n * P * min(n, P) <= _ADAPTIVE_WORK * max(1.0, n / _ADAPTIVE_WORK_RUNS)
         and 8.0 * (2 * n * held + 3 * held * held) <= _SELECTION_SHARE * memory_budget()
     )
 
@@ -116,10 +125,13 @@ class _GrowingDesign:
         self.n = len(omega)
         self.position = {}
         self.alpha = np.zeros((1, len(germs)), dtype=np.int64)
-        self.B = np.ones((self.n, 1))
+        # the columns live in a column-major buffer grown by half (B is a view of its first
+        # ones): appending to a copied array cost a copy of all columns per extension
+        self._buffer = np.ones((self.n, 1), order="F")
+        self.B = self._buffer
         self.G = np.array([[float(self.n)]])
         self.XtY = Y.sum(axis=0, keepdims=True)
-        self.degree, self.tables = -1, None
+        self.degree, self.tables, self.unit = -1, None, None
 
     def extend(self, alpha):
         """Add the multi-indices ``alpha`` (rows) not met yet; return their positions."""
@@ -128,11 +140,22 @@ class _GrowingDesign:
             new_alpha = np.array(new, dtype=np.int64)
             p = int(new_alpha.max())
             if p > self.degree:
-                self.tables = [g.table(self.omega[:, d], p) for d, g in enumerate(self.germs)]
+                # transposed, (p + 1, n): a column's values per input are one row to gather
+                self.tables = [
+                    np.ascontiguousarray(g.table(self.omega[:, d], p).T)
+                    for d, g in enumerate(self.germs)
+                ]
                 self.degree = p
-            Bn = self.tables[0][:, new_alpha[:, 0]]
+                self.unit = [bool(np.all(t[0] == 1.0)) for t in self.tables]
+            BnT = self.tables[0][new_alpha[:, 0]]
             for d in range(1, len(self.germs)):
-                Bn *= self.tables[d][:, new_alpha[:, d]]
+                if self.unit[d]:
+                    # a zero degree multiplies by exactly 1: only the columns using input d
+                    use = np.flatnonzero(new_alpha[:, d])
+                    BnT[use] *= self.tables[d][new_alpha[use, d]]
+                else:
+                    BnT *= self.tables[d][new_alpha[:, d]]
+            Bn = BnT.T  # (n, new), column-major
             k0, k1 = self.B.shape[1], self.B.shape[1] + len(new)
             check_allocation(
                 8.0 * (self.n * k1 + 2 * k1 * k1),
@@ -147,7 +170,15 @@ class _GrowingDesign:
             G[k0:, k0:] = Bn.T @ Bn
             self.G = G
             self.XtY = np.vstack([self.XtY, Bn.T @ self.Y])
-            self.B = np.hstack([self.B, Bn])
+            if k1 > self._buffer.shape[1]:
+                width = max(k1, 3 * self._buffer.shape[1] // 2)
+                if 8.0 * self.n * (k0 + width) > _SELECTION_SHARE * memory_budget():
+                    width = k1  # no room to spare: v0.4's peak, old and new columns once
+                buffer = np.empty((self.n, width), order="F")
+                buffer[:, :k0] = self.B
+                self._buffer = buffer
+            self._buffer[:, k0:k1] = Bn
+            self.B = self._buffer[:, :k1]
             self.alpha = np.vstack([self.alpha, new_alpha])
             for k, a in enumerate(new):
                 self.position[a] = k0 + k
@@ -169,7 +200,13 @@ class _GrowingDesign:
         max_steps = min(len(pos), max(n // 2, 2))
         steps = min(max_steps, max(int(first_steps), 8))
         return _grow_path(
-            lambda steps: _lar_order_gram(Gc, c, steps), self.B, pos, y, steps, max_steps
+            lambda steps: _lar_order_gram(Gc, c, steps),
+            self.B,
+            pos,
+            y,
+            steps,
+            max_steps,
+            gram=(self.G, self.XtY[:, j]),
         )
 
 
@@ -202,6 +239,7 @@ def _select_adaptive_column(design, j, solver, early_stop, max_degree):
     # chain may stall for a degree or two, e.g. odd degrees of an even function)
     chain_best = dict.fromkeys(_ADAPTIVE_Q, np.inf)
     worse = dict.fromkeys(_ADAPTIVE_Q, 0)
+    chain_terms = dict.fromkeys(_ADAPTIVE_Q, 0)  # terms of each chain's best set
     live = list(_ADAPTIVE_Q)
     for p in range(1, max_degree + 1):
         previous = None
@@ -212,10 +250,15 @@ def _select_adaptive_column(design, j, solver, early_stop, max_degree):
                 live = [r for r in live if r < q]
                 break
             if previous is not None and len(alpha) == previous[0]:
-                err = previous[1]  # the same set as at the smaller q
+                err, terms = previous[1], previous[2]  # the same set as at the smaller q
             else:
                 pos = design.extend(alpha)
                 first = 32 if best is None else len(best[1]) + 16
+                if chain_terms[q] and 8.0 * n * first > _QR_BYTES:
+                    # refits in Gram form score only a grown path's new columns: start
+                    # from this chain's best size, not the best of all chains (a q = 0.5
+                    # set rarely needs as many terms as the total-degree winner)
+                    first = min(first, chain_terms[q] + 16)
                 if solver == "lars":
                     cols, coef, err = design.select(j, pos, first)
                 else:
@@ -224,9 +267,10 @@ def _select_adaptive_column(design, j, solver, early_stop, max_degree):
                 trace.append((p, q, len(alpha), err))
                 if best is None or err < best[2]:
                     best = (design.alpha[cols], coef, err, (p, q, len(alpha)))
-            previous = (len(alpha), err)
+                terms = len(cols)
+            previous = (len(alpha), err, terms)
             if err < chain_best[q]:
-                chain_best[q], worse[q] = err, 0
+                chain_best[q], worse[q], chain_terms[q] = err, 0, terms
             else:
                 worse[q] += 1
                 if worse[q] >= early_stop:
@@ -237,6 +281,7 @@ def _select_adaptive_column(design, j, solver, early_stop, max_degree):
     return sel, coef, err, choice, trace
 
 
+@library_threads()  # many mid-sized products: a threaded BLAS only synchronizes (ecfm_uq.threads)
 def _select_adaptive(germs, omega, Y, early_stop, max_degree, solver):
     """:func:`_select_adaptive_column` for each column of Y (n, m), on one union basis.
 

@@ -40,10 +40,11 @@ from .._validation import check_int
 from ..memory import check_allocation, memory_budget
 from ._paths import (  # noqa: F401  (_loo_nested, _path_order: imported from here by tests)
     _CANDIDATES_PER_RUN,
-    _CHOLESKY_RTOL,
     _SELECTION_SHARE,
+    _cholesky_prefix,
     _lar_order_gram,
     _loo_nested,
+    _loo_nested_rows,
     _path_order,
     _sparse_select,
 )
@@ -229,50 +230,9 @@ def _path_order_gram(Gs, Xys, n, max_steps, solver):
     return entered[np.argsort(first[entered], kind="stable")].tolist()
 
 
-def _cholesky_prefix(G):
-    """Upper Cholesky factor of the longest leading block of G that is well conditioned.
-
-    Returns R (s, s) with :math:`R^T R = G_{:s,:s}`, stopping before the first column whose
-    pivot is below ``_CHOLESKY_RTOL`` of its norm (dependent on the earlier columns).
-    """
-    from scipy.linalg.lapack import dpotrf
-
-    s = G.shape[0]
-    while s > 0:
-        R, info = dpotrf(G[:s, :s], lower=0, clean=1)
-        if info > 0:
-            s = info - 1
-            continue
-        d = np.abs(np.diag(R))
-        bad = np.flatnonzero(d < _CHOLESKY_RTOL * np.sqrt(np.abs(np.diag(G)[:s])))
-        if bad.size:
-            s = int(bad[0])
-            continue
-        return R
-    raise ValueError("the constant regression column is zero; check the samples")
-
-
 def _loo_nested_gram(gd, cols, R, z, j):
     """:func:`_loo_nested` from the selected columns, in blocks of rows (Q = X R^{-1})."""
-    n, s = gd.n, len(cols)
-    y = gd.Y[:, j]
-    sum_e2 = np.zeros(s)
-    for a, b in _row_blocks(n, 4 * s):
-        Q = sla.solve_triangular(R, gd.rows(a, b, cols).T, trans="T").T
-        fitted = np.cumsum(Q * z[None, :], axis=1)
-        h = np.cumsum(Q**2, axis=1)
-        one_h = 1.0 - h
-        with np.errstate(divide="ignore", invalid="ignore"):
-            e = np.where(one_h > 1e-10, (y[a:b, None] - fitted) / one_h, np.inf)
-        sum_e2 += np.sum(e**2, axis=0)
-    var = np.var(y) if np.var(y) > 0 else 1.0
-    loo = sum_e2 / n / var
-    Rinv = sla.solve_triangular(R, np.eye(s))
-    trace = np.cumsum(np.sum(np.triu(Rinv) ** 2, axis=0))
-    k = np.arange(1, s + 1)
-    with np.errstate(divide="ignore"):
-        T = np.where(k < n, n / np.maximum(n - k, 1) * (1.0 + trace), np.inf)
-    return loo * T
+    return _loo_nested_rows(lambda a, b: gd.rows(a, b, cols), gd.Y[:, j], R, z)
 
 
 def _sparse_select_gram(gd, j, candidates, solver):
