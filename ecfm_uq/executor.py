@@ -20,7 +20,8 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from ._validation import as_finite_array, check_int
+from ._validation import as_finite_array, as_model_output, check_int
+from .errors import ModelEvaluationError
 from .memory import check_allocation
 
 __all__ = ["NonFiniteOutputError", "evaluate_samples", "output_array_bytes"]
@@ -37,9 +38,42 @@ class NonFiniteOutputError(ValueError):
         self.index = index
 
 
+def _point(x):
+    return np.array2string(np.asarray(x), precision=6, threshold=8)
+
+
+def _user_error(e, name, at, vectorized):
+    """A user's exception raised inside ``fn``, re-raised as its own type with the call
+    (the function's name and the sample) and a hint; the original chained."""
+    if isinstance(e, IndexError | TypeError):
+        hint = (
+            f"; with vectorized=True `{name}` receives a (k, d) array of k points and must "
+            "return k rows (pass vectorized=False for a function of one point)"
+            if vectorized
+            else f"; `{name}` receives one point, a 1-D array of the inputs (pass "
+            "vectorized=True for a function of a (k, d) array of points); check that it "
+            "reads no more inputs than there are"
+        )
+    else:
+        hint = ""
+    msg = f"`{name}` {at} raised {type(e).__name__}: {e}{hint}"
+    try:
+        err = type(e)(msg)
+    except Exception:  # an exception class with its own signature
+        err = ModelEvaluationError(msg)
+    return err
+
+
 def _evaluate_chunk(fn, chunk, name="fn"):
     """Evaluate ``fn`` on every sample of ``chunk``; module-level so it pickles."""
-    outs = [np.asarray(fn(s), dtype=float) for s in chunk]
+    outs = []
+    for s in chunk:
+        at = f"at x={_point(s)}"
+        try:
+            out = fn(s)
+        except Exception as e:  # a user callback: name the call and the sample
+            raise _user_error(e, name, at, False) from e
+        outs.append(as_model_output(out, name=name, at=at))
     shapes = {o.shape for o in outs}
     if len(shapes) > 1:
         raise ValueError(f"`{name}` returned outputs of different shapes: {sorted(shapes)}")
@@ -48,11 +82,17 @@ def _evaluate_chunk(fn, chunk, name="fn"):
 
 def _evaluate_batch(fn, chunk, name="fn"):
     """Evaluate a vectorized ``fn`` on a whole chunk: ``fn(chunk)`` of shape (len(chunk), ...)."""
-    out = np.asarray(fn(chunk), dtype=float)
+    at = f"at the {len(chunk)} points from x={_point(chunk[0])}"
+    try:
+        out = fn(chunk)
+    except Exception as e:  # a user callback: name the call and the points
+        raise _user_error(e, name, at, True) from e
+    out = as_model_output(out, name=name, at=at)
     if out.ndim == 0 or out.shape[0] != len(chunk):
         raise ValueError(
             f"a vectorized `{name}` must return one output row per point: got shape "
-            f"{out.shape} for {len(chunk)} points"
+            f"{out.shape} for {len(chunk)} points (a function of one point? pass "
+            "vectorized=False)"
         )
     return out
 

@@ -27,7 +27,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._validation import as_finite_array, check_int
+from ._validation import as_finite_array, check_int, check_level, rng_from_seed
 from .executor import NonFiniteOutputError, evaluate_samples
 from .memory import check_allocation
 
@@ -70,7 +70,7 @@ def draw_germ(n, seed=None, dim=1):
     """
     n = check_int("n", n, minimum=1)
     dim = check_int("dim", dim, minimum=1)
-    gen = np.random.default_rng(seed)
+    gen = rng_from_seed("seed", seed)
     return gen.random(n) if dim == 1 else gen.random((n, dim))
 
 
@@ -506,8 +506,7 @@ def sobol_indices(
         )
     if design not in ("sobol", "random"):
         raise ValueError(f"`design` must be 'sobol' or 'random', got {design!r}")
-    if isinstance(level, bool) or not isinstance(level, numbers.Real) or not 0 < level < 1:
-        raise ValueError(f"`level` must be a number in (0, 1), got {level!r}")
+    level = check_level("level", level)
     if interval not in ("asymptotic", "bootstrap"):
         raise ValueError(f"`interval` must be 'asymptotic' or 'bootstrap', got {interval!r}")
     n_bootstrap = check_int("n_bootstrap", n_bootstrap, minimum=10)
@@ -518,7 +517,7 @@ def sobol_indices(
         f"the points of a Sobol-index sample (3 x {n} points of {d} inputs)",
         "pass a smaller `n`",
     )
-    rng = np.random.default_rng(seed)
+    rng = rng_from_seed("seed", seed)
     if design == "sobol":
         u = qmc.Sobol(2 * d, scramble=True, rng=rng).random(n)
     else:

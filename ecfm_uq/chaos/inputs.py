@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
-from .._validation import as_finite_array
+from .._validation import as_finite_array, rng_from_seed
 from .germs import LEGENDRE, Germ
 from .marginals import as_marginal
 
@@ -300,7 +300,7 @@ def draw_germs(germs, n, seed=None):
     Uniform germs are ``Generator.random`` draws exactly (as in the uniform-only code);
     other germs are their inverse CDF of the same uniforms.
     """
-    omega = np.random.default_rng(seed).random((n, len(germs)))
+    omega = rng_from_seed("seed", seed).random((n, len(germs)))
     for d, g in enumerate(germs):
         if g.family != "legendre":
             u = np.clip(omega[:, d], np.finfo(float).tiny, 1.0 - np.finfo(float).epsneg)

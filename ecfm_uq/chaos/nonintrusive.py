@@ -43,7 +43,7 @@ import warnings
 import numpy as np
 import scipy.linalg as sla
 
-from .._validation import as_finite_array, check_choice, check_int
+from .._validation import as_finite_array, check_choice, check_int, rng_from_seed
 from ..executor import NonFiniteOutputError, evaluate_samples
 from ..memory import check_allocation
 from ._kernels import legendre_table
@@ -86,7 +86,7 @@ def sample_design(n, dim, design="lhs", seed=None):
     n = check_int("n_samples", n, minimum=1)
     dim = check_int("dim", dim, minimum=1)
     design = check_choice("design", design, DESIGNS)
-    rng = np.random.default_rng(seed)
+    rng = rng_from_seed("seed", seed)
     if design == "random":
         return rng.random((n, dim))
     if design == "lhs":

@@ -279,7 +279,7 @@ def fit(
         formulation=formulation,
         method=method,
         sigma=_check_sigma(sigma, kind, formulation, problem),
-        bounds=check_bounds(bounds, n_eps),
+        bounds=check_bounds(bounds, n_eps, eps0),
         tol=tol,
         maxiter=maxiter,
         options=dict(options or {}),

@@ -35,12 +35,14 @@ its (n_eps, 2) array; :func:`likelihood_ratio_test` tests a given :math:`\\epsil
 
 from __future__ import annotations
 
+import numbers
 import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import stats
 
+from ..._validation import check_int, check_level, describe
 from ...threads import library_threads
 from ..core.convergence import bounds_arrays
 from .profiler import MODEL_FAILURES, Profiler, beyond, walk
@@ -150,6 +152,9 @@ class ProfileSummary:
     regions : dict of int -> list of (lower, upper)
         Each profiled parameter's pieces below the threshold (``intervals`` are their
         hulls).
+    estimate : (n_eps,) ndarray or None
+        The estimate of the fit profiled (``result.eps``): a table of another fit refuses
+        these intervals.
     """
 
     level: float
@@ -159,6 +164,7 @@ class ProfileSummary:
     disagree: np.ndarray = None
     message: str = ""
     regions: dict = field(default_factory=dict)
+    estimate: np.ndarray = None
 
     def plot(self, names=None):
         """One panel per profiled parameter; returns the figure."""
@@ -216,13 +222,31 @@ def _likelihood(result):
 
 
 def _check_level(level):
-    try:
-        level = float(level)
-    except (TypeError, ValueError):
-        raise TypeError(f"`level` must be a number in (0, 1), got {level!r}") from None
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"`level` must be in (0, 1) (e.g. 0.95), got {level}")
-    return level
+    return check_level("level", level)
+
+
+def _which(which, n, names):
+    """The indices of ``which`` (indices or parameter names), checked."""
+    if which is None:
+        return list(range(n))
+    items = [which] if isinstance(which, str | numbers.Integral) else list(np.ravel(which))
+    known = list(names) if names else []
+    out = []
+    for w in items:
+        if isinstance(w, str | np.str_):
+            if str(w) not in known:
+                raise ValueError(
+                    f"`which` names {str(w)!r}, not a parameter name; the names are "
+                    f"{known or 'not set (pass names= to the problem)'}; or pass indices"
+                )
+            out.append(known.index(str(w)))
+        elif isinstance(w, numbers.Integral) and not isinstance(w, bool):
+            if not 0 <= int(w) < n:
+                raise ValueError(f"`which` holds {int(w)}, not a parameter index in [0, {n})")
+            out.append(int(w))
+        else:
+            raise TypeError(f"`which` must hold parameter indices or names, got {describe(w)}")
+    return out
 
 
 def _bounds(result, bounds, n):
@@ -353,12 +377,17 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
     like = _likelihood(result)
     level = _check_level(level)
     n = like.n_eps
-    which = list(range(n)) if which is None else [int(i) for i in np.atleast_1d(which)]
-    for i in which:
-        if not 0 <= i < n:
-            raise ValueError(f"`which` holds {i}, not a parameter index in [0, {n})")
+    which = _which(which, n, getattr(result, "names", None))
+    max_steps = check_int("max_steps", max_steps, minimum=1)
+    scan = check_int("scan", scan, minimum=0)
     bnds = _bounds(result, bounds, n)
     eps_hat = np.asarray(result.eps, dtype=float)
+    for i, (lo, hi) in enumerate(bnds):
+        if not lo <= eps_hat[i] <= hi:
+            raise ValueError(
+                f"`bounds[{i}]` = {(lo, hi)} excludes the estimate eps[{i}] = {eps_hat[i]:.6g}: "
+                "a profile starts at the estimate; widen the bounds to contain it"
+            )
     ell_hat, _ = like(eps_hat)
     if not np.isfinite(ell_hat):
         raise ValueError(
@@ -414,7 +443,14 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
         )
     regions = {i: list(prof_i.regions) for i, prof_i in profiles.items()}
     summary = ProfileSummary(
-        level, intervals, delta_ci, profiles, disagree, "; ".join(notes), regions
+        level,
+        intervals,
+        delta_ci,
+        profiles,
+        disagree,
+        "; ".join(notes),
+        regions,
+        np.array(result.eps, dtype=float),
     )
     return summary
 
