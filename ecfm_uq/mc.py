@@ -46,6 +46,11 @@ __all__ = [
 ]
 
 
+#: the smallest base sample of :func:`sobol_indices`: below it the ratio estimators and
+#: their large-sample (delta-method, bootstrap) intervals mean nothing
+SOBOL_MIN_N = 32
+
+
 class Moments(NamedTuple):
     """Sample statistics of Monte Carlo outputs (each of the output's shape)."""
 
@@ -435,7 +440,8 @@ def sobol_indices(
     inputs : bounds, Inputs or distributions
         As in :func:`~ecfm_uq.chaos.fit_pce`; independent inputs only.
     n : int
-        Base sample size (a power of 2 for ``design="sobol"``).
+        Base sample size (a power of 2 for ``design="sobol"``), at least ``SOBOL_MIN_N``
+        (32).
     seed : int or numpy.random.Generator
         Required: the estimate is random (a scrambled sequence or random draws).
     level : float
@@ -468,8 +474,12 @@ def sobol_indices(
     Raises
     ------
     ValueError
-        ``n`` not a power of 2 with ``design="sobol"``, ``level`` outside (0, 1),
-        dependent inputs, an output of zero variance, non-finite outputs.
+        ``n`` not a power of 2 with ``design="sobol"`` or below ``SOBOL_MIN_N``, ``level``
+        outside (0, 1), dependent inputs, an input without finite mean or variance, an
+        output of zero variance, non-finite outputs.
+    TypeError, IndexError, ...
+        An exception of ``model``, as its own type, naming the point it was called at
+        (the original chained).
     MemoryBudgetError
         The points and outputs held at once (A, B and one :math:`A_B^{(i)}`: 3n rows)
         exceed the memory budget (:mod:`ecfm_uq.memory`).
@@ -486,19 +496,26 @@ def sobol_indices(
     from scipy import special
     from scipy.stats import qmc
 
-    from .chaos.inputs import as_inputs
+    from .chaos.inputs import as_inputs, check_moments
 
     if not callable(model):
         raise TypeError(f"`model` must be callable model(x), got {type(model).__name__}")
     inputs = as_inputs(inputs)
     if inputs is None:
         raise TypeError("`inputs` must be given: bounds (d, 2), Inputs or distributions")
+    check_moments(inputs, "sobol_indices")
     if getattr(inputs, "dependent", False):
         raise ValueError(
             "Sobol indices are not defined for dependent `inputs` (a Gaussian copula): the "
             "variance has no unique split among correlated inputs; pass independent inputs"
         )
-    n = check_int("n", n, minimum=2)
+    n = check_int("n", n, minimum=1)
+    if n < SOBOL_MIN_N:
+        raise ValueError(
+            f"`n` = {n} is too small for Sobol indices: the estimators are ratios of sample "
+            f"means and their intervals are large-sample ones; pass n >= {SOBOL_MIN_N} (a "
+            "power of 2, e.g. 1024; the model runs n (d + 2) times)"
+        )
     if isinstance(design, str) and design == "sobol" and n & (n - 1):
         raise ValueError(
             f"`n` must be a power of 2 for design='sobol' (got {n}; the Sobol' points are "

@@ -506,6 +506,12 @@ def as_inputs(inputs, dim=None):
     dim : int, optional
         Required number of inputs.
     """
+    if isinstance(inputs, dict):
+        raise TypeError(
+            f"`inputs` must be bounds, an Inputs or a list of distributions, got a dict of "
+            f"{len(inputs)} entries; pass Inputs(list(d.values()), names=list(d)) to keep "
+            "the names"
+        )
     if inputs is None or isinstance(inputs, Inputs):
         out = inputs
     elif type(inputs).__module__.startswith("chaospy"):
@@ -542,6 +548,30 @@ def as_inputs(inputs, dim=None):
     if out is not None and dim is not None and out.dim != dim:
         raise ValueError(f"`inputs` has {out.dim} variables but the basis has dim={dim}")
     return out
+
+
+def check_moments(inputs, who, variance=True):
+    """Refuse inputs whose law has no finite mean (or, with ``variance``, no finite
+    variance): ``who`` estimates moments that do not exist for them.
+
+    Raises
+    ------
+    ValueError
+        Naming the input, its law, what ``who`` needs and what to do.
+    """
+    if inputs is None or isinstance(inputs, UniformInputs):
+        return
+    for name, m in zip(inputs.names, inputs.marginals, strict=True):
+        missing = "mean" if not m.finite_mean else None
+        if missing is None and variance and not m.finite_variance:
+            missing = "variance"
+        if missing is not None:
+            needs = "a mean and a variance" if variance else "a mean"
+            raise ValueError(
+                f"input {name!r} ({m!r}) has no finite {missing}: {who} needs {needs} of "
+                "every input (its estimates would be numbers without a limit); truncate the "
+                "law (scipy.stats.truncate, truncnorm) or use one with finite moments"
+            )
 
 
 def _named(build, *args, **kwargs):

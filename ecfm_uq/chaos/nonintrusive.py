@@ -49,7 +49,7 @@ from ..memory import check_allocation
 from ._kernels import legendre_table
 from .basis import ChaosBasis
 from .germs import as_germs
-from .inputs import as_inputs
+from .inputs import as_inputs, check_moments
 from .pce import PolynomialChaosExpansion
 from .projection import project
 from .quadrature import gauss_legendre
@@ -520,6 +520,9 @@ def fit_pce(
     inputs = as_inputs(inputs)
     if inputs is None:
         raise TypeError("`inputs` must be given: bounds (dim, 2), UniformInputs or chaospy.J")
+    # the expansion's mean is the law's: it must exist (the variance is checked where it
+    # is used, by the Sobol indices, so an output free of a heavy-tailed input keeps them)
+    check_moments(inputs, "fit_pce", variance=False)
     workers = check_int("workers", workers, minimum=1)
     if model is None and evaluations is None:
         raise TypeError("`model` must be callable (or pass `samples` and `evaluations`)")
