@@ -222,7 +222,7 @@ def choose_steps(
     system,
     eps,
     Theta0,
-    t_data,
+    t_data=None,
     *,
     rtol=1e-6,
     atol=None,
@@ -233,6 +233,7 @@ def choose_steps(
     tol=1e-10,
     maxiter=30,
     solver="auto",
+    times=None,
 ):
     """A time grid through the data times on which ``scheme`` meets ``rtol``/``atol``.
 
@@ -265,6 +266,9 @@ def choose_steps(
         Largest grid allowed.
     tol, maxiter, solver
         The march's Newton and linear-solver settings (:func:`.stepping.march`).
+    times : None
+        Not an argument of this function (``march``'s grid): given, it is refused with
+        a TypeError that points to ``t_data`` (the data times) and ``start`` (a grid).
 
     Returns
     -------
@@ -284,6 +288,14 @@ def choose_steps(
         the model can be marched, a blow-up), or splitting would exceed ``max_steps``; the
         message names the time the march reached.
     """
+    if times is not None:
+        raise TypeError(
+            "choose_steps takes the data times as `t_data` (the times that must be step "
+            "points), not `times` (march's grid); pass t_data=..., and a grid to refine as "
+            "start=..."
+        )
+    if t_data is None:
+        raise TypeError("choose_steps needs `t_data`, the data times the grid must hold")
     rtol, atol = check_tolerances(rtol, atol)
     scheme = check_scheme(scheme)
     t_data = check_times(t_data)
