@@ -196,7 +196,7 @@ def check_level(name, level):
     if 1.0 < level < 100.0:
         hint = f"; a percentage? pass {level / 100:g}" if level >= 50 else ""
         raise ValueError(
-            f"`{name}` must be a fraction in (0, 1) (0.95 for a 95 % level), got {level:g}{hint}"
+            f"`{name}` must be in (0, 1), a fraction (0.95 for a 95 % level), got {level:g}{hint}"
         )
     if not 0.0 < level < 1.0:
         raise ValueError(f"`{name}` must be in (0, 1) (e.g. 0.95), got {level:g}")

@@ -342,7 +342,7 @@ def choose_steps(
             refined = _refine(times, errors, "euler")
             if refined.size - 1 > max_steps:
                 raise ConvergenceError(
-                    f"{traj.message}: splitting the steps to get past t={reached:.6g} would "
+                    f"{traj.message}: splitting the steps to get past t={reached[-1]:.6g} would "
                     f"exceed max_steps={max_steps} (after {rounds} marches); the solution may "
                     "leave the region where the model can be marched there"
                 )
