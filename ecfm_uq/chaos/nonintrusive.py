@@ -503,9 +503,15 @@ def fit_pce(
     ValueError
         Unknown method or design, too few regression samples for the basis (naming
         ``n_samples`` or ``samples``), a model output that is NaN or inf (naming the
-        point), outputs of different shapes, ``evaluations`` not matching ``samples``.
+        point), outputs of different shapes, ``evaluations`` not matching ``samples``;
+        an input law without a finite mean (Cauchy, Pareto with shape <= 1) or a user's
+        density that does not integrate to 1; a negative ``seed``.
     TypeError
-        ``model`` not callable; a discrete input distribution.
+        ``model`` not callable or returning ``None``, a tuple, complex values; a discrete
+        input distribution; a seed that is not one.
+    Exception
+        An exception of ``model``, as its own type, naming the point it was called at
+        (the original chained).
 
     Examples
     --------

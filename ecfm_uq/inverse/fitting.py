@@ -221,7 +221,8 @@ def fit(
         ``"noisy-ecfm"`` and ``ReplicatedProblem`` refuse an array. Without ``sigma`` a
         least-squares fit has no consistency test (``verdict.consistent is None``).
     bounds : sequence of (lo, hi), optional
-        Bounds on :math:`\\epsilon` (``None`` for an open side).
+        Bounds on :math:`\\epsilon` (``None`` for an open side), ``lo < hi``, containing
+        ``eps0``.
     tol : float, optional
         The tolerance of the test that decides the status
         (:mod:`ecfm_uq.inverse.core.convergence`), on every path: the relative offset of a

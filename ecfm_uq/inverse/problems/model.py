@@ -49,8 +49,11 @@ class ModelProblem(InverseProblem):
     Parameters
     ----------
     model : callable
-        ``model(eps) -> array_like`` with the shape of ``data``; ``eps`` is a 1-D float
-        array of the parameters (complex for ``jac="cs"``).
+        ``model(eps) -> array_like`` of real numbers with the shape of ``data`` (axes of
+        length 1 aside: a flat vector for 2-D data is refused, its order would be a
+        guess); ``eps`` is a 1-D float array of the parameters (complex for
+        ``jac="cs"``, and the model must then be complex-analytic: checked once against
+        central differences). Its output is copied, so it may reuse one array.
     data : array_like
         The observations, any shape (flattened in the fit, C order).
     jac : callable or {"2-point", "3-point", "cs"} or None

@@ -352,8 +352,8 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
         :mod:`ecfm_uq.inverse.statistics.loglik`): ``result.likelihood``.
     level : float
         Confidence level in (0, 1).
-    which : sequence of int, optional
-        Parameters to profile (default: all).
+    which : int, str or sequence of them, optional
+        Parameters to profile, by index or by name (``result.names``; default: all).
     bounds : sequence of (lo, hi), optional
         Where the profiles stop (default: the fit's ``bounds``; open otherwise).
     max_steps : int
