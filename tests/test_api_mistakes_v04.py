@@ -112,6 +112,9 @@ MISTAKES_V04 = [
     ("sobol_indices on a law without variance",
      lambda: sobol_indices(lin, [stats.cauchy(), stats.norm()], 64, seed=0),
      ValueError, "input 'x0' (cauchy()) has no finite mean: sobol_indices needs"),
+    ("sobol_indices on t(2) (a mean, no variance)",
+     lambda: sobol_indices(lin, [stats.t(2.0), stats.norm()], 64, seed=0),
+     ValueError, "input 'x0' (t(2.0,)) has no finite variance: sobol_indices needs"),
     ("fit_pce on pareto(0.5)", lambda: fit_pce(lambda x: x[0], [stats.pareto(0.5)], seed=0),
      ValueError, "has no finite mean: fit_pce needs a mean"),
     ("fit_pce on cauchy()", lambda: fit_pce(lambda x: x[0], [stats.cauchy()], seed=0),
@@ -268,6 +271,17 @@ def test_a_heavy_tailed_input_with_a_mean_still_fits_and_profile_which_takes_nam
     by_name = profile_likelihood(res(), which=["K"])
     by_index = profile_likelihood(res(), which=[1])
     np.testing.assert_array_equal(by_name.intervals, by_index.intervals)
+
+
+def test_a_complex_step_model_may_return_a_complex_array_at_real_parameters():
+    def mm_complex(e):
+        out = np.zeros(CONC.size, dtype=complex)
+        out[:] = e[0] * CONC / (e[1] + CONC)
+        return out
+
+    r = fit(ModelProblem(mm_complex, RATE, jac="cs"), E0)
+    assert r.success, r.message
+    np.testing.assert_allclose(r.eps, _puromycin_scipy(), rtol=1e-6)
 
 
 def test_the_summary_takes_this_fits_own_profile():

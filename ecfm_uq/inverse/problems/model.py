@@ -120,7 +120,15 @@ class ModelProblem(InverseProblem):
                     f"(shape {self.shape})"
                 ) from e
             raise ModelEvaluationError(msg) from e
-        y = as_model_output(y, name="model", at=_at(eps), shape=self.shape).ravel()
+        cs = self.jac == "cs"  # a model for complex steps may hand back a complex array
+        y = as_model_output(y, name="model", at=_at(eps), shape=self.shape, complex_ok=cs).ravel()
+        if cs and np.iscomplexobj(y):
+            if np.any(y.imag != 0):
+                raise TypeError(
+                    f"{_describe_call('model', eps)} returned complex values for real "
+                    "parameters; `model` must return real predictions at real eps"
+                )
+            y = y.real.copy()
         if not all_finite(y):
             bad = np.flatnonzero(~np.isfinite(y))
             msg = (
