@@ -64,11 +64,13 @@ def _user_error(e, name, at, vectorized):
     return err
 
 
-def _evaluate_chunk(fn, chunk, name="fn"):
-    """Evaluate ``fn`` on every sample of ``chunk``; module-level so it pickles."""
+def _evaluate_chunk(fn, part, name="fn"):
+    """Evaluate ``fn`` on every sample of ``part = (offset, chunk)`` (the rows from
+    ``offset`` on); module-level so it pickles."""
+    offset, chunk = part
     outs = []
-    for s in chunk:
-        at = f"at x={_point(s)}"
+    for j, s in enumerate(chunk):
+        at = f"at sample {offset + j} (x={_point(s)})"
         try:
             out = fn(s)
         except Exception as e:  # a user callback: name the call and the sample
@@ -80,9 +82,11 @@ def _evaluate_chunk(fn, chunk, name="fn"):
     return np.stack(outs)
 
 
-def _evaluate_batch(fn, chunk, name="fn"):
-    """Evaluate a vectorized ``fn`` on a whole chunk: ``fn(chunk)`` of shape (len(chunk), ...)."""
-    at = f"at the {len(chunk)} points from x={_point(chunk[0])}"
+def _evaluate_batch(fn, part, name="fn"):
+    """Evaluate a vectorized ``fn`` on a whole chunk, ``part = (offset, chunk)``:
+    ``fn(chunk)`` of shape (len(chunk), ...)."""
+    offset, chunk = part
+    at = f"at samples {offset}..{offset + len(chunk) - 1} (x={_point(chunk[0])}, ...)"
     try:
         out = fn(chunk)
     except Exception as e:  # a user callback: name the call and the points
@@ -207,7 +211,7 @@ def evaluate_samples(
             "`executor` must have a map(f, iterable) method (concurrent.futures executor or "
             f"dask.distributed.Client), got {type(executor).__name__}"
         )
-    chunks = [samples[:1]] + [samples[i : i + chunksize] for i in range(1, n, chunksize)]
+    chunks = [(0, samples[:1])] + [(i, samples[i : i + chunksize]) for i in range(1, n, chunksize)]
     task = functools.partial(_evaluate_batch if vectorized else _evaluate_chunk, fn, name=name)
 
     own_pool = executor is None and workers > 1
@@ -237,7 +241,7 @@ def evaluate_samples(
             if consume is not None and k == 1:
                 # streamed: small chunks, so that little is in flight at once
                 step = max(1, min(chunksize, int(STREAM_CHUNK_BYTES // (8 * math.prod(shape)))))
-                part = [samples[i : i + step] for i in range(1, n, step)]
+                part = [(i, samples[i : i + step]) for i in range(1, n, step)]
             if not part:
                 continue
             for r in run(part):

@@ -160,7 +160,7 @@ MISTAKES_V04 = [
     ("model returns None", lambda: fit(ModelProblem(lambda e: None, RATE), E0),
      TypeError, "returned None; `model` must return its values"),
     ("monte_carlo fn returns None", lambda: monte_carlo(lambda x: None, np.ones((4, 1)), workers=1),
-     TypeError, "`fn` at x=[1.] returned None"),
+     TypeError, "`fn` at sample 0 (x=[1.]) returned None"),
     ("model returns a tuple", lambda: fit(ModelProblem(lambda e: (mm(e), 0), RATE), E0),
      TypeError, "returned a tuple of 2 items"),
     ("law class instead of an instance",
@@ -199,7 +199,7 @@ def test_a_users_error_is_chained_and_keeps_its_type():
 
     with pytest.raises(KeyError) as info:
         sobol_indices(model, U2, 64, seed=0)
-    assert "`model` at x=[" in str(info.value)
+    assert "`model` at sample 0 (x=[" in str(info.value)
     assert isinstance(info.value.__cause__, KeyError)
 
 
@@ -296,7 +296,7 @@ def test_choose_steps_on_a_blow_up_fails_quickly_naming_the_time():
     t0 = time.perf_counter()
     with pytest.raises(ConvergenceError, match=r"left the region .* near t=2\.\d+") as info:
         choose_steps(blow_up_system(), [0.0], [1.1], np.linspace(0, 3, 4))
-    assert time.perf_counter() - t0 < 30
+    assert time.perf_counter() - t0 < 60  # issue 39: a failure within 60 s, not a hang
     # the time named lies before the blow-up at ln 11
     t_named = float(str(info.value).split("near t=")[1].split(":")[0])
     assert 2.0 < t_named < np.log(11.0)
@@ -308,7 +308,7 @@ def test_an_adaptive_fit_from_a_blow_up_start_is_a_reported_failure():
     )
     t0 = time.perf_counter()
     r = fit(problem, [0.0])
-    assert time.perf_counter() - t0 < 30
+    assert time.perf_counter() - t0 < 60  # issue 39: a failure within 60 s, not a hang
     assert not r.success
     assert "left the region where the model can be marched near t=2." in r.message
 
