@@ -180,8 +180,13 @@ class ModelProblem(InverseProblem):
         it, else the model is not complex-analytic (``abs``, ``.real``, a comparison) and
         its complex steps are wrong, not its Jacobian rank-deficient."""
         F = fd_jacobian(self.predict, eps, method="3-point", typical=typical)
-        scale = np.maximum(np.abs(F).max(axis=0), np.abs(J).max(axis=0))
-        err = np.abs(J - F).max(axis=0) / np.where(scale > 0, scale, 1.0)
+        # columns as responses to relative changes of the parameters, so that a column
+        # near zero is judged against the others (differencing noise is not a mismatch)
+        w = np.maximum(np.abs(eps), 1.0 if typical is None else np.abs(typical))
+        w = np.where(w > 0, w, 1.0)
+        scale = np.maximum(np.abs(F).max(axis=0), np.abs(J).max(axis=0)) * w
+        floor = max(1e-6 * scale.max(), np.finfo(float).tiny)
+        err = np.abs(J - F).max(axis=0) * w / np.maximum(scale, floor)
         if err.max() > 1e-3:
             j = int(np.argmax(err))
             raise ValueError(
