@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import numbers
 
 import numpy as np
@@ -150,3 +151,126 @@ def as_dense_rows(name, value, *, n_cols=None):
     """
     out = as_operator(name, value, shape=None if n_cols is None else (None, n_cols))
     return out.toarray() if sp.issparse(out) else out
+
+
+def check_seed(name, seed):
+    """A seed numpy accepts, checked: ``None``, an int >= 0, a sequence of such ints, a
+    ``numpy.random.Generator``, ``BitGenerator`` or ``SeedSequence``; returned unchanged.
+
+    Raises
+    ------
+    TypeError, ValueError
+        Naming ``name``, for a string, a float, a bool or a negative integer (numpy's own
+        messages name neither the argument nor the fix).
+    """
+    if seed is None or isinstance(
+        seed, np.random.Generator | np.random.BitGenerator | np.random.SeedSequence
+    ):
+        return seed
+    fix = "pass an integer >= 0 (e.g. seed=0), a numpy.random.Generator or None"
+    values = seed if isinstance(seed, list | tuple | np.ndarray) else [seed]
+    for v in np.ravel(np.asarray(values, dtype=object)) if len(values) else [None]:
+        if isinstance(v, bool) or not isinstance(v, numbers.Integral):
+            raise TypeError(f"`{name}` must be a seed, got {describe(seed)}; {fix}")
+        if v < 0:
+            raise ValueError(f"`{name}` must be >= 0, got {seed!r}; {fix}")
+    return seed
+
+
+def rng_from_seed(name, seed):
+    """``numpy.random.default_rng(seed)`` after :func:`check_seed` (the same generator)."""
+    return np.random.default_rng(check_seed(name, seed))
+
+
+def check_level(name, level):
+    """A confidence level in (0, 1), as float; a percentage (``95``, ``"95%"``) or a
+    string is refused with the fraction to pass instead."""
+    if isinstance(level, str):
+        text = level.strip().rstrip("%").strip()
+        try:
+            hint = f"; pass {float(text) / 100:g}" if level.strip().endswith("%") else ""
+        except ValueError:
+            hint = ""
+        raise TypeError(f"`{name}` must be a number in (0, 1) (e.g. 0.95), got str {level!r}{hint}")
+    level = check_real(name, level)
+    if 1.0 < level < 100.0:
+        hint = f"; a percentage? pass {level / 100:g}" if level >= 50 else ""
+        raise ValueError(
+            f"`{name}` must be in (0, 1), a fraction (0.95 for a 95 % level), got {level:g}{hint}"
+        )
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"`{name}` must be in (0, 1) (e.g. 0.95), got {level:g}")
+    return level
+
+
+def as_model_output(value, *, name, at, shape=None, complex_ok=False):
+    """What a user's function returned, as a fresh float (or complex) ndarray.
+
+    The one converter of user-function outputs: ``None``, a tuple of several things,
+    strings or objects are refused; complex values are refused unless ``complex_ok``
+    (a complex-step derivative); the output is *copied*, so a function that returns the
+    same buffer every call (overwriting it) cannot change an output already taken.
+
+    Parameters
+    ----------
+    value : object
+        The return value.
+    name : str
+        The function's argument name (``"model"``, ``"fn"``, ``"jac"``).
+    at : str
+        Where it was called (``"at eps=[1. 2.]"``, ``"at sample 3 (x=[...])"``).
+    shape : tuple, optional
+        The shape required (the data's); a return whose shape differs only by axes of
+        length 1 is accepted (and reshaped), any other shape refused.
+    complex_ok : bool
+        Keep complex values (``jac="cs"``); else a complex return is a TypeError.
+
+    Raises
+    ------
+    TypeError
+        ``None``, a tuple/list that is not an array of numbers, complex values.
+    ValueError
+        The wrong shape.
+    """
+    where = f"`{name}` {at}"
+    if value is None:
+        raise TypeError(
+            f"{where} returned None; `{name}` must return its values (did it forget `return`?)"
+        )
+    if (
+        isinstance(value, tuple)
+        and len(value) > 1
+        and any(isinstance(v, np.ndarray | list | tuple | str | dict) or v is None for v in value)
+    ):
+        raise TypeError(
+            f"{where} returned a tuple of {len(value)} items ({describe(value)}); return one "
+            "array of values, not (values, extra)"
+        )
+    try:
+        arr = np.array(value, copy=True)
+    except (TypeError, ValueError) as e:
+        raise TypeError(f"{where} returned {describe(value)}, not an array of numbers") from e
+    if arr.dtype == object or arr.dtype.kind not in "biufc":
+        raise TypeError(f"{where} returned {describe(value)}, not an array of numbers")
+    if arr.dtype.kind == "c":
+        if not complex_ok:
+            raise TypeError(
+                f"{where} returned complex values (dtype {arr.dtype}); `{name}` must return "
+                "real numbers: take .real only if the imaginary part is meant to be zero"
+            )
+    else:
+        arr = arr.astype(float, copy=False)
+    if shape is not None and arr.shape != tuple(shape):
+        squeezed = tuple(s for s in arr.shape if s != 1) == tuple(s for s in shape if s != 1)
+        if not squeezed or arr.size != math.prod(shape):
+            raise ValueError(
+                f"{where} returned shape {arr.shape}; the data have shape {tuple(shape)}: "
+                f"return one value per observation, in the data's shape"
+                + (
+                    f" (reshape a flat prediction: y.reshape{tuple(shape)})"
+                    if arr.size == math.prod(shape)
+                    else ""
+                )
+            )
+        arr = arr.reshape(shape)
+    return arr

@@ -20,7 +20,8 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from ._validation import as_finite_array, check_int
+from ._validation import as_finite_array, as_model_output, check_int
+from .errors import ModelEvaluationError
 from .memory import check_allocation
 
 __all__ = ["NonFiniteOutputError", "evaluate_samples", "output_array_bytes"]
@@ -37,22 +38,65 @@ class NonFiniteOutputError(ValueError):
         self.index = index
 
 
-def _evaluate_chunk(fn, chunk, name="fn"):
-    """Evaluate ``fn`` on every sample of ``chunk``; module-level so it pickles."""
-    outs = [np.asarray(fn(s), dtype=float) for s in chunk]
+def _point(x):
+    return np.array2string(np.asarray(x), precision=6, threshold=8)
+
+
+def _user_error(e, name, at, vectorized):
+    """A user's exception raised inside ``fn``, re-raised as its own type with the call
+    (the function's name and the sample) and a hint; the original chained."""
+    if isinstance(e, IndexError | TypeError):
+        hint = (
+            f"; with vectorized=True `{name}` receives a (k, d) array of k points and must "
+            "return k rows (pass vectorized=False for a function of one point)"
+            if vectorized
+            else f"; `{name}` receives one point, a 1-D array of the inputs (pass "
+            "vectorized=True for a function of a (k, d) array of points); check that it "
+            "reads no more inputs than there are"
+        )
+    else:
+        hint = ""
+    msg = f"`{name}` {at} raised {type(e).__name__}: {e}{hint}"
+    try:
+        err = type(e)(msg)
+    except Exception:  # an exception class with its own signature
+        err = ModelEvaluationError(msg)
+    return err
+
+
+def _evaluate_chunk(fn, part, name="fn"):
+    """Evaluate ``fn`` on every sample of ``part = (offset, chunk)`` (the rows from
+    ``offset`` on); module-level so it pickles."""
+    offset, chunk = part
+    outs = []
+    for j, s in enumerate(chunk):
+        at = f"at sample {offset + j} (x={_point(s)})"
+        try:
+            out = fn(s)
+        except Exception as e:  # a user callback: name the call and the sample
+            raise _user_error(e, name, at, False) from e
+        outs.append(as_model_output(out, name=name, at=at))
     shapes = {o.shape for o in outs}
     if len(shapes) > 1:
         raise ValueError(f"`{name}` returned outputs of different shapes: {sorted(shapes)}")
     return np.stack(outs)
 
 
-def _evaluate_batch(fn, chunk, name="fn"):
-    """Evaluate a vectorized ``fn`` on a whole chunk: ``fn(chunk)`` of shape (len(chunk), ...)."""
-    out = np.asarray(fn(chunk), dtype=float)
+def _evaluate_batch(fn, part, name="fn"):
+    """Evaluate a vectorized ``fn`` on a whole chunk, ``part = (offset, chunk)``:
+    ``fn(chunk)`` of shape (len(chunk), ...)."""
+    offset, chunk = part
+    at = f"at samples {offset}..{offset + len(chunk) - 1} (x={_point(chunk[0])}, ...)"
+    try:
+        out = fn(chunk)
+    except Exception as e:  # a user callback: name the call and the points
+        raise _user_error(e, name, at, True) from e
+    out = as_model_output(out, name=name, at=at)
     if out.ndim == 0 or out.shape[0] != len(chunk):
         raise ValueError(
             f"a vectorized `{name}` must return one output row per point: got shape "
-            f"{out.shape} for {len(chunk)} points"
+            f"{out.shape} for {len(chunk)} points (a function of one point? pass "
+            "vectorized=False)"
         )
     return out
 
@@ -167,7 +211,7 @@ def evaluate_samples(
             "`executor` must have a map(f, iterable) method (concurrent.futures executor or "
             f"dask.distributed.Client), got {type(executor).__name__}"
         )
-    chunks = [samples[:1]] + [samples[i : i + chunksize] for i in range(1, n, chunksize)]
+    chunks = [(0, samples[:1])] + [(i, samples[i : i + chunksize]) for i in range(1, n, chunksize)]
     task = functools.partial(_evaluate_batch if vectorized else _evaluate_chunk, fn, name=name)
 
     own_pool = executor is None and workers > 1
@@ -197,7 +241,7 @@ def evaluate_samples(
             if consume is not None and k == 1:
                 # streamed: small chunks, so that little is in flight at once
                 step = max(1, min(chunksize, int(STREAM_CHUNK_BYTES // (8 * math.prod(shape)))))
-                part = [samples[i : i + step] for i in range(1, n, step)]
+                part = [(i, samples[i : i + step]) for i in range(1, n, step)]
             if not part:
                 continue
             for r in run(part):

@@ -26,7 +26,7 @@ import numpy as np
 import scipy.linalg as sla
 from scipy import special
 
-from .._validation import as_finite_array
+from .._validation import as_finite_array, rng_from_seed
 from .germs import LEGENDRE, Germ
 from .marginals import as_marginal
 
@@ -361,7 +361,7 @@ def draw_germs(germs, n, seed=None):
     Uniform germs are ``Generator.random`` draws exactly (as in the uniform-only code);
     other germs are their inverse CDF of the same uniforms.
     """
-    omega = np.random.default_rng(seed).random((n, len(germs)))
+    omega = rng_from_seed("seed", seed).random((n, len(germs)))
     for d, g in enumerate(germs):
         if g.family != "legendre":
             u = np.clip(omega[:, d], np.finfo(float).tiny, 1.0 - np.finfo(float).epsneg)
@@ -567,6 +567,12 @@ def as_inputs(inputs, dim=None):
     dim : int, optional
         Required number of inputs.
     """
+    if isinstance(inputs, dict):
+        raise TypeError(
+            f"`inputs` must be bounds, an Inputs or a list of distributions, got a dict of "
+            f"{len(inputs)} entries; pass Inputs(list(d.values()), names=list(d)) to keep "
+            "the names"
+        )
     if inputs is None or isinstance(inputs, Inputs):
         out = inputs
     elif type(inputs).__module__.startswith("chaospy"):
@@ -603,6 +609,30 @@ def as_inputs(inputs, dim=None):
     if out is not None and dim is not None and out.dim != dim:
         raise ValueError(f"`inputs` has {out.dim} variables but the basis has dim={dim}")
     return out
+
+
+def check_moments(inputs, who, variance=True):
+    """Refuse inputs whose law has no finite mean (or, with ``variance``, no finite
+    variance): ``who`` estimates moments that do not exist for them.
+
+    Raises
+    ------
+    ValueError
+        Naming the input, its law, what ``who`` needs and what to do.
+    """
+    if inputs is None or isinstance(inputs, UniformInputs):
+        return
+    for name, m in zip(inputs.names, inputs.marginals, strict=True):
+        missing = "mean" if not m.finite_mean else None
+        if missing is None and variance and not m.finite_variance:
+            missing = "variance"
+        if missing is not None:
+            needs = "a mean and a variance" if variance else "a mean"
+            raise ValueError(
+                f"input {name!r} ({m!r}) has no finite {missing}: {who} needs {needs} of "
+                "every input (its estimates would be numbers without a limit); truncate the "
+                "law (scipy.stats.truncate, truncnorm) or use one with finite moments"
+            )
 
 
 def _named(build, *args, **kwargs):

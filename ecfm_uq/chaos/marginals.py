@@ -166,6 +166,18 @@ class Marginal:
             return True
         return bool(np.isfinite(v))
 
+    @functools.cached_property
+    def finite_mean(self):
+        """The law has a finite mean (False for Cauchy, Pareto with shape <= 1, ...)."""
+        if self.affine or self.kind in ("lognormal", "bounded"):
+            return True
+        try:
+            with np.errstate(all="ignore"):
+                m = float(self.law.mean())
+        except Exception:  # a law without a mean method: assume finite
+            return True
+        return bool(np.isfinite(m))
+
     @property
     def support(self):
         return tuple(float(v) for v in self.law.support())
@@ -244,6 +256,7 @@ def _scipy_params(frozen):
 def _from_scipy(d, name):
     if isinstance(d.dist, stats.rv_discrete):
         raise _discrete(name, d.dist.name)
+    _check_normalized(d, name)
     shapes, loc, scale = _scipy_params(d)
     # shape parameters may be infinite (truncnorm(a, np.inf): a normal truncated below);
     # scipy itself decides whether they are valid, seen as a finite median
@@ -488,6 +501,12 @@ def as_marginal(dist, name="x"):
     """
     if isinstance(dist, Marginal):
         return dist
+    if isinstance(dist, type):
+        raise TypeError(
+            f"input {name!r} is the class {dist.__name__}, not a law: pass an instance, e.g. "
+            f"{dist.__name__}(a=..., b=...) for an rv_continuous subclass, or a frozen scipy "
+            "law such as scipy.stats.norm(0, 1)"
+        )
     if hasattr(dist, "dist") and isinstance(
         getattr(dist, "dist", None), stats.rv_continuous | stats.rv_discrete
     ):
@@ -527,6 +546,29 @@ def as_marginal(dist, name="x"):
         "1)) or a new-style one (scipy.stats.Normal(mu=0, sigma=1)), a chaospy distribution "
         f"or an object with cdf and ppf methods, got {type(dist).__name__}"
     )
+
+
+#: how far from 1 the integral of a user's density may be
+DENSITY_TOL = 1e-6
+
+
+def _check_normalized(d, name):
+    """A user's ``rv_continuous`` subclass with its own ``_pdf``: the density must
+    integrate to 1 (within ``DENSITY_TOL``) over its support, else every moment, quantile
+    and expansion of it is off by the factor (scipy does not check)."""
+    law = d.dist
+    if type(law).__module__.startswith("scipy.") or type(law)._pdf is stats.rv_continuous._pdf:
+        return
+    from scipy import integrate
+
+    lo, hi = (float(v) for v in d.support())
+    with np.errstate(all="ignore"):
+        total, err = integrate.quad(lambda x: float(d.pdf(x)), lo, hi, limit=200)
+    if not np.isfinite(total) or abs(total - 1.0) > DENSITY_TOL:
+        raise ValueError(
+            f"input {name!r} ({type(law).__name__}): its density integrates to {total:.8g} over "
+            f"[{lo:g}, {hi:g}], not 1: divide _pdf by {total:.8g} (or fix its support a=, b=)"
+        )
 
 
 def _discrete(name, law):

@@ -43,13 +43,13 @@ import warnings
 import numpy as np
 import scipy.linalg as sla
 
-from .._validation import as_finite_array, check_choice, check_int
+from .._validation import as_finite_array, check_choice, check_int, rng_from_seed
 from ..executor import NonFiniteOutputError, evaluate_samples
 from ..memory import check_allocation
 from ._kernels import legendre_table
 from .basis import ChaosBasis
 from .germs import as_germs
-from .inputs import as_inputs
+from .inputs import as_inputs, check_moments
 from .pce import PolynomialChaosExpansion
 from .projection import project
 from .quadrature import gauss_legendre
@@ -86,7 +86,7 @@ def sample_design(n, dim, design="lhs", seed=None):
     n = check_int("n_samples", n, minimum=1)
     dim = check_int("dim", dim, minimum=1)
     design = check_choice("design", design, DESIGNS)
-    rng = np.random.default_rng(seed)
+    rng = rng_from_seed("seed", seed)
     if design == "random":
         return rng.random((n, dim))
     if design == "lhs":
@@ -503,9 +503,15 @@ def fit_pce(
     ValueError
         Unknown method or design, too few regression samples for the basis (naming
         ``n_samples`` or ``samples``), a model output that is NaN or inf (naming the
-        point), outputs of different shapes, ``evaluations`` not matching ``samples``.
+        point), outputs of different shapes, ``evaluations`` not matching ``samples``;
+        an input law without a finite mean (Cauchy, Pareto with shape <= 1) or a user's
+        density that does not integrate to 1; a negative ``seed``.
     TypeError
-        ``model`` not callable; a discrete input distribution.
+        ``model`` not callable or returning ``None``, a tuple, complex values; a discrete
+        input distribution; a seed that is not one.
+    Exception
+        An exception of ``model``, as its own type, naming the point it was called at
+        (the original chained).
 
     Examples
     --------
@@ -520,6 +526,9 @@ def fit_pce(
     inputs = as_inputs(inputs)
     if inputs is None:
         raise TypeError("`inputs` must be given: bounds (dim, 2), UniformInputs or chaospy.J")
+    # the expansion's mean is the law's: it must exist (the variance is checked where it
+    # is used, by the Sobol indices, so an output free of a heavy-tailed input keeps them)
+    check_moments(inputs, "fit_pce", variance=False)
     workers = check_int("workers", workers, minimum=1)
     if model is None and evaluations is None:
         raise TypeError("`model` must be callable (or pass `samples` and `evaluations`)")

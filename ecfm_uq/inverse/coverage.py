@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from .._validation import check_int, check_positive
+from .._validation import check_int, check_positive, rng_from_seed
 from ..errors import ConvergenceError
 from ..system import solve_steady
 from .fitting import fit
@@ -127,7 +127,7 @@ def steady_coverage(
     true_eps = system.check_eps(true_eps)
     eps0 = true_eps if eps0 is None else system.check_eps(eps0)
     v0 = M_obs @ system.mean(solve_steady(system, true_eps, strict=True).Theta)
-    rng = np.random.default_rng(seed)
+    rng = rng_from_seed("seed", seed)
     est, ints, failed = [], [], 0
     for _ in range(n):
         v = v0 + sigma * rng.normal(size=v0.size)
@@ -246,7 +246,7 @@ def interval_coverage(
     system = problem.system
     true_eps = system.check_eps(true_eps)
     eps0 = true_eps if eps0 is None else system.check_eps(eps0)
-    rng = np.random.default_rng(seed)
+    rng = rng_from_seed("seed", seed)
     est, delta, prof, failed, rejected = [], [], [], 0, 0
     for _ in range(n):
         v = clean + sigma * rng.normal(size=clean.size)
@@ -296,7 +296,7 @@ def model_coverage(problem, clean, true_eps, sigma, n_datasets=200, seed=0, *, e
     sigma = check_positive("sigma", sigma)
     true_eps = np.asarray(true_eps, dtype=float)
     eps0 = true_eps if eps0 is None else np.asarray(eps0, dtype=float)
-    rng = np.random.default_rng(seed)
+    rng = rng_from_seed("seed", seed)
     delta, inside, failed, rejected, no_test, at_bound = [], [], 0, 0, 0, 0
     for _ in range(n):
         v = clean + sigma * rng.normal(size=clean.size)
@@ -350,7 +350,7 @@ def discrepancy_power(
     sigma = check_positive("sigma", sigma)
     rows = []
     for amplitude, clean in clean_by_amplitude.items():
-        rng = np.random.default_rng(seed)
+        rng = rng_from_seed("seed", seed)
         tau_rej, chi_rej, rms = [], [], []
         for _ in range(n):
             v = clean + sigma * rng.normal(size=clean.size)

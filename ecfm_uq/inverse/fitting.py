@@ -231,7 +231,8 @@ def fit(
         ``"noisy-ecfm"`` and ``ReplicatedProblem`` refuse an array. Without ``sigma`` a
         least-squares fit has no consistency test (``verdict.consistent is None``).
     bounds : sequence of (lo, hi), optional
-        Bounds on :math:`\\epsilon` (``None`` for an open side).
+        Bounds on :math:`\\epsilon` (``None`` for an open side), ``lo < hi``, containing
+        ``eps0``.
     tol : float, optional
         The tolerance of the test that decides the status
         (:mod:`ecfm_uq.inverse.core.convergence`), on every path: the relative offset of a
@@ -289,7 +290,7 @@ def fit(
         formulation=formulation,
         method=method,
         sigma=_check_sigma(sigma, kind, formulation, problem),
-        bounds=check_bounds(bounds, n_eps),
+        bounds=check_bounds(bounds, n_eps, eps0),
         tol=tol,
         maxiter=maxiter,
         options=dict(options or {}),

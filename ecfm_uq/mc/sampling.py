@@ -10,7 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._validation import as_finite_array, check_int
+from .._validation import as_finite_array, check_int, rng_from_seed
 from ..executor import NonFiniteOutputError, evaluate_samples
 from ..memory import check_allocation
 
@@ -51,7 +51,7 @@ def draw_germ(n, seed=None, dim=1):
     """
     n = check_int("n", n, minimum=1)
     dim = check_int("dim", dim, minimum=1)
-    gen = np.random.default_rng(seed)
+    gen = rng_from_seed("seed", seed)
     return gen.random(n) if dim == 1 else gen.random((n, dim))
 
 

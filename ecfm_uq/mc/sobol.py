@@ -5,17 +5,20 @@ surrogate's indices."""
 from __future__ import annotations
 
 import math
-import numbers
 from typing import NamedTuple
 
 import numpy as np
 
-from .._validation import check_int
+from .._validation import check_int, check_level, rng_from_seed
 from ..executor import evaluate_samples
 from ..memory import check_allocation
 from ..plotting import sobol_bars
 
-__all__ = ["SobolResult", "sobol_indices"]
+__all__ = ["SOBOL_MIN_N", "SobolResult", "sobol_indices"]
+
+#: the smallest base sample of :func:`sobol_indices`: below it the ratio estimators and
+#: their large-sample (delta-method, bootstrap) intervals mean nothing
+SOBOL_MIN_N = 32
 
 
 class SobolResult(NamedTuple):
@@ -162,7 +165,8 @@ def sobol_indices(
         As in :func:`~ecfm_uq.chaos.fit_pce`; independent inputs, or dependent ones
         with ``germ=True``.
     n : int
-        Base sample size (a power of 2 for ``design="sobol"``).
+        Base sample size (a power of 2 for ``design="sobol"``), at least ``SOBOL_MIN_N``
+        (32).
     seed : int or numpy.random.Generator
         Required: the estimate is random (a scrambled sequence or random draws).
     level : float
@@ -206,8 +210,12 @@ def sobol_indices(
     Raises
     ------
     ValueError
-        ``n`` not a power of 2 with ``design="sobol"``, ``level`` outside (0, 1),
-        dependent inputs, an output of zero variance, non-finite outputs.
+        ``n`` not a power of 2 with ``design="sobol"`` or below ``SOBOL_MIN_N``, ``level``
+        outside (0, 1), dependent inputs, an input without finite mean or variance, an
+        output of zero variance, non-finite outputs.
+    TypeError, IndexError, ...
+        An exception of ``model``, as its own type, naming the point it was called at
+        (the original chained).
     MemoryBudgetError
         The points and outputs held at once (A, B and one :math:`A_B^{(i)}`: 3n rows)
         exceed the memory budget (:mod:`ecfm_uq.memory`).
@@ -224,13 +232,14 @@ def sobol_indices(
     from scipy import special
     from scipy.stats import qmc
 
-    from ..chaos.inputs import as_inputs
+    from ..chaos.inputs import as_inputs, check_moments
 
     if not callable(model):
         raise TypeError(f"`model` must be callable model(x), got {type(model).__name__}")
     inputs = as_inputs(inputs)
     if inputs is None:
         raise TypeError("`inputs` must be given: bounds (d, 2), Inputs or distributions")
+    check_moments(inputs, "sobol_indices")
     if not isinstance(germ, bool):
         raise TypeError(f"`germ` must be True or False, got {germ!r}")
     if getattr(inputs, "dependent", False) and not germ:
@@ -240,7 +249,13 @@ def sobol_indices(
             "or germ=True for the indices of the independent germ components (see the "
             "docstring for what they mean)"
         )
-    n = check_int("n", n, minimum=2)
+    n = check_int("n", n, minimum=1)
+    if n < SOBOL_MIN_N:
+        raise ValueError(
+            f"`n` = {n} is too small for Sobol indices: the estimators are ratios of sample "
+            f"means and their intervals are large-sample ones; pass n >= {SOBOL_MIN_N} (a "
+            "power of 2, e.g. 1024; the model runs n (d + 2) times)"
+        )
     if isinstance(design, str) and design == "sobol" and n & (n - 1):
         raise ValueError(
             f"`n` must be a power of 2 for design='sobol' (got {n}; the Sobol' points are "
@@ -248,8 +263,7 @@ def sobol_indices(
         )
     if design not in ("sobol", "random"):
         raise ValueError(f"`design` must be 'sobol' or 'random', got {design!r}")
-    if isinstance(level, bool) or not isinstance(level, numbers.Real) or not 0 < level < 1:
-        raise ValueError(f"`level` must be a number in (0, 1), got {level!r}")
+    level = check_level("level", level)
     if interval not in ("asymptotic", "bootstrap"):
         raise ValueError(f"`interval` must be 'asymptotic' or 'bootstrap', got {interval!r}")
     n_bootstrap = check_int("n_bootstrap", n_bootstrap, minimum=10)
@@ -260,7 +274,7 @@ def sobol_indices(
         f"the points of a Sobol-index sample (3 x {n} points of {d} inputs)",
         "pass a smaller `n`",
     )
-    rng = np.random.default_rng(seed)
+    rng = rng_from_seed("seed", seed)
     if design == "sobol":
         u = qmc.Sobol(2 * d, scramble=True, rng=rng).random(n)
     else:

@@ -109,13 +109,30 @@ class _MassSolve:
 
     def __init__(self, system):
         M = system.M
-        self.lu = spla.splu(sp.csc_matrix(M)) if sp.issparse(M) else None
+        try:
+            self.lu = spla.splu(sp.csc_matrix(M)) if sp.issparse(M) else None
+        except RuntimeError as e:  # splu: "Factor is exactly singular"
+            raise _singular_mass(M) from e
         self.M = None if sp.issparse(M) else np.asarray(M)
         self.E2 = system.E2
 
     def __call__(self, B):  # B (N, P): X with M X E2 = B
-        X = self.lu.solve(B) if self.lu is not None else np.linalg.solve(self.M, B)
+        try:
+            X = self.lu.solve(B) if self.lu is not None else np.linalg.solve(self.M, B)
+        except np.linalg.LinAlgError as e:
+            raise _singular_mass(self.M) from e
         return np.linalg.solve(self.E2.T, X.T).T
+
+
+def _singular_mass(M):
+    """The ValueError of a singular mass matrix, with its rank when it is dense."""
+    rank = "" if sp.issparse(M) else f" (rank {np.linalg.matrix_rank(M)} < N = {M.shape[0]})"
+    return ValueError(
+        f"the mass matrix `M` of the system is singular{rank}: integrate() needs an "
+        "invertible M (it starts from the slope M^-1 R); for algebraic rows (a DAE) march "
+        "on a grid with march(system, eps, Theta0, dt, n_steps) or march(..., times=...), "
+        "whose implicit steps allow a singular M, or give every equation a time derivative"
+    )
 
 
 @library_threads(size=dense_unknowns)

@@ -70,6 +70,10 @@ MAX_RATIO = 2.0
 SAFETY, MAX_SPLIT = 0.9, 8
 #: the fewest steps of a grid (BDF2's estimate needs four states)
 MIN_STEPS = 3
+#: failed marches in a row whose gains in time shrink geometrically (each at most
+#: STALL_RATIO of the one before: the march creeps towards a time it cannot pass however
+#: the steps are split) mean that the solution left the region, e.g. a blow-up
+MAX_STALLED, STALL_RATIO = 5, 0.8
 
 
 @dataclass(frozen=True)
@@ -204,11 +208,21 @@ def _refine(times, errors, scheme):
     return np.asarray(out)
 
 
+def _stalled(reached):
+    """Whether the times reached by consecutive failed marches converge to a limit short of
+    the end: ``MAX_STALLED`` gains, none negative, each at most ``STALL_RATIO`` times the
+    one before (none: the first step fails however it is split)."""
+    if len(reached) <= MAX_STALLED:
+        return False
+    d = np.diff(reached[-(MAX_STALLED + 1) :])
+    return bool(np.all(d >= 0) and np.all(d[1:] <= STALL_RATIO * d[:-1]))
+
+
 def choose_steps(
     system,
     eps,
     Theta0,
-    t_data,
+    t_data=None,
     *,
     rtol=1e-6,
     atol=None,
@@ -219,6 +233,7 @@ def choose_steps(
     tol=1e-10,
     maxiter=30,
     solver="auto",
+    times=None,
 ):
     """A time grid through the data times on which ``scheme`` meets ``rtol``/``atol``.
 
@@ -251,6 +266,9 @@ def choose_steps(
         Largest grid allowed.
     tol, maxiter, solver
         The march's Newton and linear-solver settings (:func:`.stepping.march`).
+    times : None
+        Not an argument of this function (``march``'s grid): given, it is refused with
+        a TypeError that points to ``t_data`` (the data times) and ``start`` (a grid).
 
     Returns
     -------
@@ -265,8 +283,19 @@ def choose_steps(
     ConvergenceError
         A march failed even on steps split ``max_rounds`` times (when a step's Newton
         solve fails, the steps before it are halved, it is split in four, and the march
-        runs again); the message names the step and the time the march reached.
+        runs again), or consecutive failed marches creep towards a time they cannot pass
+        (``MAX_STALLED`` gains shrinking geometrically: the solution left the region where
+        the model can be marched, a blow-up), or splitting would exceed ``max_steps``; the
+        message names the time the march reached.
     """
+    if times is not None:
+        raise TypeError(
+            "choose_steps takes the data times as `t_data` (the times that must be step "
+            "points), not `times` (march's grid); pass t_data=..., and a grid to refine as "
+            "start=..."
+        )
+    if t_data is None:
+        raise TypeError("choose_steps needs `t_data`, the data times the grid must hold")
     rtol, atol = check_tolerances(rtol, atol)
     scheme = check_scheme(scheme)
     t_data = check_times(t_data)
@@ -288,6 +317,7 @@ def choose_steps(
     while times.size - 1 < MIN_STEPS:  # too few points for an estimate: halve every step
         times = np.sort(np.concatenate([times, 0.5 * (times[1:] + times[:-1])]))
     message = ""
+    reached = []  # the times consecutive failed marches reached
     for rounds in range(1, max_rounds + 1):
         traj = march(system, eps, Theta0, times=times, scheme=scheme, tol=tol, maxiter=maxiter,
                      solver=solver)  # fmt: skip
@@ -296,11 +326,29 @@ def choose_steps(
             # solution: halve every step before, split the failed one in four
             if rounds == max_rounds:
                 raise ConvergenceError(f"{traj.message} (after {rounds} marches)")
+            k = traj.failed_step
+            reached.append(float(times[k - 1]))
+            if _stalled(reached):
+                raise ConvergenceError(
+                    f"the solution left the region where the model can be marched near "
+                    f"t={reached[-1]:.6g}: {len(reached)} marches in a row failed there, each "
+                    f"gaining less time than the one before, with steps split down to "
+                    f"{times[k] - times[k - 1]:.3g} (a blow-up, or a state where the model "
+                    f"is undefined); the data run to t={t_data[-1]:g}. Last: {traj.message}"
+                )
             errors = np.zeros(times.size - 1)
-            errors[: traj.failed_step] = (2 * SAFETY) ** 2
-            errors[traj.failed_step - 1] = (4 * SAFETY) ** 2
-            times = _refine(times, errors, "euler")
+            errors[:k] = (2 * SAFETY) ** 2
+            errors[k - 1] = (4 * SAFETY) ** 2
+            refined = _refine(times, errors, "euler")
+            if refined.size - 1 > max_steps:
+                raise ConvergenceError(
+                    f"{traj.message}: splitting the steps to get past t={reached[-1]:.6g} would "
+                    f"exceed max_steps={max_steps} (after {rounds} marches); the solution may "
+                    "leave the region where the model can be marched there"
+                )
+            times = refined
             continue
+        reached = []
         errors = step_errors(traj, rtol, atol)
         if errors.max() <= 1.0:
             message = f"every step meets rtol={rtol:g}, atol={atol:g} ({times.size - 1} steps)"

@@ -6,9 +6,12 @@ fitter imports the entry point, and a walk of ``sigma`` or ``tol`` from ``fit`` 
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 
-__all__ = ["FitSettings"]
+import numpy as np
+
+__all__ = ["FitSettings", "check_least_squares_options"]
 
 
 @dataclass(frozen=True)
@@ -37,3 +40,42 @@ class FitSettings:
                 f"{self.formulation!r}, method={self.method!r}; known: {sorted(known)}"
             )
         return {**known, **self.options}
+
+
+def check_least_squares_options(options, p):
+    """The values of the least-squares ``options`` checked by name (their names were, by
+    :meth:`FitSettings.take`): ``x_scale`` ``"jac"`` or ``p`` positive numbers;
+    ``ftol``, ``xtol``, ``gtol`` non-negative numbers or None; ``polish`` a bool.
+
+    Raises
+    ------
+    TypeError, ValueError
+        Naming the option and the values it takes (scipy's messages name neither).
+    """
+    x_scale = options.get("x_scale", "jac")
+    if isinstance(x_scale, str):
+        if x_scale != "jac":
+            raise ValueError(
+                f"options['x_scale'] must be 'jac' (scale by the Jacobian's columns, the "
+                f"default) or {p} positive numbers, one per parameter, got {x_scale!r}"
+            )
+    else:
+        arr = np.asarray(x_scale, dtype=object).ravel()
+        ok = arr.size in (1, p) and all(
+            isinstance(v, numbers.Real) and not isinstance(v, bool) and np.isfinite(v) and v > 0
+            for v in arr
+        )
+        if not ok:
+            raise ValueError(
+                f"options['x_scale'] must be 'jac' or {p} positive numbers (one per "
+                f"parameter), got {x_scale!r}"
+            )
+    for key in ("ftol", "xtol", "gtol"):
+        v = options.get(key)
+        if v is not None and (
+            isinstance(v, bool) or not isinstance(v, numbers.Real) or not np.isfinite(v) or v < 0
+        ):
+            raise ValueError(f"options[{key!r}] must be a number >= 0 or None, got {v!r}")
+    if not isinstance(options.get("polish", True), bool | np.bool_):
+        raise TypeError(f"options['polish'] must be True or False, got {options['polish']!r}")
+    return options

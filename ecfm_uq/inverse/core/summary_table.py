@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..._validation import check_level
+
 __all__ = ["summary_table"]
 
 
@@ -36,6 +38,22 @@ def _num(x):
 def summary_table(result, level=0.95, profile=None):
     """The fit as text: one row per parameter, then status, optimality and verdict;
     ``profile``: a profile summary whose intervals to show (else the delta method's)."""
+    level = check_level("level", level)
+    if profile is not None and not hasattr(profile, "intervals"):
+        raise TypeError(
+            f"`profile` must be the ProfileSummary of profile_likelihood(result, level), got "
+            f"{type(profile).__name__}"
+        )
+    estimate = getattr(profile, "estimate", None)
+    if estimate is not None and (
+        np.shape(estimate) != np.shape(result.eps)
+        or not np.allclose(estimate, result.eps, rtol=1e-12, atol=0.0)
+    ):
+        raise ValueError(
+            f"`profile` was computed for another fit (estimate {np.round(estimate, 6).tolist()}"
+            f", this fit's is {np.round(result.eps, 6).tolist()}): pass "
+            "profile_likelihood(result) of this result"
+        )
     if profile is not None and abs(profile.level - level) > 1e-12:
         raise ValueError(
             f"`profile` was computed at level {profile.level:g}, the table is at {level:g}: "

@@ -52,7 +52,10 @@ def fit_dynamic_problem(problem, eps0, s):
     if not problem.adaptive:
         return _fit_dynamic(problem, eps0, s)
     if problem.steps is None:
-        problem.freeze_steps(eps0)
+        try:
+            problem.freeze_steps(eps0)
+        except ConvergenceError as e:  # no grid at eps0 (a blow-up): a reported failure
+            return _failed_at_start(problem, eps0, s, e)
     res = _fit_dynamic(problem, eps0, s)
     refrozen = False
     try:
@@ -70,6 +73,20 @@ def fit_dynamic_problem(problem, eps0, s):
         message=check.message,
     )  # fmt: skip
     return dataclasses.replace(res, extra={**res.extra, "steps": steps})
+
+
+def _failed_at_start(problem, eps0, s, error):
+    """The result of an adaptive fit whose step sequence cannot be chosen at ``eps0``:
+    ``success=False`` (``MODEL_FAILURE``), the message naming where the march stopped."""
+    eps0 = np.array(problem.system.check_eps(eps0), dtype=float)
+    message = f"fit not started: {error}; start from parameters where the model can be marched"
+    return InverseResult(
+        eps=eps0, loss=np.inf, status=FitStatus.MODEL_FAILURE, message=message,
+        method=s.formulation, optimizer=s.method,
+        uncertainty=Uncertainty.failed("not computed: the fit did not start"),
+        verdict=Verdict(None, message=message),
+        extra={"steps": dict(n_steps=None, met=False, message=str(error))},
+    )  # fmt: skip
 
 
 def _fit_dynamic(problem, eps0, s):

@@ -26,9 +26,10 @@ import dataclasses
 
 import numpy as np
 
-from ..._validation import all_finite, as_finite_array
+from ..._validation import all_finite, as_finite_array, as_model_output
 from ...errors import ConvergenceError, ModelEvaluationError
 from ..core.finite_differences import fd_jacobian
+from ..core.settings import check_least_squares_options
 from .interface import InverseProblem
 
 __all__ = ["ModelProblem"]
@@ -37,7 +38,11 @@ _JAC_MODES = ("2-point", "3-point", "cs")
 
 
 def _describe_call(name, eps):
-    return f"`{name}` at eps={np.array2string(np.asarray(eps).real, precision=6)}"
+    return f"`{name}` {_at(eps)}"
+
+
+def _at(eps):
+    return f"at eps={np.array2string(np.asarray(eps).real, precision=6)}"
 
 
 class ModelProblem(InverseProblem):
@@ -46,8 +51,11 @@ class ModelProblem(InverseProblem):
     Parameters
     ----------
     model : callable
-        ``model(eps) -> array_like`` with the shape of ``data``; ``eps`` is a 1-D float
-        array of the parameters (complex for ``jac="cs"``).
+        ``model(eps) -> array_like`` of real numbers with the shape of ``data`` (axes of
+        length 1 aside: a flat vector for 2-D data is refused, its order would be a
+        guess); ``eps`` is a 1-D float array of the parameters (complex for
+        ``jac="cs"``, and the model must then be complex-analytic: checked once against
+        central differences). Its output is copied, so it may reuse one array.
     data : array_like
         The observations, any shape (flattened in the fit, C order).
     jac : callable or {"2-point", "3-point", "cs"} or None
@@ -114,16 +122,16 @@ class ModelProblem(InverseProblem):
                     f"(shape {self.shape})"
                 ) from e
             raise ModelEvaluationError(msg) from e
-        y = np.asarray(y)
-        if y.shape != self.shape and (y.size != self.v.size or y.ndim > 1):
-            raise ValueError(
-                f"{_describe_call('model', eps)} returned shape {y.shape}; the data have "
-                f"shape {self.shape}: `model` must predict every observation"
-            )
-        y = y.reshape(-1)
-        if not np.isfinite(y @ y):  # NaN and inf (and overflow) propagate: test each then
-            if all_finite(y):
-                return y
+        cs = self.jac == "cs"  # a model for complex steps may hand back a complex array
+        y = as_model_output(y, name="model", at=_at(eps), shape=self.shape, complex_ok=cs).ravel()
+        if cs and np.iscomplexobj(y):
+            if np.any(y.imag != 0):
+                raise TypeError(
+                    f"{_describe_call('model', eps)} returned complex values for real "
+                    "parameters; `model` must return real predictions at real eps"
+                )
+            y = y.real.copy()
+        if not all_finite(y):
             bad = np.flatnonzero(~np.isfinite(y))
             msg = (
                 f"{_describe_call('model', eps)} returned {bad.size} non-finite value(s) "
@@ -144,7 +152,10 @@ class ModelProblem(InverseProblem):
             return J if columns is None else J[:, columns]
         if self.jac == "cs":
             fun = self._complex_model
-            return fd_jacobian(fun, eps, method="cs", typical=typical, columns=columns)
+            J = fd_jacobian(fun, eps, method="cs", typical=typical, columns=columns)
+            if columns is None and not getattr(self, "_analytic", False):
+                self._check_analytic(eps, J, typical)
+            return J
         return fd_jacobian(
             self.predict, eps, method=method or self.jac, typical=typical, f0=y,
             columns=columns,
@@ -153,13 +164,14 @@ class ModelProblem(InverseProblem):
 
     def _complex_model(self, z):
         try:
-            y = np.asarray(self.model(z))
+            out = self.model(z)
         except Exception as e:
             raise ModelEvaluationError(
                 f"{_describe_call('model', z)} with a complex step raised "
                 f"{type(e).__name__}: {e}; jac='cs' needs a model written for complex "
                 "parameters (no abs, no comparisons, no float()); use jac='3-point'"
             ) from e
+        y = as_model_output(out, name="model", at=_at(z), complex_ok=True)
         if not np.iscomplexobj(y):
             raise ValueError(
                 "jac='cs': `model` dropped the imaginary part of complex parameters (it "
@@ -167,16 +179,40 @@ class ModelProblem(InverseProblem):
             )
         return y.ravel()
 
+    def _check_analytic(self, eps, J, typical):
+        """Once, at the first complex-step Jacobian: central differences must agree with
+        it, else the model is not complex-analytic (``abs``, ``.real``, a comparison) and
+        its complex steps are wrong, not its Jacobian rank-deficient."""
+        F = fd_jacobian(self.predict, eps, method="3-point", typical=typical)
+        # columns as responses to relative changes of the parameters, so that a column
+        # near zero is judged against the others (differencing noise is not a mismatch)
+        w = np.maximum(np.abs(eps), 1.0 if typical is None else np.abs(typical))
+        w = np.where(w > 0, w, 1.0)
+        scale = np.maximum(np.abs(F).max(axis=0), np.abs(J).max(axis=0)) * w
+        floor = max(1e-6 * scale.max(), np.finfo(float).tiny)
+        err = np.abs(J - F).max(axis=0) * w / np.maximum(scale, floor)
+        if err.max() > 1e-3:
+            j = int(np.argmax(err))
+            raise ValueError(
+                f"jac='cs': the complex-step derivative in parameter {j} differs from central "
+                f"differences by {err[j]:.2g} (relative) {_at(eps)}: `model` is not "
+                "complex-analytic in it (abs, np.real, comparisons, max/min, float() drop "
+                "the imaginary step); use jac='3-point', or write the model with analytic "
+                "operations only"
+            )
+        self._analytic = True
+
     def _user_jacobian(self, eps):
         p = eps.size
         try:
-            J = np.asarray(self.jac(eps), dtype=float)
+            out = self.jac(eps)
         except Exception as e:
             raise type(e)(
                 f"{_describe_call('jac', eps)} raised {type(e).__name__}: {e}; `jac` must "
                 f"take the 1-D array of the {p} parameters and return the "
                 f"({self.v.size}, {p}) derivative of the predictions"
             ) from e
+        J = as_model_output(out, name="jac", at=_at(eps))
         if J.shape not in ((self.v.size, p), (*self.shape, p)):
             raise ValueError(
                 f"{_describe_call('jac', eps)} returned shape {J.shape}; expected "
@@ -282,6 +318,7 @@ def fit_model_problem(problem, eps0, s):
     eps0 = as_finite_array("eps0", eps0, ndim=1)
     p, n = eps0.size, problem.n_data
     bounds = check_bounds(s.bounds, p)
+    options = check_least_squares_options(options, p)
     if n < p:
         raise ValueError(
             f"`data` has {n} observations for {p} parameters: fewer data than parameters "

@@ -41,7 +41,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..._validation import as_finite_array, as_operator, check_int, check_positive
+from ..._validation import (
+    as_finite_array,
+    as_operator,
+    check_int,
+    check_positive,
+    rng_from_seed,
+)
 from ...errors import ConvergenceError
 from ..core.status import FitStatus
 
@@ -247,7 +253,7 @@ def sample_posterior(
         ll = log_like(eps)
         return lp + ll, ll  # the log-likelihood as a blob: the sum of squares of sigma
 
-    rng = np.random.default_rng(seed)
+    rng = rng_from_seed("seed", seed)
     start = []
     while len(start) < n_walkers:
         p = eps0 + init_scale * np.maximum(np.abs(eps0), 1.0) * rng.standard_normal(n)

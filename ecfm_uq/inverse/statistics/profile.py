@@ -35,6 +35,7 @@ its (n_eps, 2) array; :func:`likelihood_ratio_test` tests a given :math:`\\epsil
 
 from __future__ import annotations
 
+import numbers
 import warnings
 from dataclasses import dataclass, field
 
@@ -42,6 +43,7 @@ import numpy as np
 from scipy import stats
 from scipy.interpolate import PchipInterpolator
 
+from ..._validation import check_int, check_level, describe
 from ...plotting import pyplot
 from ...threads import library_threads
 from ..core.convergence import at_bound, bounds_arrays
@@ -200,6 +202,9 @@ class ProfileSummary:
         True where the profile shows no evidence against its interval
         (:attr:`Profile.concerns`, listed in ``message``); False for a parameter not
         profiled. ``disagree`` is about the delta method, this is about the profile.
+    estimate : (n_eps,) ndarray or None
+        The estimate of the fit profiled (``result.eps``): a table of another fit refuses
+        these intervals.
     """
 
     level: float
@@ -211,6 +216,7 @@ class ProfileSummary:
     regions: dict = field(default_factory=dict)
     trusted: np.ndarray = None
     names: tuple = ()
+    estimate: np.ndarray = None
 
     def plot(self, ax=None, names=None):
         """One panel per profiled parameter (:meth:`Profile.plot`).
@@ -289,13 +295,31 @@ def _likelihood(result):
 
 
 def _check_level(level):
-    try:
-        level = float(level)
-    except (TypeError, ValueError):
-        raise TypeError(f"`level` must be a number in (0, 1), got {level!r}") from None
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"`level` must be in (0, 1) (e.g. 0.95), got {level}")
-    return level
+    return check_level("level", level)
+
+
+def _which(which, n, names):
+    """The indices of ``which`` (indices or parameter names), checked."""
+    if which is None:
+        return list(range(n))
+    items = [which] if isinstance(which, str | numbers.Integral) else list(np.ravel(which))
+    known = list(names) if names else []
+    out = []
+    for w in items:
+        if isinstance(w, str | np.str_):
+            if str(w) not in known:
+                raise ValueError(
+                    f"`which` names {str(w)!r}, not a parameter name; the names are "
+                    f"{known or 'not set (pass names= to the problem)'}; or pass indices"
+                )
+            out.append(known.index(str(w)))
+        elif isinstance(w, numbers.Integral) and not isinstance(w, bool):
+            if not 0 <= int(w) < n:
+                raise ValueError(f"`which` holds {int(w)}, not a parameter index in [0, {n})")
+            out.append(int(w))
+        else:
+            raise TypeError(f"`which` must hold parameter indices or names, got {describe(w)}")
+    return out
 
 
 def _bounds(result, bounds, n):
@@ -464,8 +488,8 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
         :mod:`ecfm_uq.inverse.statistics.loglik`): ``result.likelihood``.
     level : float
         Confidence level in (0, 1).
-    which : sequence of int, optional
-        Parameters to profile (default: all).
+    which : int, str or sequence of them, optional
+        Parameters to profile, by index or by name (``result.names``; default: all).
     bounds : sequence of (lo, hi), optional
         Where the profiles stop (default: the fit's ``bounds``; open otherwise).
     max_steps : int
@@ -489,12 +513,17 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
     like = _likelihood(result)
     level = _check_level(level)
     n = like.n_eps
-    which = list(range(n)) if which is None else [int(i) for i in np.atleast_1d(which)]
-    for i in which:
-        if not 0 <= i < n:
-            raise ValueError(f"`which` holds {i}, not a parameter index in [0, {n})")
+    which = _which(which, n, getattr(result, "names", None))
+    max_steps = check_int("max_steps", max_steps, minimum=1)
+    scan = check_int("scan", scan, minimum=0)
     bnds = _bounds(result, bounds, n)
     eps_hat = np.asarray(result.eps, dtype=float)
+    for i, (lo, hi) in enumerate(bnds):
+        if not lo <= eps_hat[i] <= hi:
+            raise ValueError(
+                f"`bounds[{i}]` = {(lo, hi)} excludes the estimate eps[{i}] = {eps_hat[i]:.6g}: "
+                "a profile starts at the estimate; widen the bounds to contain it"
+            )
     ell_hat, _ = like(eps_hat)
     if not np.isfinite(ell_hat):
         raise ValueError(
@@ -556,7 +585,7 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
     names = tuple(getattr(result, "names", None) or ())
     summary = ProfileSummary(
         level, intervals, delta_ci, profiles, disagree, "; ".join(notes), regions, trusted,
-        names if len(names) == n else (),
+        names if len(names) == n else (), np.array(result.eps, dtype=float),
     )  # fmt: skip
     return summary
 

@@ -318,8 +318,9 @@ def residual_verdict(e, v, sigma=None, alpha=DEFAULT_ALPHA, n_fitted=0, *, rtol=
     )  # fmt: skip
 
 
-def check_bounds(bounds, n_eps):
-    """Validate optimizer ``bounds``: ``n_eps`` pairs ``(lo, hi)`` of numbers or None.
+def check_bounds(bounds, n_eps, eps0=None):
+    """Validate optimizer ``bounds``: ``n_eps`` pairs ``(lo, hi)`` of numbers or None,
+    ``lo < hi``, and (given ``eps0``, a start of ``n_eps`` numbers) containing the start.
 
     Returns
     -------
@@ -345,7 +346,31 @@ def check_bounds(bounds, n_eps):
                 raise ValueError(f"`bounds[{m}]` must hold numbers or None, got {(lo, hi)}")
         if lo is not None and hi is not None and lo > hi:
             raise ValueError(f"`bounds[{m}]` has lo > hi: {(lo, hi)}; swap them")
+        if lo is not None and hi is not None and lo == hi:
+            raise ValueError(
+                f"`bounds[{m}]` has lo == hi == {lo}: a parameter fixed by its bounds is not "
+                "fitted; fix it inside the model and drop it from eps0, or widen the bounds"
+            )
+    start = _start(eps0, n_eps)
+    for m, (lo, hi) in enumerate(pairs if start is not None else ()):
+        if (lo is not None and start[m] < lo) or (hi is not None and start[m] > hi):
+            raise ValueError(
+                f"`eps0[{m}]` = {start[m]:g} lies outside `bounds[{m}]` = {(lo, hi)}: start "
+                "inside the bounds (move eps0 or widen the bounds)"
+            )
     return pairs
+
+
+def _start(eps0, n_eps):
+    """``eps0`` as a finite (n_eps,) array, or None when it is not one (its own checks,
+    downstream, name that)."""
+    if eps0 is None:
+        return None
+    try:
+        start = np.asarray(eps0, dtype=float).ravel()
+    except (TypeError, ValueError):
+        return None
+    return start if start.size == n_eps and np.all(np.isfinite(start)) else None
 
 
 def extreme_coefficients(system, eps, decades):
