@@ -477,9 +477,7 @@ class PolynomialChaosExpansion:
         component : int or tuple
             The output component drawn (``()`` for a scalar output).
         germ : bool
-            Draw :meth:`sobol_germ` (the indices of the independent chaos variables, for
-            dependent inputs such as a fit's ``uncertainty.to_inputs()``: variable k is the
-            part of input k not explained by inputs ``0..k-1``) instead of refusing.
+            Draw :meth:`sobol_germ` (dependent inputs, e.g. a fit's ``to_inputs()``).
 
         Returns
         -------
@@ -488,7 +486,7 @@ class PolynomialChaosExpansion:
         if names is None:
             names = self.inputs.names if self.inputs is not None else None
             names = names or [f"w{k}" for k in range(self.dim)]
-        if germ:
+        if germ:  # variable k: input k given inputs 0..k-1
             first, total = self.sobol_germ("first"), self.sobol_germ("total")
             names = [f"{n} | {', '.join(names[:k])}" if k else n for k, n in enumerate(names)]
         else:
