@@ -29,43 +29,19 @@ from __future__ import annotations
 
 import argparse
 import time
-from importlib import resources
 
 import numpy as np
 from scipy import optimize, stats
 from scipy.integrate import solve_ivp
 
+from ecfm_uq.datasets import lynx_hare
 from ecfm_uq.inverse import OdeProblem, fit, profile_likelihood
+from ecfm_uq.problems.lotka_volterra import initial_state as y0
+from ecfm_uq.problems.lotka_volterra import jac_eps, jac_y, rhs
 
 RTOL, ATOL = 1e-10, 1e-8
 START = np.array([0.55, 0.028, 0.024, 0.8, 30.0, 4.0])
 NAMES = ["a", "b", "c", "d", "hare0", "lynx0"]
-
-
-def lynx_hare():
-    """(years, (21, 2) hare and lynx pelts in thousands)."""
-    with resources.files("ecfm_uq").joinpath("data/lynx_hare.csv").open() as f:
-        d = np.loadtxt(f, delimiter=",", skiprows=1)
-    return d[:, 0], d[:, 1:]
-
-
-def rhs(t, y, e):
-    u, v = y[0], y[1]
-    return np.array([e[0] * u - e[1] * u * v, e[2] * u * v - e[3] * v])
-
-
-def jac_y(t, y, e):
-    u, v = y
-    return np.array([[e[0] - e[1] * v, -e[1] * u], [e[2] * v, e[2] * u - e[3]]])
-
-
-def jac_eps(t, y, e):
-    u, v = y
-    return np.array([[u, -u * v, 0, 0, 0, 0], [0, 0, u * v, -v, 0, 0]])
-
-
-def y0(e):
-    return e[4:6]
 
 
 def scipy_residual(t, data):

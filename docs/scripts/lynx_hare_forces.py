@@ -5,7 +5,6 @@ lacks. Writes docs/img/lynx_hare_forces.png.
 Run: ``python docs/scripts/lynx_hare_forces.py``.
 """
 
-from importlib import resources
 from pathlib import Path
 
 import matplotlib
@@ -14,28 +13,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ecfm_uq.datasets import lynx_hare  # noqa: E402
 from ecfm_uq.inverse import OdeProblem, fit  # noqa: E402
-
-
-def rhs(t, y, e):
-    u, v = y[0], y[1]
-    return np.array([e[0] * u - e[1] * u * v, e[2] * u * v - e[3] * v])
-
-
-def jac_y(t, y, e):
-    u, v = y
-    return np.array([[e[0] - e[1] * v, -e[1] * u], [e[2] * v, e[2] * u - e[3]]])
-
-
-def jac_eps(t, y, e):
-    u, v = y
-    return np.array([[u, -u * v, 0, 0, 0, 0], [0, 0, u * v, -v, 0, 0]])
+from ecfm_uq.problems.lotka_volterra import jac_eps, jac_y, rhs  # noqa: E402
 
 
 def main():
-    with resources.files("ecfm_uq").joinpath("data/lynx_hare.csv").open() as f:
-        d = np.loadtxt(f, delimiter=",", skiprows=1)
-    t, data = d[:, 0], d[:, 1:]
+    t, data = lynx_hare()
     problem = OdeProblem(rhs, lambda e: e[4:6], t, data, t0=1900, rtol=1e-10, atol=1e-8,
                          jac=(jac_y, jac_eps), names=["a", "b", "c", "d", "hare0", "lynx0"],
                          state_names=["hare", "lynx"])  # fmt: skip

@@ -10,30 +10,15 @@ from scipy.integrate import solve_ivp
 
 from ecfm_uq.inverse import ForceSeries, OdeProblem, OdeTrajectory, fit
 from ecfm_uq.inverse.formulations.ode_forces import ExactForces, forced_components
+from ecfm_uq.problems.lotka_volterra import initial_state as y0_of
+from ecfm_uq.problems.lotka_volterra import jac_eps as lv_jac_eps
+from ecfm_uq.problems.lotka_volterra import jac_y as lv_jac_y
+from ecfm_uq.problems.lotka_volterra import rhs as lv
 
 matplotlib.use("Agg")
 
 TRUTH = np.array([0.5, 0.025, 0.025, 0.8, 30.0, 4.0])
 JAC = None
-
-
-def lv(t, y, e):
-    u, v = y[0], y[1]
-    return np.array([e[0] * u - e[1] * u * v, e[2] * u * v - e[3] * v])
-
-
-def lv_jac_y(t, y, e):
-    u, v = y
-    return np.array([[e[0] - e[1] * v, -e[1] * u], [e[2] * v, e[2] * u - e[3]]])
-
-
-def lv_jac_eps(t, y, e):
-    u, v = y
-    return np.array([[u, -u * v, 0, 0, 0, 0], [0, 0, u * v, -v, 0, 0]])
-
-
-def y0_of(e):
-    return e[4:6]
 
 
 def simulate(times, eps=TRUTH, harvest=0.0, window=(5.0, 8.0), push=None):

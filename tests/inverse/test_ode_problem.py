@@ -7,26 +7,13 @@ from scipy import optimize
 from scipy.integrate import solve_ivp
 
 from ecfm_uq.inverse import OdeProblem, fit, profile_likelihood
+from ecfm_uq.problems.lotka_volterra import jac_eps as lv_jac_eps
+from ecfm_uq.problems.lotka_volterra import jac_y as lv_jac_y
+from ecfm_uq.problems.lotka_volterra import rhs as lv
 
 TRUTH = np.array([0.5, 0.025, 0.025, 0.8, 30.0, 4.0])
 T = np.arange(0.0, 16.0, 1.0)
 RTOL = 1e-10
-
-
-def lv(t, y, e):
-    u, v = y[0], y[1]
-    return np.array([e[0] * u - e[1] * u * v, e[2] * u * v - e[3] * v])
-
-
-def lv_jac_y(t, y, e):
-    u, v = y
-    return np.array([[e[0] - e[1] * v, -e[1] * u], [e[2] * v, e[2] * u - e[3]]])
-
-
-def lv_jac_eps(t, y, e):
-    u, v = y
-    z = np.zeros_like(u)
-    return np.array([[u, -u * v, z, z, z, z], [z, z, u * v, -v, z, z]])
 
 
 def y0_of(e):
