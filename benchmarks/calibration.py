@@ -27,10 +27,10 @@ Run: ``python benchmarks/calibration.py [--repeat 30]``.
 from __future__ import annotations
 
 import argparse
-import time
 
+import _scipy_peer as peer
 import numpy as np
-from scipy import optimize, stats
+from scipy import optimize
 
 from ecfm_uq.inverse import ModelProblem, fit, profile_likelihood
 
@@ -44,10 +44,7 @@ def model(e):
 
 
 def scipy_fit(y):
-    ls = optimize.least_squares(lambda e: model(e) - y, START)
-    n, p = y.size, START.size
-    cov = 2 * ls.cost / (n - p) * np.linalg.inv(ls.jac.T @ ls.jac)
-    return ls, np.sqrt(np.diag(cov))
+    return peer.scipy_fit(lambda e: model(e) - y, START)
 
 
 def curve_fit(y):
@@ -55,45 +52,7 @@ def curve_fit(y):
 
 
 def scipy_profile(y, ls, se, level=0.95):
-    """Profile-t intervals with scipy alone (Bates & Watts 1988, Sec. 6.1)."""
-    n, p = y.size, START.size
-    limit = 2 * ls.cost * (1 + stats.f.ppf(level, 1, n - p) / (n - p))
-    out = np.empty((p, 2))
-    for j in range(p):
-        free = [k for k in range(p) if k != j]
-        warm = {"x": ls.x[free]}
-
-        def rss(t, j=j, free=free, warm=warm):
-            def r(z):
-                e = np.empty(p)
-                e[j], e[free] = t, z
-                return model(e) - y
-
-            o = optimize.least_squares(r, warm["x"])
-            warm["x"] = o.x
-            return 2 * o.cost - limit
-
-        for k, d in enumerate((-1.0, 1.0)):
-            warm["x"] = ls.x[free]
-            b = ls.x[j] + d * 2 * se[j]
-            while rss(b) < 0:
-                b = ls.x[j] + 2 * (b - ls.x[j])
-            out[j, k] = optimize.brentq(rss, *sorted([ls.x[j], b]), xtol=1e-10)
-    return out
-
-
-def best_of(fns, repeat):
-    """Best time of each function over ``repeat`` rounds, the functions taking turns
-    within each round (a change of the machine's load hits both sides alike); returns
-    the best times and the last values."""
-    times = [[] for _ in fns]
-    values = [None] * len(fns)
-    for _ in range(repeat):
-        for k, fn in enumerate(fns):
-            t0 = time.perf_counter()
-            values[k] = fn()
-            times[k].append(time.perf_counter() - t0)
-    return [min(t) for t in times], values
+    return peer.scipy_profile(lambda e: model(e) - y, ls, se, level)
 
 
 def main(argv=None):
@@ -104,7 +63,7 @@ def main(argv=None):
     problem = ModelProblem(model, y)
     fit(problem, START)  # first call: imports
 
-    (t_fit, t_sp, t_cf), (res, (ls, se), (popt, pcov)) = best_of(
+    (t_fit, t_sp, t_cf), (res, (ls, se), (popt, pcov)) = peer.best_of(
         [lambda: fit(problem, START), lambda: scipy_fit(y), lambda: curve_fit(y)], args.repeat
     )
     print(f"estimates: ecfm_uq {res.eps.round(8)}, scipy {ls.x.round(8)}")
@@ -116,7 +75,7 @@ def main(argv=None):
           f"curve_fit {1e3 * t_cf:.2f} ms")  # fmt: skip
 
     rep = max(3, args.repeat // 5)
-    (t_prof, t_sprof), (summary, ref) = best_of(
+    (t_prof, t_sprof), (summary, ref) = peer.best_of(
         [lambda: profile_likelihood(res), lambda: scipy_profile(y, ls, se)], rep
     )
     width = ref[:, 1] - ref[:, 0]

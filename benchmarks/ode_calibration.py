@@ -28,10 +28,9 @@ Run: ``python benchmarks/ode_calibration.py [--repeat 3]``.
 from __future__ import annotations
 
 import argparse
-import time
 
+import _scipy_peer as peer
 import numpy as np
-from scipy import optimize, stats
 from scipy.integrate import solve_ivp
 
 from ecfm_uq.datasets import lynx_hare
@@ -54,51 +53,11 @@ def scipy_residual(t, data):
 
 
 def scipy_fit(t, data):
-    ls = optimize.least_squares(scipy_residual(t, data), START)
-    n, p = data.size, START.size
-    cov = 2 * ls.cost / (n - p) * np.linalg.inv(ls.jac.T @ ls.jac)
-    return ls, np.sqrt(np.diag(cov))
+    return peer.scipy_fit(scipy_residual(t, data), START)
 
 
 def scipy_profile(t, data, ls, se, level=0.95):
-    """Profile-t intervals with scipy alone (Bates & Watts 1988, Sec. 6.1)."""
-    n, p = data.size, START.size
-    limit = 2 * ls.cost * (1 + stats.f.ppf(level, 1, n - p) / (n - p))
-    res = scipy_residual(t, data)
-    out = np.empty((p, 2))
-    for j in range(p):
-        free = [k for k in range(p) if k != j]
-        warm = {"x": ls.x[free]}
-
-        def rss(val, j=j, free=free, warm=warm):
-            def r(z):
-                e = np.empty(p)
-                e[j], e[free] = val, z
-                return res(e)
-
-            o = optimize.least_squares(r, warm["x"])
-            warm["x"] = o.x
-            return 2 * o.cost - limit
-
-        for k, d in enumerate((-1.0, 1.0)):
-            warm["x"] = ls.x[free]
-            b = ls.x[j] + d * 2 * se[j]
-            while rss(b) < 0:
-                b = ls.x[j] + 2 * (b - ls.x[j])
-            out[j, k] = optimize.brentq(rss, *sorted([ls.x[j], b]), xtol=1e-10)
-    return out
-
-
-def best_of(fns, repeat):
-    """Best time of each function over ``repeat`` rounds, taking turns; the last values."""
-    times = [[] for _ in fns]
-    values = [None] * len(fns)
-    for _ in range(repeat):
-        for k, fn in enumerate(fns):
-            t0 = time.perf_counter()
-            values[k] = fn()
-            times[k].append(time.perf_counter() - t0)
-    return [min(t) for t in times], values
+    return peer.scipy_profile(scipy_residual(t, data), ls, se, level)
 
 
 def main(argv=None):
@@ -113,7 +72,7 @@ def main(argv=None):
                              names=NAMES)  # fmt: skip
     fit(problem, START)  # first call: imports
 
-    (t_fit, t_sp, t_fd), (res, (ls, se), res_fd) = best_of(
+    (t_fit, t_sp, t_fd), (res, (ls, se), res_fd) = peer.best_of(
         [lambda: fit(problem, START), lambda: scipy_fit(t, data),
          lambda: fit(differenced, START)], args.repeat,
     )  # fmt: skip
@@ -133,7 +92,7 @@ def main(argv=None):
     print(f"ode differenced-fit/scipy time ratio: {t_fd / t_sp:.2f}")
     if args.no_profile:
         return
-    (t_prof, t_sprof), (summary, ref) = best_of(
+    (t_prof, t_sprof), (summary, ref) = peer.best_of(
         [lambda: profile_likelihood(res), lambda: scipy_profile(t, data, ls, se)], 1
     )
     width = ref[:, 1] - ref[:, 0]

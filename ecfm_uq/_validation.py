@@ -217,8 +217,10 @@ def as_model_output(value, *, name, at, shape=None, complex_ok=False):
         The return value.
     name : str
         The function's argument name (``"model"``, ``"fn"``, ``"jac"``).
-    at : str
-        Where it was called (``"at eps=[1. 2.]"``, ``"at sample 3 (x=[...])"``).
+    at : str or callable
+        Where it was called (``"at eps=[1. 2.]"``, ``"at sample 3 (x=[...])"``), or a
+        function of no argument returning it (formatted only for a message: an array's
+        text costs more than the call it describes).
     shape : tuple, optional
         The shape required (the data's); a return whose shape differs only by axes of
         length 1 is accepted (and reshaped), any other shape refused.
@@ -232,10 +234,13 @@ def as_model_output(value, *, name, at, shape=None, complex_ok=False):
     ValueError
         The wrong shape.
     """
-    where = f"`{name}` {at}"
+
+    def where():
+        return f"`{name}` {at() if callable(at) else at}"
+
     if value is None:
         raise TypeError(
-            f"{where} returned None; `{name}` must return its values (did it forget `return`?)"
+            f"{where()} returned None; `{name}` must return its values (did it forget `return`?)"
         )
     if (
         isinstance(value, tuple)
@@ -243,19 +248,19 @@ def as_model_output(value, *, name, at, shape=None, complex_ok=False):
         and any(isinstance(v, np.ndarray | list | tuple | str | dict) or v is None for v in value)
     ):
         raise TypeError(
-            f"{where} returned a tuple of {len(value)} items ({describe(value)}); return one "
+            f"{where()} returned a tuple of {len(value)} items ({describe(value)}); return one "
             "array of values, not (values, extra)"
         )
     try:
         arr = np.array(value, copy=True)
     except (TypeError, ValueError) as e:
-        raise TypeError(f"{where} returned {describe(value)}, not an array of numbers") from e
+        raise TypeError(f"{where()} returned {describe(value)}, not an array of numbers") from e
     if arr.dtype == object or arr.dtype.kind not in "biufc":
-        raise TypeError(f"{where} returned {describe(value)}, not an array of numbers")
+        raise TypeError(f"{where()} returned {describe(value)}, not an array of numbers")
     if arr.dtype.kind == "c":
         if not complex_ok:
             raise TypeError(
-                f"{where} returned complex values (dtype {arr.dtype}); `{name}` must return "
+                f"{where()} returned complex values (dtype {arr.dtype}); `{name}` must return "
                 "real numbers: take .real only if the imaginary part is meant to be zero"
             )
     else:
@@ -264,7 +269,7 @@ def as_model_output(value, *, name, at, shape=None, complex_ok=False):
         squeezed = tuple(s for s in arr.shape if s != 1) == tuple(s for s in shape if s != 1)
         if not squeezed or arr.size != math.prod(shape):
             raise ValueError(
-                f"{where} returned shape {arr.shape}; the data have shape {tuple(shape)}: "
+                f"{where()} returned shape {arr.shape}; the data have shape {tuple(shape)}: "
                 f"return one value per observation, in the data's shape"
                 + (
                     f" (reshape a flat prediction: y.reshape{tuple(shape)})"

@@ -24,7 +24,13 @@ from ._validation import as_finite_array, as_model_output, check_int
 from .errors import ModelEvaluationError
 from .memory import check_allocation
 
-__all__ = ["NonFiniteOutputError", "evaluate_samples", "output_array_bytes"]
+__all__ = ["CallerWrapped", "NonFiniteOutputError", "evaluate_samples", "output_array_bytes"]
+
+
+class CallerWrapped(Exception):  # noqa: N818 (a marker, not an error of its own)
+    """Base of a failure a caller's own wrapper of ``fn`` already reports with its sample
+    (e.g. :func:`ecfm_uq.mc.verify`): passed through as it is, not wrapped again."""
+
 
 # Outputs handed to a consumer (not stored) travel in chunks of at most this many bytes.
 STREAM_CHUNK_BYTES = 2**20
@@ -70,11 +76,16 @@ def _evaluate_chunk(fn, part, name="fn"):
     offset, chunk = part
     outs = []
     for j, s in enumerate(chunk):
-        at = f"at sample {offset + j} (x={_point(s)})"
+
+        def at(j=j, s=s):
+            return f"at sample {offset + j} (x={_point(s)})"
+
         try:
             out = fn(s)
+        except CallerWrapped:
+            raise
         except Exception as e:  # a user callback: name the call and the sample
-            raise _user_error(e, name, at, False) from e
+            raise _user_error(e, name, at(), False) from e
         outs.append(as_model_output(out, name=name, at=at))
     shapes = {o.shape for o in outs}
     if len(shapes) > 1:
@@ -86,11 +97,16 @@ def _evaluate_batch(fn, part, name="fn"):
     """Evaluate a vectorized ``fn`` on a whole chunk, ``part = (offset, chunk)``:
     ``fn(chunk)`` of shape (len(chunk), ...)."""
     offset, chunk = part
-    at = f"at samples {offset}..{offset + len(chunk) - 1} (x={_point(chunk[0])}, ...)"
+
+    def at():
+        return f"at samples {offset}..{offset + len(chunk) - 1} (x={_point(chunk[0])}, ...)"
+
     try:
         out = fn(chunk)
+    except CallerWrapped:
+        raise
     except Exception as e:  # a user callback: name the call and the points
-        raise _user_error(e, name, at, True) from e
+        raise _user_error(e, name, at(), True) from e
     out = as_model_output(out, name=name, at=at)
     if out.ndim == 0 or out.shape[0] != len(chunk):
         raise ValueError(

@@ -29,7 +29,7 @@ import numpy as np
 from .._validation import as_finite_array, check_int
 from ..chaos.inputs import as_inputs, draw_germs
 from ..chaos.pce import PolynomialChaosExpansion
-from ..executor import NonFiniteOutputError
+from ..executor import CallerWrapped, NonFiniteOutputError
 from ..plotting import pyplot
 from .sampling import batch_errors, loglog_slope, mc_moments, monte_carlo, relative_error
 
@@ -41,7 +41,7 @@ _PARITY_POINTS = 20_000
 _SUMMARY_ROWS = 12
 
 
-class _SampleFailure(Exception):
+class _SampleFailure(CallerWrapped):
     """The model raised at one sample (carried out of a worker process with its index)."""
 
     def __init__(self, index, original):

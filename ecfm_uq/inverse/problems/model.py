@@ -123,7 +123,9 @@ class ModelProblem(InverseProblem):
                 ) from e
             raise ModelEvaluationError(msg) from e
         cs = self.jac == "cs"  # a model for complex steps may hand back a complex array
-        y = as_model_output(y, name="model", at=_at(eps), shape=self.shape, complex_ok=cs).ravel()
+        y = as_model_output(
+            y, name="model", at=lambda: _at(eps), shape=self.shape, complex_ok=cs
+        ).ravel()
         if cs and np.iscomplexobj(y):
             if np.any(y.imag != 0):
                 raise TypeError(
@@ -171,7 +173,7 @@ class ModelProblem(InverseProblem):
                 f"{type(e).__name__}: {e}; jac='cs' needs a model written for complex "
                 "parameters (no abs, no comparisons, no float()); use jac='3-point'"
             ) from e
-        y = as_model_output(out, name="model", at=_at(z), complex_ok=True)
+        y = as_model_output(out, name="model", at=lambda: _at(z), complex_ok=True)
         if not np.iscomplexobj(y):
             raise ValueError(
                 "jac='cs': `model` dropped the imaginary part of complex parameters (it "
@@ -212,7 +214,7 @@ class ModelProblem(InverseProblem):
                 f"take the 1-D array of the {p} parameters and return the "
                 f"({self.v.size}, {p}) derivative of the predictions"
             ) from e
-        J = as_model_output(out, name="jac", at=_at(eps))
+        J = as_model_output(out, name="jac", at=lambda: _at(eps))
         if J.shape not in ((self.v.size, p), (*self.shape, p)):
             raise ValueError(
                 f"{_describe_call('jac', eps)} returned shape {J.shape}; expected "
