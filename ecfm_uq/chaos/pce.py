@@ -261,7 +261,8 @@ class PolynomialChaosExpansion:
 
     @property
     def variance(self):
-        """:math:`\\operatorname{Var}[y] = \\sum_{k\\ge1} c_k^2 n_k`, shape ``output_shape``."""
+        """:math:`\\operatorname{Var}[y] = \\sum_{k\\ge1} c_k^2 n_k` (``output_shape``); refused on an input of infinite variance."""
+        self._check_finite_variance(np.asarray(self.basis.indices) > 0)
         return self._contributions().sum(axis=0).reshape(self.output_shape)
 
     @property
@@ -342,10 +343,9 @@ class PolynomialChaosExpansion:
             if used[k] and not m.finite_variance:
                 raise ValueError(
                     f"input {self.inputs.names[k]!r} ({m!r}) has no finite variance, so the "
-                    "output's variance may not exist and its Sobol indices with it; the "
-                    "expansion only has the variance of its truncated polynomial. If the "
-                    f"model is bounded in {self.inputs.names[k]!r}, read the indices of the "
-                    "germ: PolynomialChaosExpansion(pce.basis, pce.coefficients).first_order()"
+                    "output's variance (and its Sobol indices) may not exist: the expansion "
+                    "has only its truncated polynomial's. If the model is bounded in it, use "
+                    "the germ's: PolynomialChaosExpansion(pce.basis, pce.coefficients)"
                 )
 
     def sobol_germ(self, kind="first", zero_variance="raise"):

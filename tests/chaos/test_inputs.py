@@ -389,3 +389,18 @@ def test_sobol_indices_of_an_output_without_finite_variance_are_refused_naming_t
     # an output that does not depend on the heavy-tailed input keeps its indices
     pce2 = fit_pce(lambda x: x[0] ** 2, Inputs(laws), "quadrature", order=3)
     np.testing.assert_allclose(pce2.first_order(), [1.0, 0.0], atol=1e-12)
+
+
+def test_variance_of_an_output_on_an_input_without_finite_variance_is_refused():
+    """x0 + x1 with x1 ~ t(2) has no finite variance: the expansion's truncated variance
+    (a finite number) is refused rather than reported (issue 39); an output that does not
+    depend on the heavy-tailed input keeps its variance, Var[x0^2] = 2."""
+    laws = [stats.norm(), stats.t(2.0)]
+    pce = fit_pce(lambda x: x[0] + x[1], Inputs(laws, names=["a", "heavy"]), "quadrature", order=3)
+    with pytest.raises(ValueError, match="input 'heavy'.*no finite variance"):
+        _ = pce.variance
+    with pytest.raises(ValueError, match="input 'heavy'"):
+        _ = pce.std
+    assert pce.mean == pytest.approx(0.0, abs=1e-12)
+    pce2 = fit_pce(lambda x: x[0] ** 2, Inputs(laws), "quadrature", order=3)
+    assert pce2.variance == pytest.approx(2.0, rel=1e-12)
