@@ -80,7 +80,7 @@ def test_uncertainty_page_example_runs_and_reports_intervals():
     ns = {}
     exec(compile(blocks[0], "uncertainty.md", "exec"), ns)
     res = ns["res"]  # the ECFM fit, last in the loop
-    assert res.success and res.uncertainty.noise_model == "known" and res.method == "ecfm"
+    assert res.success and res.uncertainty.noise_model == "known" and res.formulation == "ecfm"
     np.testing.assert_allclose(
         res.uncertainty.stderr, np.sqrt(np.diag(res.uncertainty.cov)), rtol=1e-12
     )

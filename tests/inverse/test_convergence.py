@@ -121,7 +121,7 @@ def test_budget_spent_is_max_iterations():
     res = fit(SteadyProblem(system, M_OBS, v), [2.0], maxiter=2)
     assert res.status is FitStatus.MAX_ITERATIONS and not res.success
     full = fit(SteadyProblem(system, M_OBS, v), [2.0])
-    assert full.success and full.optimality <= OFFSET_TOL and full.optimizer == "least-squares"
+    assert full.success and full.optimality <= OFFSET_TOL and full.method == "least-squares"
 
 
 def two_parameter_model():
@@ -193,7 +193,7 @@ def test_twenty_adam_epochs_are_not_a_success(burgers, formulation):
 @pytest.mark.parametrize("formulation", ["standard", "ecfm"])
 def test_the_dynamic_default_converges(burgers, formulation):
     res = fit(burgers(), [1.0, 0.2], formulation=formulation)
-    assert res.optimizer == "least-squares"
+    assert res.method == "least-squares"
     assert res.success, res.message
     np.testing.assert_allclose(res.eps, [1.75, 1.0], rtol=1e-8)
 
@@ -291,7 +291,7 @@ def test_all_at_once_status_comes_from_the_kkt_conditions():
     assert "KKT" in stopped.message or "infeasible" in stopped.message
     done = fit(problem, [0.0, 1.0], method="all-at-once")
     assert done.status is FitStatus.CONVERGED, done.message
-    assert done.optimality <= KKT_TOL and done.optimizer == "SLSQP"
+    assert done.optimality <= KKT_TOL and done.method == "SLSQP"
     reduced = fit(problem, [0.0, 1.0])
     np.testing.assert_allclose(done.eps, reduced.eps, rtol=1e-5)
 

@@ -111,7 +111,7 @@ def test_one_call_shape_for_dynamic_and_replicated_problems():
     assert res.forces.shape == (m.n_steps + 1, m.M_obs.shape[0]) and res.state is None
     check_extra_documented(res)
     adam = fit(dyn, [1.6, 0.8], method="adam", maxiter=3, options={"lr": 1e-2})
-    assert adam.optimizer == "adam" and adam.nit == 3
+    assert adam.method == "adam" and adam.nit == 3
     check_extra_documented(adam)
 
     beam = BeamModel()

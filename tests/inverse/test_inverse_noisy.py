@@ -93,7 +93,7 @@ def test_standard_matches_closed_form_least_squares():
     f_ls = 0.5 * np.sum((G @ eps_ls - v) ** 2)
     res = fit(SteadyProblem(system, M_obs, v), np.zeros(3), method="all-at-once")
     assert res.success, res.message
-    assert res.method == "standard-slsqp" and res.nit > 0
+    assert res.formulation == "standard-slsqp" and res.nit > 0
     # SLSQP stops when the objective changes by less than its ftol (1e-12 by default)
     assert -1e-14 < res.loss - f_ls < 1e-12
     # with a tighter ftol the parameters reach the closed form as closely as the loss can

@@ -206,7 +206,7 @@ def test_standard_estimate_is_the_scalar_maximum_likelihood(linear):
         ReplicatedProblem(system, M_OBS, v), [0.5], formulation="standard", bounds=[(0.0, 1.4)]
     )
     assert res.success, res.message
-    assert res.method == "likelihood-standard"
+    assert res.formulation == "likelihood-standard"
     assert res.eps[0] == pytest.approx(ref.x, abs=1e-7)
     assert res.extra["force_norm"] == 0.0
     assert res.loss == pytest.approx(ref.fun, rel=1e-12)
@@ -283,7 +283,7 @@ def test_penalty_form_runs_slsqp_and_reports(linear):
     res = fit(
         ReplicatedProblem(system, M_OBS, v), [0.5], formulation="penalty", bounds=[(0.0, 1.4)]
     )
-    assert res.method == "likelihood-penalty"
+    assert res.formulation == "likelihood-penalty"
     assert isinstance(res.success, bool) and res.message
     assert res.extra["penalty"] == 100.0
     std = fit(

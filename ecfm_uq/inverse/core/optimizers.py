@@ -35,7 +35,7 @@ def adam(
     betas=(0.9, 0.999),
     eps_hat=1e-8,
     *,
-    method="adam",
+    formulation="adam",
     callback=None,
 ):
     """Minimize ``fun_and_grad`` with Adam for a fixed number of epochs.
@@ -56,8 +56,8 @@ def adam(
         Decay rates :math:`(\\beta_1, \\beta_2)`, each in [0, 1).
     eps_hat : float
         :math:`\\hat\\varepsilon` in the denominator.
-    method : str
-        Label stored in the result (e.g. ``"standard"`` or ``"ecfm"``).
+    formulation : str
+        Label stored in the result (``result.formulation``) (e.g. ``"standard"`` or ``"ecfm"``).
     callback : callable, optional
         ``callback(epoch, x, f, g)`` after each evaluation (epoch 0 is the start).
 
@@ -120,7 +120,9 @@ def adam(
         x = x - lr * mhat / (np.sqrt(vhat) + eps_hat)
 
     if not xs:
-        raise ConvergenceError(f"{method}: the objective fails at the starting point: {message}")
+        raise ConvergenceError(
+            f"{formulation}: the objective fails at the starting point: {message}"
+        )
     if success:
         message += f"; final |grad| = {np.linalg.norm(gs[-1]):.3e}"
     return InverseResult(
@@ -131,8 +133,8 @@ def adam(
         nit=len(xs) - 1,
         nfev=len(xs) + (not success),
         njev=len(xs) + (not success),
-        optimizer="adam",
-        method=method,
+        formulation=formulation,
+        method="adam",
         eps_history=np.array(xs),
         loss_history=np.array(fs),
         extra={"grad": gs[-1], "grad_history": np.array(gs)},

@@ -268,11 +268,11 @@ class InverseResult:
     optimality : float or None
         The measured first-order optimality at ``eps`` (unit-free; see
         :mod:`ecfm_uq.inverse.core.convergence`), when measured.
-    method : str
+    formulation : str
         Label of the formulation that ran (``"standard"``, ``"ecfm"``, ``"noisy-ecfm"``,
         ``"likelihood-inner-outer"``, ...).
-    optimizer : str
-        The optimizer that ran (``"BFGS"``, ``"adam"``, ``"SLSQP"``, ...).
+    method : str
+        The optimizer that ran (what ``fit(method=)`` took, or the default chosen) (``"BFGS"``, ``"adam"``, ``"SLSQP"``, ...).
     eps_history : (nit + 1, n_eps) ndarray
     loss_history : (nit + 1,) ndarray
     state : ndarray or None
@@ -394,8 +394,8 @@ class InverseResult:
     nfev: int = 0
     njev: int = 0
     optimality: float | None = None
+    formulation: str = ""
     method: str = ""
-    optimizer: str = ""
     eps_history: np.ndarray = field(default_factory=_empty_history)
     loss_history: np.ndarray = field(default_factory=lambda: np.zeros(0))
     state: np.ndarray | None = None
@@ -440,7 +440,7 @@ class InverseResult:
     def __repr__(self):
         consistent = None if self.verdict is None else self.verdict.consistent
         return (
-            f"<InverseResult {self.method} {self.status.name}: eps="
+            f"<InverseResult {self.formulation} {self.status.name}: eps="
             f"{np.array2string(self.eps, precision=6)}, consistent={consistent}>"
         )
 

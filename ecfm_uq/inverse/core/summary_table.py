@@ -69,7 +69,7 @@ def summary_table(result, level=0.95, profile=None):
         lo, hi, kind = _interval(result, level, j, profile)
         rows.append((names[j], _num(result.eps[j]), _num(se[j]), f"[{_num(lo)}, {_num(hi)}]", kind))
     widths = [max(len(r[c]) for r in rows) for c in range(5)]
-    lines = [f"{result.method or 'fit'} fit ({result.optimizer or 'optimizer'})"]
+    lines = [f"{result.formulation or 'fit'} fit ({result.method or 'optimizer'})"]
     rule = "-" * (sum(widths) + 8)
     lines.append(rule)
     for k, r in enumerate(rows):

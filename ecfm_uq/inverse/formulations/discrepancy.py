@@ -581,8 +581,8 @@ def fit_random_force(problem, eps0, s):
     return InverseResult(
         eps=eps, loss=val, status=status, message=message,
         nit=standard.nit + res.nit, nfev=standard.nfev + search.nfev,
-        njev=standard.njev + res.njev, optimality=optimality, method="ecfm",
-        optimizer="L-BFGS-B", forces=lam, uncertainty=unc, verdict=verdict,
+        njev=standard.njev + res.njev, optimality=optimality, formulation="ecfm-random",
+        method="L-BFGS-B", forces=lam, uncertainty=unc, verdict=verdict,
         likelihood=like, interval_likelihood=interval_likelihood, extra=extra,
     )  # fmt: skip
 

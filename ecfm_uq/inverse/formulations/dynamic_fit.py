@@ -82,7 +82,7 @@ def _failed_at_start(problem, eps0, s, error):
     message = f"fit not started: {error}; start from parameters where the model can be marched"
     return InverseResult(
         eps=eps0, loss=np.inf, status=FitStatus.MODEL_FAILURE, message=message,
-        method=s.formulation, optimizer=s.method,
+        formulation=s.formulation, method=s.method,
         uncertainty=Uncertainty.failed("not computed: the fit did not start"),
         verdict=Verdict(None, message=message),
         extra={"steps": dict(n_steps=None, met=False, message=str(error))},
@@ -128,7 +128,7 @@ def _fit_dynamic(problem, eps0, s):
             epochs=_ADAM_EPOCHS if s.maxiter is None else s.maxiter,
             betas=opts["betas"],
             eps_hat=opts["eps_hat"],
-            method=formulation,
+            formulation=formulation,
             callback=opts["callback"],
         )
         traj = None
@@ -180,10 +180,10 @@ def _fit_dynamic(problem, eps0, s):
     return dataclasses.replace(res, verdict=verdict)
 
 
-def _result(out, formulation, optimizer):
+def _result(out, formulation, method):
     return InverseResult(
         eps=out.x, loss=out.loss, status=out.status, message=out.message, nit=out.nit,
-        nfev=out.nfev, njev=out.nfev, method=formulation, optimizer=optimizer,
+        nfev=out.nfev, njev=out.nfev, formulation=formulation, method=method,
         eps_history=out.eps_history, loss_history=out.loss_history,
         optimality=out.optimality,
     )  # fmt: skip

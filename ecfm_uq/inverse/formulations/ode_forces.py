@@ -317,7 +317,7 @@ def fit_ode_ecfm(problem, eps0, s):
         out = least_squares_scaled(residual, eps0, bounds, s.tol, maxiter, options)
     except ConvergenceError as e:
         raise ConvergenceError(f"fit: {e}") from e
-    common = dict(method="ecfm", optimizer="least-squares", bounds=bounds, names=problem.names,
+    common = dict(formulation="ecfm", method="least-squares", bounds=bounds, names=problem.names,
                   likelihood=no_likelihood("ecfm"), nit=out.nit, nfev=out.nfev,
                   eps_history=out.eps_history, loss_history=out.loss_history)  # fmt: skip
     if out.payload is None:

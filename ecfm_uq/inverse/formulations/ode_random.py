@@ -186,8 +186,8 @@ def fit_ode_random(problem, eps0, s):
                      details={"tau": tau, "lrt": lrt})  # fmt: skip
     return InverseResult(
         eps=out.x, loss=out.loss, status=out.status, message=out.message, nit=out.nit,
-        nfev=out.nfev, njev=out.nit, optimality=out.optimality, method="ecfm-random",
-        optimizer="least-squares", eps_history=out.eps_history,
+        nfev=out.nfev, njev=out.nit, optimality=out.optimality, formulation="ecfm-random",
+        method="least-squares", eps_history=out.eps_history,
         loss_history=out.loss_history, state=traj, forces=series, uncertainty=unc,
         verdict=verdict, likelihood=no_likelihood("ecfm-random"), bounds=bounds,
         names=problem.names,

@@ -201,7 +201,7 @@ def fit_steady_problem(problem, eps0, s):
     if out.payload is None:  # the optimizer stopped where the model fails
         return InverseResult(
             eps=out.x, loss=np.inf, message=out.message, nit=out.nit, nfev=out.nfev,
-            status=out.status, method=s.formulation, optimizer=method, optimality=out.optimality,
+            status=out.status, formulation=s.formulation, method=method, optimality=out.optimality,
             eps_history=out.eps_history, loss_history=out.loss_history,
             verdict=Verdict(False, test="none", message=f"NOT consistent: {out.final_error}"),
         )  # fmt: skip
@@ -233,8 +233,8 @@ def fit_steady_problem(problem, eps0, s):
         nfev=out.nfev,
         njev=out.nfev,
         optimality=out.optimality,
-        method=s.formulation,
-        optimizer=method,
+        formulation=s.formulation,
+        method=method,
         eps_history=out.eps_history,
         loss_history=out.loss_history,
         state=sol.Theta,

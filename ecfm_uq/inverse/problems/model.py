@@ -380,7 +380,7 @@ def fit_model_problem(problem, eps0, s):
     if out.payload is None or out.jacobian is None:
         return InverseResult(
             eps=out.x, loss=np.inf, message=out.message, nit=out.nit, nfev=out.nfev,
-            status=out.status, method="standard", optimizer="least-squares",
+            status=out.status, formulation="standard", method="least-squares",
             eps_history=out.eps_history, loss_history=out.loss_history,
             verdict=model_verdict(None, None, noise, p, bounds, out.x, failed=out.message),
             likelihood=likelihood, bounds=bounds, names=problem.names,
@@ -417,8 +417,8 @@ def fit_model_problem(problem, eps0, s):
         )
     return InverseResult(
         eps=out.x, loss=out.loss, status=out.status, message=message, nit=out.nit,
-        nfev=out.nfev, njev=out.nit, optimality=out.optimality, method="standard",
-        optimizer="least-squares", eps_history=out.eps_history,
+        nfev=out.nfev, njev=out.nit, optimality=out.optimality, formulation="standard",
+        method="least-squares", eps_history=out.eps_history,
         loss_history=out.loss_history, extra={"prediction": y.reshape(problem.shape)},
         uncertainty=unc, verdict=verdict, likelihood=likelihood, bounds=bounds,
         names=problem.names, problem=problem,

@@ -566,4 +566,4 @@ def fit_ode_standard(problem, eps0, s):
     except ConvergenceError:
         state = None
     extra = dict(res.extra, prediction=pred, n_missing=problem.n_missing)
-    return dataclasses.replace(res, state=state, extra=extra, method="standard")
+    return dataclasses.replace(res, state=state, extra=extra, formulation="standard")

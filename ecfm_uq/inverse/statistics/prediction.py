@@ -243,7 +243,7 @@ def _quantity(result, g):
         if problem is None or not hasattr(problem, "predict"):
             raise ValueError(
                 "predict(g=None) predicts the data of a fitted ModelProblem, and this "
-                f"result ({result.method}) is not one's; pass `g`, a callable eps -> the "
+                f"result ({result.formulation}) is not one's; pass `g`, a callable eps -> the "
                 "quantity of interest (e.g. the sensors' mean of a solve at eps)"
             )
         return (lambda e: problem.predict(e, first=True)), problem.shape, True
