@@ -78,6 +78,7 @@ __all__ = [
     "XTOL",
     "Optimality",
     "decide_status",
+    "minimize_optimality",
     "gradient_optimality",
     "kkt_optimality",
     "least_squares_optimality",
@@ -393,9 +394,73 @@ def scaled_gradient_optimality(g, x=None, bounds=None, *, tol=SCALED_GRADIENT_TO
                       f"gradient {value:.1e} {rel} {tol:.0e} in standard-error units")  # fmt: skip
 
 
-def decide_status(opt, exhausted):
-    """:class:`FitStatus` from an :class:`Optimality`: CONVERGED when it holds, else
-    MAX_ITERATIONS when the optimizer's budget ran out (``exhausted``), else STALLED."""
+def minimize_optimality(g, x, z, scale, gtol, bounds, *, precise=True):
+    r"""First-order optimality of :func:`~ecfm_uq.inverse.core.drivers.minimize_scaled`'s (or :func:`~ecfm_uq.inverse.core.optimizers.adam`'s) objective at its returned point.
+
+    Converged when the gradient of the scaled objective :math:`z/z(\epsilon_0)`, the
+    components at an active bound left out, is at most ``gtol`` (max norm); or, with
+    ``precise`` (no inner solve failed), when ``z`` is at round-off zero (both objectives
+    are >= 0: a global minimum) or when a relative change of ``eps`` would change ``z`` by
+    less than 1e-6 relative (the round-off limit of misspecified data, :math:`z^* > 0`).
+
+    Parameters
+    ----------
+    g : (n,) ndarray
+        Gradient of ``z`` at ``x``.
+    x : (n,) ndarray
+    z : float
+    scale : float
+        :math:`z(\epsilon_0)` (1 when that is 0).
+    gtol : float
+    bounds : list of (lo, hi) or None
+    precise : bool, optional
+
+    Returns
+    -------
+    Optimality
+        ``test`` is ``"relative gradient"``, ``"round-off zero"`` or ``"round-off limit"``.
+    """
+    g = np.asarray(g, dtype=float)
+    if not np.all(np.isfinite(g)) or not np.isfinite(z):
+        return Optimality(False, np.inf, "relative gradient", gtol, "non-finite gradient")
+    free = g if bounds is None else g[~active_bounds(np.asarray(x, dtype=float), g, bounds)]
+    value = float(np.max(np.abs(free), initial=0.0)) / scale
+    if value <= gtol:
+        return Optimality(True, value, "relative gradient", gtol,
+                          f"relative gradient {value:.1e} <= {gtol:.0e}")  # fmt: skip
+    rel_opt = float(np.linalg.norm(g) * max(np.linalg.norm(x), 1.0) / max(z, 1e-300))
+    if precise and z <= 1e-20 * scale:
+        return Optimality(True, rel_opt, "round-off zero", gtol,
+                          "objective at round-off zero: global minimum")  # fmt: skip
+    if precise and rel_opt <= 1e-6:
+        return Optimality(True, rel_opt, "round-off limit", 1e-6,
+                          f"stopped at the round-off limit; relative optimality {rel_opt:.1e}")  # fmt: skip
+    return Optimality(False, value, "relative gradient", gtol,
+                      f"relative gradient {value:.1e} > {gtol:.0e}")  # fmt: skip
+
+
+def decide_status(opt, exhausted, failure=None):
+    """The one status decision of every fit, from what was measured.
+
+    Parameters
+    ----------
+    opt : Optimality or None
+        The optimality conditions measured at the returned point (``None`` when they
+        could not be measured: the model fails there).
+    exhausted : bool
+        Whether the optimizer's budget ran out.
+    failure : Exception, str or None
+        A model failure measured at the returned point (the model cannot be solved
+        there), or ``None``.
+
+    Returns
+    -------
+    FitStatus
+        MODEL_FAILURE when ``failure`` is given (or nothing was measured), else CONVERGED
+        when ``opt`` holds, else MAX_ITERATIONS when ``exhausted``, else STALLED.
+    """
+    if failure is not None or opt is None:
+        return FitStatus.MODEL_FAILURE
     if opt.converged:
         return FitStatus.CONVERGED
     return FitStatus.MAX_ITERATIONS if exhausted else FitStatus.STALLED

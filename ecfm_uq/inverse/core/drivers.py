@@ -22,6 +22,7 @@ from .convergence import (
     bounds_arrays,
     decide_status,
     least_squares_optimality,
+    minimize_optimality,
     polish_least_squares,
 )
 from .status import FitStatus
@@ -82,13 +83,20 @@ def check_minimize_method(method):
 
 @dataclass
 class Outcome:
-    """What a driver did: the final point, how it stopped, the path and the failures."""
+    """What a driver did: the final point, what was measured there, the path and the
+    failures.
+
+    ``status`` is :func:`~ecfm_uq.inverse.core.convergence.decide_status` of what was
+    measured (``None`` until :func:`verify_least_squares` measures it); ``exhausted`` is
+    whether the optimizer's budget ran out; ``claimed`` is the optimizer's own stopping
+    claim, kept only for the message (it never decides the status).
+    """
 
     x: np.ndarray
     loss: float
     grad: np.ndarray | None
     payload: object
-    status: FitStatus
+    status: FitStatus | None
     message: str
     nit: int
     nfev: int
@@ -101,6 +109,8 @@ class Outcome:
     #: caller for the standard errors: no second Jacobian)
     residual: np.ndarray | None = None
     jacobian: np.ndarray | None = None
+    exhausted: bool = False
+    claimed: bool = False
 
     @property
     def success(self):
@@ -111,10 +121,8 @@ def minimize_scaled(evaluate, eps0, method, bounds, gtol, maxiter, options):
     """``scipy.optimize.minimize`` on the objective divided by its value at ``eps0``.
 
     Dividing by :math:`z(\\epsilon_0)` makes ``gtol`` relative (the tolerance does not
-    depend on the data's units). A stop on "precision loss" (status 2) counts as
-    converged when the objective is at round-off zero (a global minimum of a
-    non-negative objective) or when a relative change of ``eps`` would change ``z`` by
-    less than 1e-6 relative.
+    depend on the data's units). The status is decided from what is measured at the
+    returned point (:func:`minimize_optimality`), not from scipy's ``success``.
 
     Parameters
     ----------
@@ -182,31 +190,18 @@ def minimize_scaled(evaluate, eps0, method, bounds, gtol, maxiter, options):
         z, g, payload = evaluate(res.x)
     except ConvergenceError as e:  # the optimizer stopped where the model fails
         msg = f"{res.message} (the model cannot be solved at the final eps: {e})"
-        return Outcome(x, np.inf, None, None, FitStatus.MODEL_FAILURE, msg, nit,
+        return Outcome(x, np.inf, None, None, decide_status(None, False, failure=e), msg, nit,
                        counts["nfev"], *path, failures, e)  # fmt: skip
+    opt = minimize_optimality(g, x, z, scale, gtol, bounds, precise=not failures)
     msg = str(res.message)
-    success = bool(res.success)
-    if not success and res.get("status") == 2 and not failures:
-        # the line search could not decrease z at machine precision. That is convergence
-        # when z is at round-off zero (both objectives are >= 0: a global minimum) or
-        # when first-order optimality holds relative to z itself: a relative change of
-        # eps would change z by less than 1e-6 relative (misspecified data: z* > 0)
-        rel_opt = float(np.linalg.norm(g) * max(np.linalg.norm(res.x), 1.0) / max(z, 1e-300))
-        if z <= 1e-20 * scale:
-            success = True
-            msg += " (objective at round-off zero: global minimum)"
-        elif rel_opt <= 1e-6:
-            success = True
-            msg += f" (stopped at the round-off limit; relative optimality {rel_opt:.1e})"
+    if opt.converged and opt.test != "relative gradient":
+        msg += f" ({opt.message})"
     if failures:
         msg += f" ({len(failures)} inner solves failed; first: {failures[0]})"
-    if success:
-        status = FitStatus.CONVERGED
-    elif nit >= maxiter:
-        status = FitStatus.MAX_ITERATIONS
-    else:
-        status = FitStatus.STALLED
-    return Outcome(x, z, g, payload, status, msg, nit, counts["nfev"], *path, failures)
+    exhausted = nit >= maxiter and not opt.converged
+    return Outcome(x, z, g, payload, decide_status(opt, exhausted), msg, nit, counts["nfev"],
+                   *path, failures, optimality=opt.value, exhausted=exhausted,
+                   claimed=opt.converged)  # fmt: skip
 
 
 def verify_least_squares(out, residual, bounds, exhausted, *, polish, tol=OFFSET_TOL):
@@ -219,12 +214,13 @@ def verify_least_squares(out, residual, bounds, exhausted, *, polish, tol=OFFSET
     :class:`Outcome` carries the measured optimality; its message keeps the optimizer's
     and adds the test's sentence when the two disagree (or after a polish).
     """
-    if out.payload is None:  # the model cannot be solved at the final point
+    if out.final_error is not None:  # the model cannot be solved at the final point
         return out
     try:
         r, J, payload = residual(out.x)
     except ConvergenceError as e:
-        out.status, out.message = FitStatus.MODEL_FAILURE, f"{out.message} ({e})"
+        out.status = decide_status(None, exhausted, failure=e)
+        out.message = f"{out.message} ({e})"
         return out
     out.nfev += 1
     opt = least_squares_optimality(r, J, out.x, bounds=bounds, tol=tol)
@@ -235,7 +231,7 @@ def verify_least_squares(out, residual, bounds, exhausted, *, polish, tol=OFFSET
         if float(r @ r) <= 2 * out.loss or opt2.converged:
             out.x, out.loss, out.payload, opt = np.asarray(x), 0.5 * float(r @ r), payload, opt2
             msg += f"; polished by Levenberg-Marquardt steps ({n} evaluations)"
-    said = out.status is FitStatus.CONVERGED
+    said = out.claimed
     out.status = decide_status(opt, exhausted)
     if opt.converged != said or not opt.converged or "polished" in msg:
         msg += f" [{'converged' if opt.converged else 'NOT converged'}: {opt.message}]"
@@ -348,13 +344,14 @@ def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options, check=No
         msg += f" ({len(failures)} inner solves failed; first: {failures[0]})"
     if ev is None:
         e = ConvergenceError(failures[-1])
-        return Outcome(x, np.inf, None, None, FitStatus.MODEL_FAILURE, msg, nit,
+        return Outcome(x, np.inf, None, None, decide_status(None, False, failure=e), msg, nit,
                        counts["nfev"], np.array(hist_eps), np.array(hist_loss), failures, e)  # fmt: skip
     r, J, payload = ev
+    # the status is decided by verify_least_squares from the measured optimality
     out = Outcome(
-        x, 0.5 * float(r @ r), J.T @ r, payload,
-        FitStatus.CONVERGED if res.status > 0 else FitStatus.MAX_ITERATIONS, msg, nit,
+        x, 0.5 * float(r @ r), J.T @ r, payload, None, msg, nit,
         counts["nfev"], np.array(hist_eps), np.array(hist_loss), failures,
+        exhausted=res.status == 0, claimed=res.status > 0,
     )  # fmt: skip
 
     def cached(e):
@@ -364,7 +361,7 @@ def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options, check=No
         return ev
 
     judge = cached if check is None else _counted(check, counts)
-    out = verify_least_squares(out, judge, bounds, res.status == 0, polish=polish, tol=tol)
+    out = verify_least_squares(out, judge, bounds, out.exhausted, polish=polish, tol=tol)
     out.nfev = counts["nfev"]
     if out.loss < hist_loss[-1]:
         hist_eps.append(np.array(out.x))
@@ -529,13 +526,14 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     ev = evaluate(x)
     if ev is None:
         e = ConvergenceError(failures[-1])
-        return Outcome(x, np.inf, None, None, FitStatus.MODEL_FAILURE, msg, nit,
+        return Outcome(x, np.inf, None, None, decide_status(None, False, failure=e), msg, nit,
                        counts["nfev"], np.array(hist_eps), np.array(hist_loss), failures, e)  # fmt: skip
     r = ev[0]
+    # the status is decided by verify_least_squares from the measured optimality
     out = Outcome(
-        x, 0.5 * float(r @ r), None, ev[2],
-        FitStatus.CONVERGED if ier in (1, 2, 3, 4) else FitStatus.MAX_ITERATIONS, msg, nit,
+        x, 0.5 * float(r @ r), None, ev[2], None, msg, nit,
         counts["nfev"], np.array(hist_eps), np.array(hist_loss), failures,
+        exhausted=ier == 5, claimed=ier in (1, 2, 3, 4),
     )  # fmt: skip
 
     def cached(e):
@@ -547,7 +545,7 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
         return ev
 
     judge = cached if check is None else _counted(check, counts)
-    out = verify_least_squares(out, judge, None, ier == 5, polish=polish, tol=tol)
+    out = verify_least_squares(out, judge, None, out.exhausted, polish=polish, tol=tol)
     out.grad = None if out.jacobian is None else out.jacobian.T @ out.residual
     out.nfev = counts["nfev"]
     if out.loss < best["loss"]:

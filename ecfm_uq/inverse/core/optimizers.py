@@ -23,8 +23,8 @@ import numpy as np
 
 from ..._validation import as_finite_array, check_int, check_positive
 from ...errors import ConvergenceError
+from .convergence import decide_status, minimize_optimality
 from .result import InverseResult
-from .status import FitStatus
 
 
 def adam(
@@ -37,6 +37,7 @@ def adam(
     *,
     formulation="adam",
     callback=None,
+    gtol=1e-10,
 ):
     """Minimize ``fun_and_grad`` with Adam for a fixed number of epochs.
 
@@ -60,6 +61,10 @@ def adam(
         Label stored in the result (``result.formulation``) (e.g. ``"standard"`` or ``"ecfm"``).
     callback : callable, optional
         ``callback(epoch, x, f, g)`` after each evaluation (epoch 0 is the start).
+    gtol : float
+        Tolerance of the optimality measured at the final iterate
+        (:func:`~ecfm_uq.inverse.core.convergence.minimize_optimality`: the gradient
+        relative to the objective at ``x0``, or the round-off limit).
 
     Returns
     -------
@@ -69,6 +74,10 @@ def adam(
         every iterate and its loss; ``extra["grad"]`` is the final gradient and
         ``extra["grad_history"]`` all gradients. On a failed evaluation the histories
         stop at the last successful iterate, which is returned with ``success=False``.
+        The status is decided from what is measured at the final iterate
+        (:func:`~ecfm_uq.inverse.core.convergence.decide_status`): CONVERGED when its
+        optimality holds (``optimality`` is the measured value), else MAX_ITERATIONS (the
+        epochs are a budget, not a test); MODEL_FAILURE on a failed evaluation.
 
     Raises
     ------
@@ -79,6 +88,7 @@ def adam(
         raise TypeError("`fun_and_grad` must be callable x -> (f, g)")
     x = as_finite_array("x0", np.atleast_1d(x0), ndim=1).copy()
     lr = check_positive("lr", lr)
+    gtol = check_positive("gtol", gtol)
     epochs = check_int("epochs", epochs, minimum=1)
     try:
         b1, b2 = (float(b) for b in betas)
@@ -123,12 +133,16 @@ def adam(
         raise ConvergenceError(
             f"{formulation}: the objective fails at the starting point: {message}"
         )
+    opt = None
     if success:
         message += f"; final |grad| = {np.linalg.norm(gs[-1]):.3e}"
+        scale = fs[0] if fs[0] > 0 else 1.0
+        opt = minimize_optimality(gs[-1], xs[-1], fs[-1], scale, gtol, None)
     return InverseResult(
         eps=xs[-1],
         loss=fs[-1],
-        status=FitStatus.CONVERGED if success else FitStatus.MODEL_FAILURE,
+        status=decide_status(opt, exhausted=True, failure=None if success else message),
+        optimality=None if opt is None else opt.value,
         message=message,
         nit=len(xs) - 1,
         nfev=len(xs) + (not success),

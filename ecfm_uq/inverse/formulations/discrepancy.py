@@ -72,7 +72,7 @@ for both priors.
 from __future__ import annotations
 
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import optimize, stats
@@ -535,28 +535,36 @@ def fit_random_force(problem, eps0, s):
     eps = eps_std + scale * x
     val, g_hat, lin = _profiled(model, eps)
     grad = fd_gradient(p, x, 1e-5)
-    # the one status decision (the optimizer's own success is not asked): the gradient
-    # of the profiled marginal likelihood in standard-error units, bounds projected
+    # the one status decision (the optimizer's own success is not asked), from what is
+    # measured: the gradient of the profiled marginal likelihood in standard-error units,
+    # bounds projected, and the facts below
     opt = scaled_gradient_optimality(grad, x, search.bnds, tol=search.tol)
     optimality = opt.value
     hits = at_bound(eps, s.bounds)
-    status = decide_status(opt, exhausted=res.nit >= search.maxiter)
+    exhausted, failure = res.nit >= search.maxiter, None
     lam, lam_sd = model.forces(lin, g_hat)
     unc = _uncertainty(p, x, scale, standard, g_hat, model, lin)
     message = f"{res.message} [{opt.message}]"
-    if status == FitStatus.CONVERGED:
+    if opt.converged:
         # a small gradient is not an optimum where the data no longer determine eps (an
         # estimate run off towards infinity, e.g. a reaction rate 10^eps0 -> 0): the same
         # refusal as the standard fit's
         if not np.any(g_hat) and not standard.success and np.allclose(eps, standard.eps):
-            status, message = standard.status, f"tau = 0, the standard fit: {standard.message}"
+            # tau = 0: this is the standard fit, and what was measured there holds
+            opt = replace(opt, converged=False)
+            exhausted = standard.status is FitStatus.MAX_ITERATIONS
+            failure = standard.message if standard.status is FitStatus.MODEL_FAILURE else None
+            message = f"tau = 0, the standard fit: {standard.message}"
         elif np.any(g_hat) and _singular(_gauss_newton_information(model, lin, g_hat)):
-            status = FitStatus.STALLED
+            # an optimum at infinity: no budget would reach it
+            opt = replace(opt, converged=False)
+            exhausted = False
             message = (
                 f"{message} [NOT converged: the Gauss-Newton information J^T S^-1 J is "
                 "singular at the estimate (the readings no longer depend on some parameter "
                 "combination): the minimum may lie at infinity]"
             )
+    status = decide_status(opt, exhausted, failure)
     T, p_value = model.restricted_test(lin)
     verdict = _verdict(T, p_value, g_hat, lam, lam_sd, s.alpha, hits)
     # the density of the data given eps (sample_posterior) holds the covariance at tau-hat;

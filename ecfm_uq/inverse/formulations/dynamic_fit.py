@@ -11,7 +11,7 @@ import numpy as np
 
 from ..._validation import check_choice
 from ...errors import ConvergenceError
-from ..core.convergence import OFFSET_TOL, least_squares_optimality
+from ..core.convergence import OFFSET_TOL, decide_status, least_squares_optimality
 from ..core.drivers import (
     LEAST_SQUARES_KEYWORDS,
     check_minimize_method,
@@ -81,7 +81,7 @@ def _failed_at_start(problem, eps0, s, error):
     eps0 = np.array(problem.system.check_eps(eps0), dtype=float)
     message = f"fit not started: {error}; start from parameters where the model can be marched"
     return InverseResult(
-        eps=eps0, loss=np.inf, status=FitStatus.MODEL_FAILURE, message=message,
+        eps=eps0, loss=np.inf, status=decide_status(None, False, failure=error), message=message,
         formulation=s.formulation, method=s.method,
         uncertainty=Uncertainty.failed("not computed: the fit did not start"),
         verdict=Verdict(None, message=message),
@@ -132,8 +132,7 @@ def _fit_dynamic(problem, eps0, s):
             callback=opts["callback"],
         )
         traj = None
-        if res.status is FitStatus.CONVERGED:  # completed its epochs: at an optimum?
-            res = _check_adam(problem, res, residual, s.bounds)
+        res = _check_adam(problem, res, residual, s.bounds)
     elif method in ("least-squares", "trf"):
         s.take(dict.fromkeys(LEAST_SQUARES_KEYWORDS))  # by name, before any march
         out = least_squares_scaled(
@@ -157,7 +156,7 @@ def _fit_dynamic(problem, eps0, s):
         )  # fmt: skip
         if n_eps <= _LSQ_MAX_EPS:
             out = verify_least_squares(
-                out, residual, s.bounds, out.status is FitStatus.MAX_ITERATIONS, polish=polish,
+                out, residual, s.bounds, out.exhausted, polish=polish,
                 tol=OFFSET_TOL if s.tol is None else s.tol,
             )  # fmt: skip
         res = _result(out, formulation, method)
@@ -190,27 +189,31 @@ def _result(out, formulation, method):
 
 
 def _check_adam(problem, res, residual, bounds):
-    """Adam ran its epochs: CONVERGED only if the least-squares optimality conditions
-    hold at its last iterate, else MAX_ITERATIONS (its epochs are a budget, not a test).
-    Returns the result with that status."""
+    """The one status decision of an Adam fit: Adam's epochs are a budget (``exhausted``),
+    not a test; the least-squares optimality conditions at its last iterate decide
+    (:func:`~ecfm_uq.inverse.core.convergence.decide_status`), a failed evaluation (Adam's
+    or the check's march) being a measured model failure. Adam's own status is not asked.
+    Returns the result with that status and the measured optimality."""
+    if res.status is FitStatus.MODEL_FAILURE:  # an evaluation failed: nothing to measure
+        return dataclasses.replace(
+            res, status=decide_status(None, True, failure=res.message), optimality=None
+        )
     saved = dict(problem._last)  # the check must not move the warm starts
     try:
         r, J, _ = residual(res.eps)
     except ConvergenceError as e:
         return dataclasses.replace(
-            res, status=FitStatus.MODEL_FAILURE,
+            res, status=decide_status(None, True, failure=e), optimality=None,
             message=f"{res.message} [the model cannot be marched at the last iterate: {e}]",
         )  # fmt: skip
     finally:
         problem._last = saved
     opt = least_squares_optimality(r, J, res.eps, bounds=bounds)
-    res = dataclasses.replace(res, nfev=res.nfev + 1, optimality=opt.value)
-    if not opt.converged:
-        res = dataclasses.replace(
-            res, status=FitStatus.MAX_ITERATIONS,
-            message=f"{res.message} [NOT converged: {opt.message}]",
-        )  # fmt: skip
-    return res
+    message = res.message if opt.converged else f"{res.message} [NOT converged: {opt.message}]"
+    return dataclasses.replace(
+        res, status=decide_status(opt, exhausted=True), nfev=res.nfev + 1,
+        optimality=opt.value, message=message,
+    )  # fmt: skip
 
 
 _OBJECTIVE = {

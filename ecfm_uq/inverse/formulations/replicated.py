@@ -73,7 +73,6 @@ from ..core.convergence import (
 )
 from ..core.finite_differences import fd_jacobian
 from ..core.result import InverseResult, Uncertainty
-from ..core.status import FitStatus
 from ..problems.moments import DegenerateVarianceError, moment_verdict, replicate_statistics
 from .forces import optimal_forces
 
@@ -607,9 +606,8 @@ def fit_replicated_problem(problem, eps0, s):
         uncertainty=unc,
         eps=eps_hat,
         loss=float(loss),
-        status=(
-            decide_status(opt, int(res.nit) >= maxiter) if final_ok else FitStatus.MODEL_FAILURE
-        ),
+        # a model that cannot be solved at the returned point is a measured failure
+        status=decide_status(opt, int(res.nit) >= maxiter, failure=None if final_ok else msg),
         optimality=None if opt is None else opt.value,
         message=msg,
         nit=int(res.nit),

@@ -30,7 +30,6 @@ from ..core.drivers import (
 )
 from ..core.gradients import choose_gradient
 from ..core.result import InverseResult, Uncertainty, Verdict
-from ..core.status import FitStatus
 from ..problems.galerkin import lazy_standard_residual
 from ..statistics.verdict import consistency_verdict
 
@@ -193,7 +192,7 @@ def fit_steady_problem(problem, eps0, s):
             # its default unless options give one
             out = minimize_scaled(evaluate, eps0, method, bounds, _DEFAULT_TOL, maxiter, options)
             out = verify_least_squares(
-                out, residual, bounds, out.status is FitStatus.MAX_ITERATIONS, polish=polish,
+                out, residual, bounds, out.exhausted, polish=polish,
                 tol=OFFSET_TOL if s.tol is None else s.tol,
             )  # fmt: skip
     except ConvergenceError as e:
