@@ -36,7 +36,7 @@ imports :mod:`.fitting`:
 ``formulations/``   how each formulation turns a problem into an estimate: ``steady``
                     (standard and exact ECFM, reduced), ``noisy`` and ``noise`` (all at
                     once, the paper's noise bounds), ``discrepancy`` and ``sparse_forces``
-                    (random-force ECFM), ``dynamic_fit``, ``replicated`` and ``forces``
+                    (random-force ECFM), ``dynamic_fit``, ``replicated``, ``replicated_status`` and ``forces``
                     (pseudo-likelihood), ``ode_forces`` and ``ode_random`` (exact-match and
                     random-force ECFM of an ODE)
 ``problems/``       a model and its data behind one interface (``interface``): ``model``

@@ -54,7 +54,6 @@ derivatives in :mod:`ecfm_uq.inverse.problems.pseudo_likelihood`, the inner forc
 from __future__ import annotations
 
 import copy
-import dataclasses
 import numbers
 import warnings
 
@@ -69,19 +68,23 @@ from ..core.convergence import (
     at_bound,
     bounds_arrays,
     decide_status,
-    gradient_optimality,
 )
-from ..core.finite_differences import fd_jacobian
 from ..core.result import InverseResult, Uncertainty
-from ..problems.moments import DegenerateVarianceError, moment_verdict, replicate_statistics
+from ..problems.moments import moment_verdict, replicate_statistics
 from .forces import optimal_forces
+from .replicated_status import (
+    FAILURES,
+    at_inner_resolution,
+    eps_optimality,
+    penalty_eps_newton,
+)
 
 __all__ = ["fit_replicated_problem"]
 
 FORMULATIONS = ("inner-outer", "penalty", "standard")
 
 
-_FAILURES = (ConvergenceError, DegenerateVarianceError)
+_FAILURES = FAILURES
 
 
 class _Tracker:
@@ -126,7 +129,7 @@ def _trust_region(fun, eps0, bounds, gtol, maxiter, trust_radius):
     happens when trial points keep failing (``fun`` returns ``inf`` where the forward or
     inner solve fails): the radius shrinks onto the edge of the solvable region. Such a
     stop next to a failed trial (within 1e-6 of the answer, relative) is said in the
-    message; whether the point is an optimum is decided by :func:`_eps_optimality`, never
+    message; whether the point is an optimum is decided by :func:`eps_optimality`, never
     by trust-constr's own flag.
 
     With bounds, trust-constr is an interior-point method: an estimate held at a bound is
@@ -365,100 +368,8 @@ def _fit_penalty(like, eps0, bounds, maxiter, ftol=1e-8, lam0=None, penalty=100.
 _FORCE_SCALING_TOL = 0.1
 
 
-def _eps_optimality(stationarity, eps, bounds, tol):
-    """The one status test of every pseudo-likelihood fit: is ``eps`` a minimizer of the
-    fit's objective in :math:`\\epsilon`?
-
-    ``stationarity = (z, g, gradient)``: the objective at ``eps``, its analytic gradient
-    there, and the gradient as a function of :math:`\\epsilon` (``"standard"``:
-    :math:`\\Lambda(\\cdot, 0)`; ``"inner-outer"``: :math:`\\tfrac12\\|\\lambda^*\\|^2`
-    along the branch of forces through the estimate's; ``"penalty"``:
-    :math:`\\alpha\\Lambda(\\cdot, \\lambda)` at the returned forces, which have no
-    minimizer to test). The Hessian is differenced from the analytic gradient (steps
-    :math:`10^{-5}\\max(|\\epsilon_k|, 1)`, central inside the bounds, one-sided inward at
-    them; :func:`~ecfm_uq.inverse.core.finite_differences.fd_jacobian`) and the test is the
-    relative Newton decrement of
-    :func:`~ecfm_uq.inverse.core.convergence.gradient_optimality`, parameters held at a
-    bound dropped. The gradient's size alone says nothing: on the beam the inner-outer
-    objective changes curvature by :math:`10^8` per unit load, so a gradient of 0.1 there is
-    a
-    Newton step of :math:`10^{-10}`.
-    """
-    z, g, gradient = stationarity
-    if g is None:
-        return Optimality(False, np.inf, "newton decrement", tol,
-                          "in eps: the forces' Hessian is not positive definite at the "
-                          "estimate (no smooth branch of optimal forces)")  # fmt: skip
-    eps = np.asarray(eps, dtype=float)
-    try:
-        H = _eps_hessian(gradient, eps, g, bounds)
-    except _FAILURES as e:
-        return Optimality(False, np.inf, "newton decrement", tol, f"in eps: Hessian: {e}")
-    opt = gradient_optimality(z, g, H, x=eps, bounds=bounds, tol=tol)
-    return dataclasses.replace(opt, message=f"in eps: {opt.message}")
-
-
-def _eps_hessian(gradient, eps, g, bounds):
-    """The Hessian in eps differenced from the analytic ``gradient`` (``g`` at ``eps``):
-    the steps of :func:`_eps_optimality`."""
-    cols = []
-    for k in range(eps.size):
-        h = 1e-5 * max(abs(eps[k]), 1.0)
-        lo, hi = (None, None) if bounds is None else bounds[k]
-        up, down = hi is None or eps[k] + h <= hi, lo is None or eps[k] - h >= lo
-        method, step = ("3-point", h) if up and down else ("2-point", h if up else -h)
-        cols.append(fd_jacobian(gradient, eps, method=method, steps=step, f0=g, columns=[k]))
-    return np.hstack(cols)
-
-
-def _penalty_eps_newton(like, eps, lam, alpha, bounds, tol, maxiter=20):
-    """Newton steps in eps on the penalty objective at fixed forces ``lam``,
-    :math:`\\alpha\\Lambda(\\epsilon, \\lambda)` (the log term does not depend on eps),
-    until :func:`_eps_optimality` holds or a step no longer lowers it.
-
-    SLSQP down the :math:`\\lambda \\to 0` valley spends its iterations shrinking the
-    forces (the log term falls without bound) and may stop with eps still moving, where
-    it stopped depending on the machine's last bits (3.7e-4 off on one CPU, 1e-7 on
-    another); at fixed forces the problem in eps is smooth and bounded, and its
-    minimizer is what the status's "eps" test certifies.
-
-    Returns
-    -------
-    eps, p
-        The point and the pseudo-likelihood evaluation there.
-    """
-    lo, hi = bounds_arrays(bounds, eps.size)
-    eps = np.asarray(eps, dtype=float)
-
-    def gradient(e):
-        return alpha * like.evaluate(e, lam, order=1).grad_eps
-
-    p = like.evaluate(eps, lam, order=1)
-    for _ in range(maxiter):
-        z, g = alpha * p.value, alpha * p.grad_eps
-        if _eps_optimality((z, g, gradient), eps, bounds, tol).converged:
-            break
-        try:
-            H = _eps_hessian(gradient, eps, g, bounds)
-            step = -np.linalg.solve(0.5 * (H + H.T), g)
-        except (*_FAILURES, np.linalg.LinAlgError):
-            break
-        for t in 0.5 ** np.arange(8):
-            trial = np.clip(eps + t * step, lo, hi)
-            try:
-                pt = like.evaluate(trial, lam, order=1)
-            except _FAILURES:
-                continue
-            if alpha * pt.value < z:
-                eps, p = trial, pt
-                break
-        else:
-            break
-    return eps, p
-
-
 def _force_scaling(opt, slope):
-    """The penalty form's test of its forces, after :func:`_eps_optimality`: a minimum
+    """The penalty form's test of its forces, after :func:`eps_optimality`: a minimum
     along :math:`\\lambda \\to t\\lambda` (slope 0), not the :math:`\\lambda \\to 0`
     valley (slope 2)."""
     if not opt.converged or abs(slope) <= _FORCE_SCALING_TOL:
@@ -480,7 +391,7 @@ _FITTERS = {
 
 
 #: defaults of the pseudo-likelihood fits: ``tol`` is the status test's (the relative
-#: Newton decrement, :func:`_eps_optimality`); the optimizers' own stopping rules are
+#: Newton decrement, :func:`eps_optimality`); the optimizers' own stopping rules are
 #: options: trust-constr's ``gtol`` (relative to the gradient at eps0) and SLSQP's ``ftol``
 _DEFAULT_MAXITER = 200
 _SYNONYMS = {"ecfm": "inner-outer"}
@@ -561,20 +472,23 @@ def fit_replicated_problem(problem, eps0, s):
     opt, optimality_solves = None, 0
     if final_ok:
         before = like.n_solves
-        opt = _eps_optimality(stationarity, x[: system.n_eps], s.bounds, tol)
+        opt = eps_optimality(stationarity, x[: system.n_eps], s.bounds, tol)
         if formulation == "penalty":
             if not opt.converged:  # eps still moving where SLSQP stopped: finish it
                 m, alpha = system.n_eps, extra["penalty"]
-                eps_n, p_n = _penalty_eps_newton(like, x[:m], lam, alpha, s.bounds, tol)
+                eps_n, p_n = penalty_eps_newton(like, x[:m], lam, alpha, s.bounds, tol)
                 if alpha * p_n.value < alpha * p.value:
                     x = np.concatenate([eps_n, lam])
                     p = p_n
                     loss = extra["log_force_term"] + alpha * p.value
                     extra["force_scaling_slope"] = float(2.0 + alpha * lam @ p.grad_lam)
                     stationarity = (alpha * p.value, alpha * p.grad_eps, stationarity[2])
-                    opt = _eps_optimality(stationarity, eps_n, s.bounds, tol)
+                    opt = eps_optimality(stationarity, eps_n, s.bounds, tol)
                     msg += "; eps finished by Newton steps at the returned forces"
             opt = _force_scaling(opt, extra["force_scaling_slope"])
+        elif formulation == "inner-outer" and not opt.converged and np.isfinite(opt.value):
+            opt = at_inner_resolution(like, opt, stationarity, x[: system.n_eps], lam,
+                                       s.bounds, opts.get("inner_tol", 1e-15))  # fmt: skip
         optimality_solves = like.n_solves - before
         msg += f" [{'converged' if opt.converged else 'NOT converged'}: {opt.message}]"
     if not final_ok:
