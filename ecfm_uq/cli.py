@@ -55,6 +55,13 @@ def build_parser():
         mod.add_arguments(p)
     p = studies.add_parser("all", help="every study, plus summary.md")
     add_common_arguments(p)
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=2,
+        help="studies run at once, each in its own single-threaded process (default 2; "
+        "the results do not depend on it)",
+    )
     return parser
 
 
@@ -78,7 +85,7 @@ def main(argv=None):
     try:
         _check_out(args.out)
         if args.study == "all":
-            reproduce_all(args.out, progress, seed=args.seed)
+            reproduce_all(args.out, progress, seed=args.seed, workers=args.workers)
         else:
             mod = load_study(args.study)
             settings = mod.settings_from_args(args)

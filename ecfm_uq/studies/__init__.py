@@ -26,6 +26,7 @@ STUDY_NAMES = (
     "geometry",
     "coverage",
     "missing-physics",
+    "ode",
 )
 
 __all__ = [

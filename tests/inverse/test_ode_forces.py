@@ -6,45 +6,16 @@ alarm rate and the power of the forces' chi-squared test)."""
 import matplotlib
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 
-from ecfm_uq.inverse import ForceSeries, OdeProblem, OdeTrajectory, fit
+from ecfm_uq.inverse import ForceSeries, OdeTrajectory, fit
 from ecfm_uq.inverse.formulations.ode_forces import ExactForces, forced_components
-from ecfm_uq.problems.lotka_volterra import initial_state as y0_of
-from ecfm_uq.problems.lotka_volterra import jac_eps as lv_jac_eps
-from ecfm_uq.problems.lotka_volterra import jac_y as lv_jac_y
-from ecfm_uq.problems.lotka_volterra import rhs as lv
+from ecfm_uq.studies.ode import TRUTH as STUDY_TRUTH
+from ecfm_uq.studies.ode import lv_problem as problem  # LV with its Jacobians
+from ecfm_uq.studies.ode import simulate  # the data of `ecfm-uq reproduce ode`
 
 matplotlib.use("Agg")
 
-TRUTH = np.array([0.5, 0.025, 0.025, 0.8, 30.0, 4.0])
-JAC = None
-
-
-def simulate(times, eps=TRUTH, harvest=0.0, window=(5.0, 8.0), push=None):
-    """The states at ``times`` of LV, with a harvest ``du/dt -= harvest * u`` on
-    ``window`` and/or a constant added force ``push`` (n_state,) throughout."""
-    add = np.zeros(2) if push is None else np.asarray(push, float)
-
-    def rhs(t, y):
-        h = harvest if window[0] <= t < window[1] else 0.0
-        return lv(t, y, eps) + add - np.array([h * y[0], 0.0])
-
-    cuts = sorted({times[0], times[-1], *[w for w in window if times[0] < w < times[-1]]})
-    y, out = np.asarray(eps[4:6], float), []
-    for a, b in zip(cuts[:-1], cuts[1:], strict=True):
-        sel = times[(times >= a) & ((times < b) | (b == times[-1]))]
-        s = solve_ivp(rhs, (a, b), y, method="DOP853", rtol=1e-12, atol=1e-12,
-                      t_eval=sel, dense_output=True)  # fmt: skip
-        out.append(s.y.T)
-        y = s.sol(b)
-    return np.vstack(out)
-
-
-def problem(times, data, rtol=1e-9, **kw):
-    kw.setdefault("jac", (lv_jac_y, lv_jac_eps))
-    return OdeProblem(lv, y0_of, times, data, t0=kw.pop("t0", times[0]), rtol=rtol,
-                      atol=kw.pop("atol", rtol), state_names=["hare", "lynx"], **kw)  # fmt: skip
+TRUTH = np.array(STUDY_TRUTH)
 
 
 ANNUAL = np.arange(0.0, 13.0)

@@ -169,3 +169,30 @@ def test_a_study_without_its_extra_names_the_extra(monkeypatch):
     monkeypatch.setattr(studies, "missing_requirements", lambda name: [("skfem", "fem")])
     with pytest.raises(RuntimeError, match=r'pip install -e "\.\[fem\]"'):
         studies.run_study("missing-physics", {}, "unused", None)
+
+
+def test_reproduce_all_in_two_workers_reports_in_order_and_summarizes_the_same(tmp_path):
+    """Two spawned worker processes: the per-study lines in the order of the names, and
+    summary.md, as with one process (studies that fail at once: no monkeypatching
+    crosses into a spawned worker, and a real study costs too much here)."""
+    import io
+    import re
+
+    from ecfm_uq import summary
+    from ecfm_uq.studies._common import Progress
+
+    names = ["no-such-a", "coverage", "no-such-b"]  # "coverage" is started first
+    logs, mds = [], []
+    for workers in (1, 2):
+        out = tmp_path / f"w{workers}"
+        log = io.StringIO()
+        with pytest.raises(RuntimeError, match="no-such-a.*coverage.*no-such-b"):
+            summary.reproduce_all(out, Progress(stream=log), names=names, workers=workers,
+                                  seed=-1)  # fmt: skip
+        logs.append(re.sub(r"after \d+ s", "after N s", log.getvalue().replace(str(out), "OUT")))
+        mds.append((out / "summary.md").read_text())
+    assert logs[0] == logs[1]
+    assert [line.split(":")[0] for line in logs[1].splitlines()[:3]] == names
+    assert mds[0] == mds[1]
+    with pytest.raises(ValueError, match="workers"):
+        summary.reproduce_all(tmp_path, Progress(stream=io.StringIO()), workers=0)
