@@ -280,8 +280,12 @@ def test_penalty_objective_is_unbounded_below_as_forces_vanish(linear):
 
 def test_penalty_form_runs_slsqp_and_reports(linear):
     system, v = linear
+    # started at 0.7: from 0.5, scipy 1.15's SLSQP (the floor) jumps on this CPU to the
+    # upper bound, a KKT point with forces of norm 51 (another basin of a non-convex
+    # objective, reported as such), where scipy 1.16's follows the valley; from 0.7 both
+    # follow it, and the valley is what this test is about
     res = fit(
-        ReplicatedProblem(system, M_OBS, v), [0.5], formulation="penalty", bounds=[(0.0, 1.4)]
+        ReplicatedProblem(system, M_OBS, v), [0.7], formulation="penalty", bounds=[(0.0, 1.4)]
     )
     assert res.formulation == "likelihood-penalty"
     assert isinstance(res.success, bool) and res.message
