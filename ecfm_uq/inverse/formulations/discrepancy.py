@@ -555,7 +555,9 @@ def fit_random_force(problem, eps0, s):
             exhausted = standard.status is FitStatus.MAX_ITERATIONS
             failure = standard.message if standard.status is FitStatus.MODEL_FAILURE else None
             message = f"tau = 0, the standard fit: {standard.message}"
-        elif np.any(g_hat) and _singular(_gauss_newton_information(model, lin, g_hat)):
+        elif _singular(_gauss_newton_information(model, lin, g_hat)):
+            # (with tau = 0 too: the search can walk on along the flat direction past
+            # where the standard fit stopped, 1e7 further on one machine's last bits)
             # an optimum at infinity: no budget would reach it
             opt = replace(opt, converged=False)
             exhausted = False
