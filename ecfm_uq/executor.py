@@ -70,6 +70,19 @@ def _user_error(e, name, at, vectorized):
     return err
 
 
+def _call(fn, x, name, at, vectorized):
+    """``fn(x)`` converted (:func:`~ecfm_uq._validation.as_model_output`); a user's
+    exception re-raised naming the call ``at()`` and the sample, the original chained (one
+    a caller's wrapper already reports, :class:`CallerWrapped`, passed through)."""
+    try:
+        out = fn(x)
+    except CallerWrapped:
+        raise
+    except Exception as e:  # a user callback: name the call and the sample(s)
+        raise _user_error(e, name, at(), vectorized) from e
+    return as_model_output(out, name=name, at=at)
+
+
 def _evaluate_chunk(fn, part, name="fn"):
     """Evaluate ``fn`` on every sample of ``part = (offset, chunk)`` (the rows from
     ``offset`` on); module-level so it pickles."""
@@ -80,13 +93,7 @@ def _evaluate_chunk(fn, part, name="fn"):
         def at(j=j, s=s):
             return f"at sample {offset + j} (x={_point(s)})"
 
-        try:
-            out = fn(s)
-        except CallerWrapped:
-            raise
-        except Exception as e:  # a user callback: name the call and the sample
-            raise _user_error(e, name, at(), False) from e
-        outs.append(as_model_output(out, name=name, at=at))
+        outs.append(_call(fn, s, name, at, vectorized=False))
     shapes = {o.shape for o in outs}
     if len(shapes) > 1:
         raise ValueError(f"`{name}` returned outputs of different shapes: {sorted(shapes)}")
@@ -101,13 +108,7 @@ def _evaluate_batch(fn, part, name="fn"):
     def at():
         return f"at samples {offset}..{offset + len(chunk) - 1} (x={_point(chunk[0])}, ...)"
 
-    try:
-        out = fn(chunk)
-    except CallerWrapped:
-        raise
-    except Exception as e:  # a user callback: name the call and the points
-        raise _user_error(e, name, at(), True) from e
-    out = as_model_output(out, name=name, at=at)
+    out = _call(fn, chunk, name, at, vectorized=True)
     if out.ndim == 0 or out.shape[0] != len(chunk):
         raise ValueError(
             f"a vectorized `{name}` must return one output row per point: got shape "
