@@ -41,7 +41,8 @@ imports :mod:`.fitting`:
                     random-force ECFM of an ODE)
 ``problems/``       a model and its data behind one interface (``interface``): ``model``
                     (a Python function), ``ode`` (a user's ODE, forward sensitivities),
-                    ``galerkin`` (steady, replicated), ``dynamic``;
+                    ``galerkin`` (steady, replicated), ``dynamic`` (``dynamic_sparse``:
+                    data at some steps, one force per data interval);
                     ``noise_model`` and ``whitening`` (``sigma`` as given);
                     ``pseudo_likelihood`` and ``moments`` (the replicated data's
                     likelihood)

@@ -129,7 +129,7 @@ def _check_sigma(sigma, kind, formulation, problem):
     if kind == "dynamic":  # per sensor, a covariance over them, or per reading
         from .problems.whitening import dynamic_noise_model
 
-        return dynamic_noise_model(sigma, problem.n_steps, problem.n_sensors)
+        return dynamic_noise_model(sigma, problem.n_readings, problem.n_sensors)
     return noise_model(sigma, problem.n_sensors)
 
 

@@ -47,6 +47,7 @@ from ...system.schemes import SCHEMES
 from ...system.step_control import check_steps, check_tolerances, choose_steps
 from ..core.gradients import choose_gradient
 from ..core.result import Uncertainty
+from .dynamic_sparse import IntervalForces, data_steps
 from .interface import InverseProblem
 
 FORMULATIONS = ("standard", "ecfm")
@@ -70,15 +71,26 @@ class DynamicInverseProblem(InverseProblem):
         Number of steps :math:`\\mathcal P`.
     M_obs : (C, N) array_like
         Measurement operator :math:`\\mathcal M`.
-    V : (n_steps + 1, C) array_like
+    V : (n_steps + 1, C) or (len(t), C) array_like
         Data; row ``i`` is :math:`v_i` at time ``t0 + i * dt`` (row 0, the initial time,
-        is not used by either objective). Their noise is ``fit``'s ``sigma``, readings at
+        is not used by either objective); with ``t``, row ``i`` is the reading at ``t[i]``. Their noise is ``fit``'s ``sigma``, readings at
         different times independent: one number, one standard deviation per sensor
         ``(C,)`` or a covariance over the sensors ``(C, C)``, the same at every time; or
         one standard deviation per reading ``(n_steps, C)``, the shape of ``V[1:]``
         (:mod:`~ecfm_uq.inverse.problems.whitening`, which says which shape is which).
     t0 : float
         Initial time.
+    t : (n_t,) array_like, optional
+        The data times, when the data are not at every step: strictly increasing times
+        on the step grid ``t0 + k * dt`` within the march (``dt`` dividing the data's
+        spacing; the integrator takes ``dt``'s steps between them). The standard fit fits
+        these readings only; the ECFM holds one force vector over each data interval
+        :math:`(t_{j-1}, t_j]` and matches the data at the data times, its objective the
+        force function's :math:`L^2`, :math:`\\tfrac12\\sum_j\\Delta t_j|\\lambda_j|^2`
+        (:mod:`~ecfm_uq.inverse.problems.dynamic_sparse`). A reading at ``t0`` is not
+        fitted (as row 0 without ``t``); without one, ``V`` is stored with the initial
+        state's reading as its row 0, so ``problem.V`` has ``len(t) + 1`` rows. ``None``
+        (the default), or every step: data at every step, the paper's problem.
     solve_tol : float
         Newton tolerance per step on :math:`\\|R\\|_2`.
     solve_maxiter : int
@@ -111,8 +123,9 @@ class DynamicInverseProblem(InverseProblem):
     ------
     ValueError
         On misshaped or non-finite data, a system without mass matrix, a
-        non-positive ``dt``/``solve_tol``/``rtol``, an unknown ``scheme``, or ``rtol``/``atol``
-        with a fixed-step scheme.
+        non-positive ``dt``/``solve_tol``/``rtol``, an unknown ``scheme``, ``rtol``/``atol``
+        with a fixed-step scheme, or data times ``t`` off the step grid, unsorted,
+        repeated or outside the march.
     """
 
     def __init__(
@@ -125,6 +138,7 @@ class DynamicInverseProblem(InverseProblem):
         V,
         *,
         t0=0.0,
+        t=None,
         solve_tol=1e-10,
         solve_maxiter=30,
         gradient="auto",
@@ -165,8 +179,27 @@ class DynamicInverseProblem(InverseProblem):
         if self.M_obs.shape[1] != N:
             raise ValueError(f"`M_obs` must have N = {N} columns, got shape {self.M_obs.shape}")
         C = self.M_obs.shape[0]
-        self.V = as_finite_array("V", V, shape=(self.n_steps + 1, C))
-        self._rows = np.arange(self.n_steps + 1)  # the data times' rows of a trajectory
+        self._forces = None  # the IntervalForces of data at some steps (built when needed)
+        self._weight = self.dt  # z = weight/2 * sum of squared residuals (standard)
+        steps = None if t is None else data_steps(t, self.t0, self.dt, self.n_steps)
+        if steps is not None and np.array_equal(steps, np.arange(self.n_steps + 1)):
+            steps = None  # data at every step: the paper's problem
+        if steps is None:
+            self.V = as_finite_array("V", V, shape=(self.n_steps + 1, C))
+            self._rows = np.arange(self.n_steps + 1)  # the data times' rows of a trajectory
+        else:
+            V = as_finite_array("V", V, shape=(steps.size, C))
+            if steps[0] != 0:  # row 0 is the initial time's (not fitted): its reading
+                V = np.vstack([self.Theta0 @ system.E1 @ self.M_obs.T, V])
+                steps = np.r_[0, steps]
+            if steps.size < 2:
+                raise ValueError("`t` has no data time after t0: nothing to fit")
+            self.V = V
+            self._rows = steps
+            self._weight = self.dt * steps[-1] / (steps.size - 1)  # the mean data spacing
+        self.sparse = steps is not None
+        #: the data times, the rows of V
+        self.t = self.t0 + self.dt * self._rows
 
     @property
     def adaptive(self):
@@ -190,7 +223,7 @@ class DynamicInverseProblem(InverseProblem):
             raise ValueError(f"freeze_steps is for scheme='adaptive', not {self.scheme!r}")
         eps = self.system.check_eps(eps)
         at = f"choosing the steps at eps={np.array2string(eps)} failed"
-        t_data = self.t0 + self.dt * np.arange(self.n_steps + 1)  # the rows of V
+        t_data = self.t  # the rows of V
         try:
             seq = choose_steps(
                 self.system, eps, self.Theta0, t_data, rtol=self.rtol, atol=self.atol,
@@ -236,6 +269,11 @@ class DynamicInverseProblem(InverseProblem):
         """Number of readings fitted, ``n_steps * C`` (``V[0]`` is the initial time)."""
         return int(np.size(self.V[1:]))
 
+    @property
+    def n_readings(self):
+        """Number of data times fitted (``n_steps``, or the data times after ``t0``)."""
+        return self.V.shape[0] - 1
+
     def forget_solves(self):
         """A copy with other data starts cold (no warm start from the old data's fits)."""
         self._last = {}
@@ -270,6 +308,8 @@ class DynamicInverseProblem(InverseProblem):
                 )
             constraint = (self.M_obs, self._in_data_units(self.V))
         eps = self.system.check_eps(eps)
+        if constraint is not None and self.sparse:
+            return self._interval_forces(eps, sensitivities)[0]
         if self.adaptive and self.steps is None:
             self.freeze_steps(eps)
         grid = dict(dt=self.dt, n_steps=self.n_steps, t0=self.t0)
@@ -302,6 +342,27 @@ class DynamicInverseProblem(InverseProblem):
         if self.warm_start:
             self._last[formulation] = traj
         return traj
+
+    def _interval_forces(self, eps, sensitivities=False):
+        """The ECFM with data at some steps: the march whose force, one per data interval,
+        matches the data (:meth:`.dynamic_sparse.IntervalForces.solve`); ``(traj, lam (J,
+        C), dlam (J, C, n_eps) or None)``."""
+        if self._forces is None:
+            self._forces = IntervalForces(self)
+        last = self._last.get("ecfm") if self.warm_start else None
+        lam0 = None if last is None else last.lam[self._rows[1:]]
+        try:
+            out = self._forces.solve(self, eps, sensitivities, lam0)
+        except ConvergenceError as e:
+            if lam0 is not None:  # forces far from this eps can mislead Newton: retry cold
+                del self._last["ecfm"]
+                return self._interval_forces(eps, sensitivities)
+            raise ConvergenceError(
+                f"ecfm forward solve at eps={np.array2string(eps)} failed: {e}"
+            ) from e
+        if self.warm_start:
+            self._last["ecfm"] = out[0]
+        return out
 
     def predictions(self, trajectory):
         """Sensor readings of the mean state, :math:`\\mathcal M\\,\\Theta_i\\mathbb E[\\Psi]`,
@@ -352,18 +413,18 @@ class DynamicInverseProblem(InverseProblem):
             eps, "standard", sensitivities=gradient and not adjoint, keep_factors=adjoint
         )
         e = self.predictions(traj)[1:] - self.V[1:]  # (P, C), i = 1..P
-        z = 0.5 * self.dt * float(np.sum(e * e))
+        z = 0.5 * self._weight * float(np.sum(e * e))
         if not gradient:
             return z, None, traj
         if adjoint:  # dz/dTheta_i = dt (e_i / sigma_i) M E1^T: de_i/d(M theta_i) = 1/sigma_i
             g = np.zeros(traj.Theta.shape)
             e_load = self._whiten(e, slice(1, None))
-            g[self._rows[1:]] = self.dt * np.einsum(
+            g[self._rows[1:]] = self._weight * np.einsum(
                 "tc,cj,k->tjk", e_load, self.M_obs, self.system.E1
             )
             return z, traj.adjoint_gradient(g), traj
         de = self._reading_sensitivities(traj)  # (P, C, n_eps)
-        return z, self.dt * np.einsum("tc,tcm->m", e, de), traj
+        return z, self._weight * np.einsum("tc,tcm->m", e, de), traj
 
     def ecfm_objective(self, eps, gradient=True):
         """:math:`z^{ECFM}` (Eq. ecfm_obj) and its gradient (Eqs. ecfm_grad,
@@ -374,8 +435,18 @@ class DynamicInverseProblem(InverseProblem):
         z : float
         grad : (n_eps,) ndarray or None
         trajectory : Trajectory
-            ``trajectory.lam`` ``(n_steps + 1, C)`` are the constraint forces.
+            ``trajectory.lam`` ``(n_steps + 1, C)`` are the constraint forces (with data
+            times ``t``: the force of each data interval, held over its steps;
+            :math:`z = \\tfrac12\\sum_j\\Delta t_j|\\lambda_j|^2` over the intervals and its
+            gradient by forward sensitivities).
         """
+        if self.sparse:
+            traj, lam, dlam = self._interval_forces(self.system.check_eps(eps), gradient)
+            w = self._forces.widths
+            z = 0.5 * float(np.sum(w[:, None] * lam * lam))
+            if not gradient:
+                return z, None, traj
+            return z, np.einsum("t,tc,tcm->m", w, lam, dlam), traj
         adjoint = gradient and self.gradient == "adjoint"
         traj = self.solve(eps, "ecfm", sensitivities=gradient and not adjoint, keep_factors=adjoint)
         lam = traj.lam[1:]
@@ -405,8 +476,12 @@ class DynamicInverseProblem(InverseProblem):
         """
         formulation = check_choice("formulation", formulation, FORMULATIONS)
         traj = self.solve(eps, formulation, sensitivities=True)
-        h = np.sqrt(self.dt)
+        h = np.sqrt(self._weight)  # dt with data at every step
         n_eps = self.system.n_eps
+        if formulation == "ecfm" and self.sparse:  # sqrt(dt_j) lam_j, one per interval
+            w = np.sqrt(self._forces.widths)[:, None]
+            lam, dlam = traj.lam[self._rows[1:]], traj.dlam[self._rows[1:]]
+            return (w * lam).ravel(), (w[:, :, None] * dlam).reshape(-1, n_eps), traj
         if formulation == "ecfm":
             return h * traj.lam[1:].ravel(), h * traj.dlam[1:].reshape(-1, n_eps), traj
         e = self.predictions(traj)[1:] - self.V[1:]
@@ -440,7 +515,7 @@ class DynamicInverseProblem(InverseProblem):
 
         if formulation != "standard":
             return no_likelihood(formulation)
-        noise = dynamic_noise_model(sigma, self.n_steps, self.n_sensors)
+        noise = dynamic_noise_model(sigma, self.n_readings, self.n_sensors)
         if noise.kind in ("diagonal", "covariance"):
             from .whitening import whitened_problem
 
@@ -448,7 +523,7 @@ class DynamicInverseProblem(InverseProblem):
             what = f"trajectory least squares, Gaussian noise {noise.describe()}"
             return dataclasses.replace(like, description=what)
         sigma = noise.scale
-        dt = self.dt
+        dt = self._weight
 
         def rss(eps):  # z = dt/2 * sum of squared residuals over the P readings
             z, g, _ = self.standard_objective(eps, gradient=True)
@@ -499,7 +574,7 @@ class DynamicInverseProblem(InverseProblem):
         if sigma is not None and np.ndim(sigma) > 0:  # whitened once, as fit does
             from .whitening import dynamic_noise_model, jacobian_in_data_units, whitened_problem
 
-            noise = dynamic_noise_model(sigma, self.n_steps, self.n_sensors)
+            noise = dynamic_noise_model(sigma, self.n_readings, self.n_sensors)
             if noise.kind != "scalar":
                 unc = whitened_problem(self, noise).uncertainty(eps, formulation, 1.0, covariance)
                 return dataclasses.replace(
@@ -524,7 +599,7 @@ class DynamicInverseProblem(InverseProblem):
         other._last = dict(self._last)
 
         def grad(e, w):
-            other.V = np.vstack([self.V[:1], w.reshape(self.n_steps, -1)])
+            other.V = np.vstack([self.V[:1], w.reshape(self.n_readings, -1)])
             return other.objective(formulation)(e)[1]
 
         data = self.V[1:].ravel()
@@ -543,7 +618,7 @@ class DynamicInverseProblem(InverseProblem):
         if formulation == "standard":
             # r = sqrt(dt) (M theta - V): d eps_hat / dV = sqrt(dt) J^+
             try:
-                D = np.sqrt(self.dt) * least_squares_jacobian(J)
+                D = np.sqrt(self._weight) * least_squares_jacobian(J)
             except NonIdentifiableError as e:
                 return Uncertainty.failed(f"uncertainty not computed: {e}")
             return estimate_uncertainty(None, eps, data, s2, model, dof=dof, deps_dv=D)

@@ -1,0 +1,231 @@
+"""Data at their own times for a :class:`~ecfm_uq.inverse.problems.dynamic.DynamicInverseProblem`:
+readings at some steps of the time grid, the integrator stepping between them.
+
+The data times ``t`` are a subset of the step grid :math:`t_0 + k\\Delta t` (:func:`data_steps`
+checks it); the step ``dt`` is the integrator's (as fine as its accuracy needs), the data
+come when they come.
+
+* The standard fit fits the readings at the data times only (the other steps have no
+  datum: their sensitivities and adjoint sources are zero).
+* The ECFM force is a function of time on the data's time scale: one force vector
+  :math:`\\lambda_j` per data interval :math:`(t_{j-1}, t_j]` (:math:`t_0` the initial
+  time), held over every step in it, the per-step forces :math:`F = E\\lambda` with
+  :math:`E` the 0/1 expansion matrix. The exact match :math:`\\mathcal M\\,\\mathbb
+  E[\\theta(t_j)] = v_j` holds at the data times; for given :math:`\\epsilon` the forces
+  are its solution by Newton's method (:class:`IntervalForces`), the force entering the
+  march as a known load :math:`\\Gamma\\lambda_j` whose derivative in :math:`\\lambda` the
+  march's forward sensitivities carry. The objective is the force function's
+  :math:`L^2`, :math:`z = \\tfrac12\\sum_j \\Delta t_j |\\lambda_j|^2` (the same as
+  :class:`~ecfm_uq.inverse.problems.ode.OdeProblem`'s ECFM), its gradient the implicit
+  derivative :math:`d\\lambda/d\\epsilon = -G_\\lambda^{-1}G_\\epsilon` of the match
+  conditions :math:`G(\\lambda, \\epsilon) = 0` (:math:`G_\\lambda` block lower triangular:
+  a force acts on its own and later data times only).
+
+With data at every step (``t=None``, the default) nothing here runs: the problem is the
+paper's, one force per step solved inside each step's Newton iteration.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..._validation import as_finite_array
+from ...errors import ConvergenceError
+from ...system import GalerkinSystem, LoadTerm, march
+
+__all__ = ["IntervalForces", "data_steps"]
+
+#: Newton iterations of the exact match before the forces are declared not found
+MAX_NEWTON = 25
+
+
+def data_steps(t, t0, dt, n_steps):
+    """The step indices ``k`` of data times ``t = t0 + k dt`` on the march's grid.
+
+    Parameters
+    ----------
+    t : (n_t,) array_like
+        Strictly increasing data times in ``[t0, t0 + n_steps dt]``, each on the grid to
+        a relative ``1e-9`` of ``dt``.
+    t0, dt : float
+    n_steps : int
+
+    Returns
+    -------
+    (n_t,) int ndarray
+
+    Raises
+    ------
+    ValueError
+        Naming ``t``: empty, not increasing (unsorted, or a repeated time), outside the
+        march, or a time between two steps (choose ``dt`` dividing the data's spacing).
+    """
+    t = as_finite_array("t", t, ndim=1)
+    if t.size == 0:
+        raise ValueError("`t` (the data times) is empty: pass the times of the rows of V")
+    d = np.diff(t)
+    if np.any(d <= 0):
+        i = int(np.flatnonzero(d <= 0)[0])
+        what = "repeated" if d[i] == 0 else "not increasing"
+        raise ValueError(
+            f"`t` must be strictly increasing: t[{i}]={t[i]:g} is followed by "
+            f"t[{i + 1}]={t[i + 1]:g} ({what}); sort the data by time and merge repeated times"
+        )
+    end = t0 + n_steps * dt
+    if t[0] < t0 - 1e-9 * dt or t[-1] > end + 1e-9 * dt:
+        bad = t[0] if t[0] < t0 else t[-1]
+        raise ValueError(
+            f"`t` must lie in the march [t0, t0 + n_steps dt] = [{t0:g}, {end:g}]; "
+            f"t={bad:g} does not: raise n_steps, or drop the readings outside"
+        )
+    x = (t - t0) / dt
+    k = np.rint(x).astype(int)
+    off = np.abs(x - k) > 1e-9 * np.maximum(1.0, np.abs(x))
+    if np.any(off):
+        i = int(np.flatnonzero(off)[0])
+        raise ValueError(
+            f"`t` must be on the step grid t0 + k dt (t0={t0:g}, dt={dt:g}): t[{i}]={t[i]:g} "
+            f"is {x[i]:.6g} steps after t0; choose dt dividing the data's spacing (e.g. "
+            f"dt = {float(np.min(np.diff(np.r_[t0, t]))):g} / m for an integer m)"
+        )
+    return k
+
+
+class IntervalForces:
+    """The exact-match forces of a problem with data at some steps, one per data interval.
+
+    Parameters
+    ----------
+    problem : DynamicInverseProblem
+        With ``t`` (data times), a fixed-step scheme, and ``C`` constraint forces
+        (``Gamma``) for its ``C`` sensors.
+
+    Attributes
+    ----------
+    steps : (J,) int ndarray
+        The step index of every fitted data time (``V[1:]``'s rows).
+    widths : (J,) ndarray
+        :math:`\\Delta t_j = t_j - t_{j-1}` (:math:`t_0` the initial time).
+    system : GalerkinSystem
+        The problem's system with the forces as a load :math:`\\Gamma\\lambda_j` on the steps
+        of interval ``j`` and ``J C`` more parameters, :math:`(\\epsilon, \\lambda_1, \\dots,
+        \\lambda_J)`, so that one march gives the state and its derivatives in both.
+    """
+
+    def __init__(self, problem):
+        system = problem.system
+        self.n_eps = system.n_eps
+        self.steps = np.asarray(problem._rows[1:], dtype=int)
+        self.J, self.C = self.steps.size, system.n_forces
+        self.widths = problem.dt * np.diff(np.r_[0, self.steps])
+        # the interval of every step point k (step k - 1 -> k): j with steps[j-1] < k <= steps[j]
+        k = np.arange(problem.n_steps + 1)
+        self.interval = np.searchsorted(self.steps, k, side="left")
+        self.interval[0] = self.J  # the initial state: no force
+        t0, dt, ne, J, C = problem.t0, problem.dt, self.n_eps, self.J, self.C
+        Gamma = system.Gamma.toarray() if sp.issparse(system.Gamma) else np.asarray(system.Gamma)
+        N = system.N
+        last = problem.n_steps
+
+        def which(t):
+            return self.interval[min(max(int(np.rint((t - t0) / dt)), 0), last)]
+
+        def force(eps, t):
+            j = which(t)
+            if j >= J:
+                return np.zeros(N)
+            return Gamma @ np.asarray(eps[ne + j * C : ne + (j + 1) * C], dtype=float)
+
+        def dforce(eps, t):
+            D = np.zeros((N, ne + J * C))
+            j = which(t)
+            if j < J:
+                D[:, ne + j * C : ne + (j + 1) * C] = Gamma
+            return D
+
+        terms = (*system.terms, LoadTerm(force, dforce, name="interval forces"))
+        self.system = GalerkinSystem(
+            terms, ne + J * C, basis=system.basis, Gamma=system.Gamma, M=system.M,
+            name=f"{system.name} + interval forces",
+        )  # fmt: skip
+
+    def expand(self, lam):
+        """Per-step forces ``(n_steps + 1, ...)`` from the interval forces ``(J, ...)``:
+        :math:`E\\lambda` (row 0 and the steps after the last datum: zero)."""
+        lam = np.asarray(lam)
+        out = np.zeros((self.interval.size,) + lam.shape[1:])
+        held = self.interval < self.J
+        out[held] = lam[self.interval[held]]
+        return out
+
+    def solve(self, problem, eps, sensitivities=False, lam0=None):
+        """The forces that match the data at ``eps``, by Newton's method on all intervals.
+
+        Returns
+        -------
+        traj : Trajectory
+            The march with the forces: ``lam`` (n_steps + 1, C) the per-step forces
+            :math:`E\\lambda`; with ``sensitivities``, ``dTheta`` and ``dlam`` the total
+            derivatives in :math:`\\epsilon` (through the forces).
+        lam : (J, C) ndarray
+            The force of every data interval.
+        dlam : (J, C, n_eps) ndarray or None
+            :math:`d\\lambda/d\\epsilon` (with ``sensitivities``).
+
+        Raises
+        ------
+        ConvergenceError
+            A march fails, or the match is not met in :data:`MAX_NEWTON` iterations.
+        """
+        ne, J, C = self.n_eps, self.J, self.C
+        lam = np.zeros(J * C) if lam0 is None else np.array(lam0, dtype=float).ravel()
+        target = problem._in_data_units(problem.V)[1:]  # (J, C)
+        scale = max(1.0, float(np.max(np.abs(target))))
+        E1 = problem.system.E1
+        small = False  # the last Newton step was at round-off: this march is the answer
+        for it in range(MAX_NEWTON + 1):
+            traj = march(
+                self.system, np.r_[eps, lam], problem.Theta0, problem.dt, problem.n_steps,
+                t0=problem.t0, sensitivities=True, tol=problem.solve_tol,
+                maxiter=problem.solve_maxiter, strict=True, solver=problem.solver,
+                scheme=problem.scheme,
+            )  # fmt: skip
+            mean = traj.Theta[self.steps] @ E1  # (J, N)
+            G = (mean @ problem.M_obs.T - target).ravel()
+            dmean = np.einsum("tikm,k->tim", traj.dTheta[self.steps], E1)
+            D = np.einsum("cj,tjm->tcm", problem.M_obs, dmean).reshape(J * C, -1)
+            G_lam = D[:, ne:]
+            if small or np.max(np.abs(G)) <= 1e-12 * scale:
+                break
+            if it == MAX_NEWTON:
+                raise ConvergenceError(
+                    f"the exact match at the data times is not met after {MAX_NEWTON} Newton "
+                    f"iterations on the interval forces (largest mismatch "
+                    f"{np.max(np.abs(G)):.3e}); a finer dt, or parameters nearer the data"
+                )
+            try:
+                step = np.linalg.solve(G_lam, -G)
+            except np.linalg.LinAlgError as e:
+                raise ConvergenceError(
+                    "the interval forces cannot move the readings (singular match "
+                    f"Jacobian: {e}); each sensor needs a force that reaches it (Gamma)"
+                ) from e
+            if not np.all(np.isfinite(step)):
+                raise ConvergenceError("the Newton step on the interval forces is not finite")
+            lam = lam + step
+            small = np.max(np.abs(step)) <= 1e-12 * max(1.0, float(np.max(np.abs(lam))))
+        lam_j = lam.reshape(J, C)
+        dlam = None
+        dTheta = None
+        if sensitivities:
+            dl = -np.linalg.solve(G_lam, D[:, :ne])  # (J C, n_eps)
+            dTheta = traj.dTheta[..., :ne] + traj.dTheta[..., ne:] @ dl
+            dlam = dl.reshape(J, C, ne)
+        out = dataclasses.replace(
+            traj, lam=self.expand(lam_j), dTheta=dTheta,
+            dlam=None if dlam is None else self.expand(dlam),
+        )  # fmt: skip
+        return out, lam_j, dlam

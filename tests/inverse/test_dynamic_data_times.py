@@ -1,0 +1,182 @@
+"""DynamicInverseProblem with data at their own times (``t``): readings at some steps, the
+standard fit on those, the ECFM with one force per data interval; against closed forms of
+the backward-Euler decay, central differences, and the every-step problem."""
+
+import numpy as np
+import pytest
+
+from ecfm_uq.inverse import fit
+from ecfm_uq.inverse.problems.dynamic import DynamicInverseProblem
+from ecfm_uq.problems.burgers import BurgersModel
+from ecfm_uq.system import Coefficient, GalerkinSystem, LinearTerm
+
+RATES = np.array([1.0, 2.5])  # theta_i' = -a k_i theta_i
+THETA0 = np.array([1.0, -0.7])
+A_TRUE = 0.8
+DT, N_STEPS, EVERY = 0.05, 24, 4
+
+
+def _system():
+    terms = [LinearTerm(np.diag(RATES), Coefficient.parameter(0))]
+    return GalerkinSystem(terms, n_eps=1, Gamma=np.eye(2), M=np.eye(2), name="decay")
+
+
+def _be_states(a, source=None):
+    """Backward Euler of theta' = -a k theta + f(t) by hand: (n_steps + 1, 2).
+    ``source(s)`` is the constant source on step s -> s + 1."""
+    th = np.zeros((N_STEPS + 1, 2))
+    th[0] = THETA0
+    for s in range(N_STEPS):
+        f = np.zeros(2) if source is None else source(s)
+        th[s + 1] = (th[s] + DT * f) / (1.0 + a * RATES * DT)
+    return th
+
+
+def _problem(V, steps, **kw):
+    return DynamicInverseProblem(
+        _system(), THETA0, DT, N_STEPS, np.eye(2), V, t=DT * steps, solve_tol=1e-13, **kw
+    )
+
+
+STEPS = np.arange(EVERY, N_STEPS + 1, EVERY)  # data every 4th step, not at t0
+
+
+def test_backward_euler_closed_form_is_the_march():
+    """The hand recursion is theta0 (1 + a k dt)^-s (the test's truth is independent)."""
+    th = _be_states(A_TRUE)
+    s = np.arange(N_STEPS + 1)[:, None]
+    np.testing.assert_allclose(th, THETA0 * (1 + A_TRUE * RATES * DT) ** (-s), rtol=1e-14)
+
+
+def test_standard_objective_by_definition_and_gradients():
+    """z = w/2 sum_j |M theta(t_j) - v_j|^2 over the data times only, w the mean data
+    spacing; forward and adjoint gradients against central differences."""
+    V = _be_states(A_TRUE)[STEPS] + 0.01 * np.cos(np.arange(STEPS.size))[:, None]
+    prob = _problem(V, STEPS)
+    a = 0.6
+    z, g, _ = prob.standard_objective(np.array([a]))
+    e = _be_states(a)[STEPS] - V
+    assert z == pytest.approx(0.5 * EVERY * DT * np.sum(e**2), rel=1e-11)
+    h = 1e-6
+    fd = (prob.loss([a + h], "standard") - prob.loss([a - h], "standard")) / (2 * h)
+    assert g[0] == pytest.approx(fd, rel=1e-7)
+    adj = _problem(V, STEPS, gradient="adjoint")
+    assert adj.standard_objective(np.array([a]))[1][0] == pytest.approx(g[0], rel=1e-10)
+    r, J, _ = prob.residual(np.array([a]), "standard")
+    assert r.shape == (STEPS.size * 2,) and 0.5 * r @ r == pytest.approx(z, rel=1e-12)
+    assert (J.T @ r)[0] == pytest.approx(g[0], rel=1e-10)
+
+
+def test_standard_fit_recovers_the_rate_from_sparse_data():
+    V = _be_states(A_TRUE)[STEPS]
+    res = fit(_problem(V, STEPS), [0.3], formulation="standard")
+    assert res.success
+    assert res.eps[0] == pytest.approx(A_TRUE, rel=1e-8)
+
+
+def test_ecfm_with_exact_data_has_zero_forces_and_finds_the_rate():
+    prob = _problem(_be_states(A_TRUE)[STEPS], STEPS)
+    z, g, traj = prob.ecfm_objective(np.array([A_TRUE]))
+    assert np.max(np.abs(traj.lam)) < 1e-9 and z < 1e-18 and abs(g[0]) < 1e-9
+    # away from the truth the forces are not zero, and the data are met exactly
+    _, _, traj = prob.ecfm_objective(np.array([0.5]), gradient=False)
+    assert np.max(np.abs(traj.lam)) > 1e-2
+    reads = traj.Theta[STEPS, :, 0]
+    np.testing.assert_allclose(reads, prob.V[1:], atol=1e-11)
+    res = fit(prob, [0.3], formulation="ecfm")
+    assert res.success
+    assert res.eps[0] == pytest.approx(A_TRUE, rel=1e-8)
+
+
+def test_a_missing_source_shows_up_as_the_force_of_its_interval():
+    """Data with a source f on the 3rd data interval only (steps 8..12): at the true rate the
+    exact-match forces are f there and zero in every other interval (a held force is
+    exactly the missing constant source), and held over that interval's steps."""
+    f = np.array([0.9, -0.4])
+    V = _be_states(A_TRUE, lambda s: f if 8 <= s < 12 else np.zeros(2))[STEPS]
+    prob = _problem(V, STEPS)
+    _, _, traj = prob.ecfm_objective(np.array([A_TRUE]), gradient=False)
+    lam = traj.lam[STEPS]  # the force of each interval (held up to its data time)
+    want = np.zeros_like(lam)
+    want[2] = f
+    np.testing.assert_allclose(lam, want, atol=1e-10)
+    np.testing.assert_allclose(traj.lam[9:13], np.tile(f, (4, 1)), atol=1e-10)
+    assert np.all(traj.lam[0] == 0)
+
+
+@pytest.mark.parametrize("steps", [STEPS, np.array([0, 3, 4, 9, 17, 24])])
+def test_ecfm_objective_and_gradient_against_central_differences(steps):
+    """z = 1/2 sum_j dt_j |lam_j|^2 (uneven intervals too, a reading at t0 not fitted)."""
+    f = np.array([0.5, 0.3])
+    V = _be_states(A_TRUE, lambda s: f if s >= 10 else np.zeros(2))[steps]
+    prob = _problem(V, steps)
+    x = np.array([0.55])
+    z, g, traj = prob.ecfm_objective(x)
+    fitted = steps[steps > 0]
+    widths = DT * np.diff(np.r_[0, fitted])
+    lam = traj.lam[fitted]
+    assert z == pytest.approx(0.5 * np.sum(widths[:, None] * lam**2), rel=1e-13)
+    h = 1e-6
+    fd = (prob.loss(x + h, "ecfm") - prob.loss(x - h, "ecfm")) / (2 * h)
+    assert g[0] == pytest.approx(fd, rel=1e-6)
+    r, J, _ = prob.residual(x, "ecfm")
+    assert 0.5 * r @ r == pytest.approx(z, rel=1e-12)
+    assert (J.T @ r)[0] == pytest.approx(g[0], rel=1e-10)
+
+
+def test_every_step_is_the_default_problem_bit_for_bit():
+    V = _be_states(0.7) + 0.01
+    dense = DynamicInverseProblem(_system(), THETA0, DT, N_STEPS, np.eye(2), V)
+    every = DynamicInverseProblem(
+        _system(), THETA0, DT, N_STEPS, np.eye(2), V, t=DT * np.arange(N_STEPS + 1)
+    )
+    assert not every.sparse
+    for f in ("standard", "ecfm"):
+        z0, g0, t0 = getattr(dense, f"{f}_objective")(np.array([0.5]))
+        z1, g1, t1 = getattr(every, f"{f}_objective")(np.array([0.5]))
+        assert z0 == z1 and np.array_equal(g0, g1) and np.array_equal(t0.lam, t1.lam)
+
+
+def test_burgers_with_data_every_fifth_step():
+    model = BurgersModel(n_modes=12, n_steps=20, T=1.0, newton_tol=1e-12)
+    steps = np.arange(5, 21, 5)
+    V = model.true_data(np.array([1.75, 1.0]))[steps]
+    prob = DynamicInverseProblem(
+        model.system, model.Theta0, model.dt, model.n_steps, model.M_obs, V,
+        t=model.dt * steps, solve_tol=1e-12,
+    )  # fmt: skip
+    x = np.array([1.6, 0.8])
+    z, g, traj = prob.ecfm_objective(x)
+    assert np.all(np.isfinite(traj.lam)) and np.all(np.isfinite(g)) and z > 0
+    np.testing.assert_allclose(traj.Theta[steps, :, 0] @ model.M_obs.T, V, atol=1e-9)
+    h = 1e-5
+    fd = [
+        (prob.loss(x + h * e, "ecfm") - prob.loss(x - h * e, "ecfm")) / (2 * h) for e in np.eye(2)
+    ]
+    np.testing.assert_allclose(g, fd, rtol=1e-5)
+    z_true, _, traj = prob.ecfm_objective(np.array([1.75, 1.0]), gradient=False)
+    assert z_true < 1e-16
+
+
+@pytest.mark.parametrize(
+    "t, match",
+    [
+        (DT * np.array([4, 8.5, 12]), "on the step grid"),
+        (DT * np.array([8, 4, 12]), "strictly increasing"),
+        (DT * np.array([4, 8, 8]), "repeated"),
+        (DT * np.array([4, 8, N_STEPS + 4]), "lie in the march"),
+        (DT * np.array([-1, 4, 8]), "lie in the march"),
+        (np.array([]), "empty"),
+        (np.array([0.0]), "no data time after t0"),
+    ],
+)
+def test_bad_data_times_are_refused_naming_t(t, match):
+    V = np.zeros((len(t), 2))
+    with pytest.raises(ValueError, match=match) as err:
+        _problem(V, np.asarray(t) / DT)
+    assert "`t`" in str(err.value)
+
+
+def test_data_of_another_length_than_t_is_refused():
+    with pytest.raises(ValueError, match="V"):
+        _problem(np.zeros((3, 2)), STEPS)
