@@ -5,6 +5,7 @@ the backward-Euler decay, central differences, and the every-step problem."""
 import numpy as np
 import pytest
 
+from ecfm_uq.chaos import ChaosBasis
 from ecfm_uq.inverse import fit
 from ecfm_uq.inverse.problems.dynamic import DynamicInverseProblem
 from ecfm_uq.problems.burgers import BurgersModel
@@ -180,3 +181,42 @@ def test_bad_data_times_are_refused_naming_t(t, match):
 def test_data_of_another_length_than_t_is_refused():
     with pytest.raises(ValueError, match="V"):
         _problem(np.zeros((3, 2)), STEPS)
+
+
+def test_compiled_and_generic_marches_give_the_same_forces():
+    """The forces enter as a load tabulated per march (compiled kernel) or evaluated per
+    step (generic path): the same objective, gradient and forces."""
+    f = np.array([0.5, 0.3])
+    V = _be_states(A_TRUE, lambda s: f if s >= 10 else np.zeros(2))[STEPS]
+    x = np.array([0.55])
+    fast = _problem(V, STEPS)
+    slow = _problem(V, STEPS, solver={"compiled": False})
+    z0, g0, t0 = fast.ecfm_objective(x)
+    z1, g1, t1 = slow.ecfm_objective(x)
+    assert t0.plan.path == "compiled-p1" and t1.plan.path == "generic"
+    assert z1 == pytest.approx(z0, rel=1e-10) and g1[0] == pytest.approx(g0[0], rel=1e-9)
+    np.testing.assert_allclose(t1.lam, t0.lam, rtol=1e-9, atol=1e-12)
+
+
+def test_stochastic_system_forces_act_on_the_mean():
+    """P > 1 (random viscosity, data every 2nd step): the match holds on the mean state,
+    the forces are zero at the truth, and the gradient equals central differences."""
+    model = BurgersModel(
+        n_modes=8, n_steps=10, T=0.5, viscosity_chaos=ChaosBasis(2), viscosity_spread=0.4
+    )
+    steps = np.arange(2, 11, 2)
+    V = model.true_data(np.array([1.75, 1.0]))[steps]
+    prob = DynamicInverseProblem(
+        model.system, model.Theta0, model.dt, model.n_steps, model.M_obs, V,
+        t=model.dt * steps, solve_tol=1e-12,
+    )  # fmt: skip
+    x = np.array([1.6, 0.8])
+    z, g, traj = prob.ecfm_objective(x)
+    mean = traj.Theta[steps] @ model.system.E1
+    np.testing.assert_allclose(mean @ model.M_obs.T, V, atol=1e-9)
+    h = 1e-5
+    fd = [
+        (prob.loss(x + h * e, "ecfm") - prob.loss(x - h * e, "ecfm")) / (2 * h) for e in np.eye(2)
+    ]
+    np.testing.assert_allclose(g, fd, rtol=1e-5)
+    assert prob.loss(np.array([1.75, 1.0]), "ecfm") < 1e-16

@@ -125,32 +125,18 @@ class IntervalForces:
         k = np.arange(problem.n_steps + 1)
         self.interval = np.searchsorted(self.steps, k, side="left")
         self.interval[0] = self.J  # the initial state: no force
-        t0, dt, ne, J, C = problem.t0, problem.dt, self.n_eps, self.J, self.C
         Gamma = system.Gamma.toarray() if sp.issparse(system.Gamma) else np.asarray(system.Gamma)
-        N = system.N
-        last = problem.n_steps
-
-        def which(t):
-            return self.interval[min(max(int(np.rint((t - t0) / dt)), 0), last)]
-
-        def force(eps, t):
-            j = which(t)
-            if j >= J:
-                return np.zeros(N)
-            return Gamma @ np.asarray(eps[ne + j * C : ne + (j + 1) * C], dtype=float)
-
-        def dforce(eps, t):
-            D = np.zeros((N, ne + J * C))
-            j = which(t)
-            if j < J:
-                D[:, ne + j * C : ne + (j + 1) * C] = Gamma
-            return D
-
-        terms = (*system.terms, LoadTerm(force, dforce, name="interval forces"))
+        load = _IntervalLoad(self, Gamma, problem.t0, problem.dt)
+        terms = (*system.terms, load)
         self.system = GalerkinSystem(
-            terms, ne + J * C, basis=system.basis, Gamma=system.Gamma, M=system.M,
+            terms, self.n_eps + self.J * self.C, basis=system.basis, Gamma=system.Gamma, M=system.M,
             name=f"{system.name} + interval forces",
         )  # fmt: skip
+
+    def at_times(self, times, t0, dt):
+        """The interval of the step point at each of ``times`` (``J``: no force)."""
+        k = np.rint((np.asarray(times, dtype=float) - t0) / dt).astype(int)
+        return self.interval[np.clip(k, 0, self.interval.size - 1)]
 
     def expand(self, lam):
         """Per-step forces ``(n_steps + 1, ...)`` from the interval forces ``(J, ...)``:
@@ -229,3 +215,50 @@ class IntervalForces:
             dlam=None if dlam is None else self.expand(dlam),
         )  # fmt: skip
         return out, lam_j, dlam
+
+
+class _IntervalLoad(LoadTerm):
+    """The load :math:`\\Gamma\\lambda_j` on the steps of data interval ``j``, its force
+    values the trailing ``J C`` parameters; :meth:`on_grid` tabulates a march's grid at
+    once (the compiled march's one call per march, not one per step)."""
+
+    def __init__(self, forces, Gamma, t0, dt):
+        self.forces, self.Gamma, self.t0, self.dt = forces, Gamma, t0, dt
+        super().__init__(self._force, self._dforce, name="interval forces")
+        self.size = Gamma.shape[0]
+
+    def _columns(self, j):
+        ne, C = self.forces.n_eps, self.forces.C
+        return slice(ne + j * C, ne + (j + 1) * C)
+
+    def _force(self, eps, t):
+        j = int(self.forces.at_times([t], self.t0, self.dt)[0])
+        if j >= self.forces.J:
+            return np.zeros(self.size)
+        return self.Gamma @ np.asarray(eps[self._columns(j)], dtype=float)
+
+    def _dforce(self, eps, t):
+        D = np.zeros((self.size, len(eps)))
+        j = int(self.forces.at_times([t], self.t0, self.dt)[0])
+        if j < self.forces.J:
+            D[:, self._columns(j)] = self.Gamma
+        return D
+
+    def on_grid(self, eps, times, derivative=False):
+        """``F`` (n_t, N, P) and ``dF`` (n_t, N, P, n_eps) or ``None``, as
+        :meth:`LoadTerm.on_grid`, by interval rather than by time."""
+        E1 = self._E1
+        J, C, ne = self.forces.J, self.forces.C, self.forces.n_eps
+        j = self.forces.at_times(times, self.t0, self.dt)
+        held = j < J
+        lam = np.asarray(eps[ne:], dtype=float).reshape(J, C)
+        per = np.zeros((j.size, C))
+        per[held] = lam[j[held]]
+        F = (per @ self.Gamma.T)[:, :, None] * E1
+        if not derivative:
+            return F, None
+        dF = np.zeros(F.shape + (len(eps),))
+        block = self.Gamma[:, None, :] * E1[None, :, None]  # (N, P, C)
+        for i in np.unique(j[held]):
+            dF[np.flatnonzero(j == i), :, :, self._columns(i)] = block
+        return F, dF
