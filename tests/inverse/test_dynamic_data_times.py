@@ -220,3 +220,60 @@ def test_stochastic_system_forces_act_on_the_mean():
     ]
     np.testing.assert_allclose(g, fd, rtol=1e-5)
     assert prob.loss(np.array([1.75, 1.0]), "ecfm") < 1e-16
+
+
+def _be_rate_derivative(a, steps):
+    """d theta_s / d a of theta0 (1 + a k dt)^-s, by hand: (n_t, 2)."""
+    s = np.asarray(steps)[:, None]
+    return -s * RATES * DT * THETA0 * (1 + a * RATES * DT) ** (-s - 1.0)
+
+
+def test_standard_fit_uncertainty_matches_the_closed_form_gauss_newton():
+    """Noisy readings at the data times only, sigma known: stderr = sigma / |J|, J the
+    closed-form derivative of the fitted readings (independent of the weight w); a sigma
+    per reading ((n_t, C), the readings fitted) whitens reading by reading."""
+    rng = np.random.default_rng(7)
+    sigma = 0.02
+    V = _be_states(A_TRUE)[STEPS] + sigma * rng.standard_normal((STEPS.size, 2))
+    res = fit(_problem(V, STEPS), [0.3], sigma=sigma)
+    assert res.success and res.uncertainty.success
+    Jc = _be_rate_derivative(res.eps[0], STEPS).ravel()
+    assert res.uncertainty.stderr[0] == pytest.approx(sigma / np.linalg.norm(Jc), rel=1e-6)
+    S = np.tile([sigma, 3 * sigma], (STEPS.size, 1))
+    S[::2] *= 2.0
+    res = fit(_problem(V, STEPS), [0.3], sigma=S)
+    assert res.success and res.uncertainty.success
+    Jc = (_be_rate_derivative(res.eps[0], STEPS) / S).ravel()
+    assert res.uncertainty.stderr[0] == pytest.approx(1.0 / np.linalg.norm(Jc), rel=1e-6)
+    # the estimate is the weighted least-squares root: sum J_w r_w = 0 at it
+    r = ((_be_states(res.eps[0])[STEPS] - V) / S).ravel()
+    assert abs(Jc @ r) < 1e-8 * np.linalg.norm(Jc) * np.linalg.norm(r)
+
+
+def test_adaptive_steps_between_sparse_data_times_recover_the_exact_rate():
+    """Readings of the exact solution theta0 exp(-a k t) at 5 uneven times: backward
+    Euler on the data's spacing is biased, the adaptive grid between them is not."""
+    t = np.array([0.25, 0.5, 1.0, 1.5, 2.0])
+    V = THETA0 * np.exp(-A_TRUE * RATES * t[:, None])
+    coarse = DynamicInverseProblem(_system(), THETA0, 0.25, 8, np.eye(2), V, t=t)
+    adaptive = DynamicInverseProblem(
+        _system(), THETA0, 0.25, 8, np.eye(2), V, t=t, scheme="adaptive", rtol=1e-6
+    )
+    assert abs(fit(coarse, [0.3]).eps[0] - A_TRUE) > 0.05
+    res = fit(adaptive, [0.3])
+    assert res.success and res.extra["steps"]["met"]
+    assert res.eps[0] == pytest.approx(A_TRUE, rel=2e-4)
+    with pytest.raises(ValueError, match="adaptive"):
+        adaptive.ecfm_objective([0.5])
+
+
+def test_ecfm_fit_with_noisy_sparse_data_reports_interval_forces():
+    rng = np.random.default_rng(3)
+    V = _be_states(A_TRUE)[STEPS] + 0.01 * rng.standard_normal((STEPS.size, 2))
+    res = fit(_problem(V, STEPS), [0.3], formulation="ecfm", sigma=0.01)
+    assert res.success and res.uncertainty.success
+    assert res.forces.shape == (N_STEPS + 1, 2) and np.all(res.forces[0] == 0)
+    # held over each interval: constant on the steps of one interval
+    for a, b in zip(np.r_[0, STEPS[:-1]], STEPS, strict=True):
+        assert np.all(res.forces[a + 1 : b + 1] == res.forces[b])
+    assert abs(res.eps[0] - A_TRUE) < 5 * res.uncertainty.stderr[0]
