@@ -270,6 +270,14 @@ class DynamicInverseProblem(InverseProblem):
         return int(np.size(self.V[1:]))
 
     @property
+    def data_steps(self):
+        """The trajectory row (step index) of every row of ``V``, ``(n_readings + 1,)``:
+        ``trajectory.Theta[problem.data_steps]`` are the states at the data times, and for
+        the ECFM with data times ``t`` ``forces[problem.data_steps[1:]]`` the force of
+        each data interval."""
+        return np.array(self._rows)
+
+    @property
     def n_readings(self):
         """Number of data times fitted (``n_steps``, or the data times after ``t0``)."""
         return self.V.shape[0] - 1
