@@ -277,3 +277,26 @@ def test_ecfm_fit_with_noisy_sparse_data_reports_interval_forces():
     for a, b in zip(np.r_[0, STEPS[:-1]], STEPS, strict=True):
         assert np.all(res.forces[a + 1 : b + 1] == res.forces[b])
     assert abs(res.eps[0] - A_TRUE) < 5 * res.uncertainty.stderr[0]
+
+
+def test_ecfm_uncertainty_data_derivative_against_refits():
+    """The sparse ECFM's d eps_hat / dV (Gauss-Newton, the forces' exact data derivative):
+    at exact data (zero forces) it is the derivative of the estimate itself, measured by
+    refitting with each reading moved by +-h."""
+    V = _be_states(A_TRUE)[STEPS]
+    prob = _problem(V, STEPS)
+    res = fit(prob, [0.3], formulation="ecfm", sigma=0.01, tol=1e-14)
+    D = res.uncertainty.jacobian  # (1, n_data)
+    assert D.shape == (1, STEPS.size * 2)
+    h = 1e-5
+    fd = np.zeros(D.shape[1])
+    for i in range(fd.size):
+        moved = []
+        for sgn in (1, -1):
+            W = prob.V.copy()
+            W[1:].reshape(-1)[i] += sgn * h
+            moved.append(fit(prob.with_data(W), [A_TRUE], formulation="ecfm", tol=1e-14,
+                             uncertainty=False).eps[0])  # fmt: skip
+        fd[i] = (moved[0] - moved[1]) / (2 * h)
+    np.testing.assert_allclose(D[0], fd, rtol=1e-4, atol=1e-6 * np.max(np.abs(fd)))
+    assert res.uncertainty.stderr[0] == pytest.approx(0.01 * np.linalg.norm(fd), rel=1e-4)

@@ -68,7 +68,7 @@ def fit_dynamic_problem(problem, eps0, s):
         steps = dict(n_steps=problem.steps.n_steps, met=False, message=str(e))
         return dataclasses.replace(res, extra={**res.extra, "steps": steps})
     steps = dict(
-        n_steps=check.n_steps, n_data=problem.n_steps, rtol=check.rtol, atol=check.atol,
+        n_steps=check.n_steps, n_data=problem.n_readings, rtol=check.rtol, atol=check.atol,
         max_error=check.max_error, met=check.met, refrozen=refrozen, times=check.times,
         message=check.message,
     )  # fmt: skip

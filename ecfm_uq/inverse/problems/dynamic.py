@@ -32,6 +32,10 @@ The sensitivities are integrated by :func:`ecfm_uq.system.march` with the factor
 step Jacobian, so a gradient costs little more than a forward solve. For a stochastic
 system (``P > 1``) :math:`\\theta_i` is read as the mean :math:`\\Theta_i\\mathbb E[\\Psi]`,
 which is also what the ECFM data constraint acts on.
+
+With data at some steps only (``t``, the data times), the standard objective sums over
+the data times and the ECFM holds one force over each data interval, matched at the data
+times: :mod:`~ecfm_uq.inverse.problems.dynamic_sparse`.
 """
 
 from __future__ import annotations
@@ -47,7 +51,7 @@ from ...system.schemes import SCHEMES
 from ...system.step_control import check_steps, check_tolerances, choose_steps
 from ..core.gradients import choose_gradient
 from ..core.result import Uncertainty
-from .dynamic_sparse import IntervalForces, data_steps
+from .dynamic_sparse import IntervalForces, data_derivatives, data_steps
 from .interface import InverseProblem
 
 FORMULATIONS = ("standard", "ecfm")
@@ -73,10 +77,11 @@ class DynamicInverseProblem(InverseProblem):
         Measurement operator :math:`\\mathcal M`.
     V : (n_steps + 1, C) or (len(t), C) array_like
         Data; row ``i`` is :math:`v_i` at time ``t0 + i * dt`` (row 0, the initial time,
-        is not used by either objective); with ``t``, row ``i`` is the reading at ``t[i]``. Their noise is ``fit``'s ``sigma``, readings at
+        is not used by either objective); with ``t``, row ``i`` is the reading at
+        ``t[i]``. Their noise is ``fit``'s ``sigma``, readings at
         different times independent: one number, one standard deviation per sensor
         ``(C,)`` or a covariance over the sensors ``(C, C)``, the same at every time; or
-        one standard deviation per reading ``(n_steps, C)``, the shape of ``V[1:]``
+        one standard deviation per reading ``(n_readings, C)``, the shape of ``V[1:]``
         (:mod:`~ecfm_uq.inverse.problems.whitening`, which says which shape is which).
     t0 : float
         Initial time.
@@ -354,7 +359,7 @@ class DynamicInverseProblem(InverseProblem):
     def _interval_forces(self, eps, sensitivities=False):
         """The ECFM with data at some steps: the march whose force, one per data interval,
         matches the data (:meth:`.dynamic_sparse.IntervalForces.solve`); ``(traj, lam (J,
-        C), dlam (J, C, n_eps) or None)``."""
+        C), dlam (J, C, n_eps) or None, G_lam (J C, J C))``."""
         if self._forces is None:
             self._forces = IntervalForces(self)
         last = self._last.get("ecfm") if self.warm_start else None
@@ -379,7 +384,7 @@ class DynamicInverseProblem(InverseProblem):
 
         Returns
         -------
-        (n_steps + 1, C) ndarray
+        (n_readings + 1, C) ndarray
         """
         return self._whiten(trajectory.Theta[self._rows] @ self.system.E1 @ self.M_obs.T)
 
@@ -449,7 +454,7 @@ class DynamicInverseProblem(InverseProblem):
             gradient by forward sensitivities).
         """
         if self.sparse:
-            traj, lam, dlam = self._interval_forces(self.system.check_eps(eps), gradient)
+            traj, lam, dlam, _ = self._interval_forces(self.system.check_eps(eps), gradient)
             w = self._forces.widths
             z = 0.5 * float(np.sum(w[:, None] * lam * lam))
             if not gradient:
@@ -566,6 +571,9 @@ class DynamicInverseProblem(InverseProblem):
         ``sigma`` an array (per sensor, a covariance over the sensors, or per reading; the
         shapes of :func:`~ecfm_uq.inverse.fit`): the same computation on the whitened
         problem (:mod:`ecfm_uq.inverse.problems.whitening`), ``jacobian`` in the data's units.
+        The ECFM with data times ``t`` and ``"gauss-newton"``: :math:`d\\hat\\epsilon/dv =
+        -J^+\\,\\partial r/\\partial v` with the forces' exact derivative in the data,
+        :math:`G_\\lambda^{-1}` (:func:`~.dynamic_sparse.data_derivatives`), no differencing.
 
         Returns
         -------
@@ -618,11 +626,21 @@ class DynamicInverseProblem(InverseProblem):
 
         saved = dict(self._last)
         try:
-            _, J, _ = self.residual(eps, formulation)
+            if formulation == "ecfm" and self.sparse:  # the forces' data derivative known
+                _, J, dr_dv = data_derivatives(self, eps)
+            else:
+                _, J, _ = self.residual(eps, formulation)
         except ConvergenceError as e:
             return Uncertainty.failed(f"uncertainty not computed: {e}")
         finally:
             self._last = saved
+        if formulation == "ecfm" and self.sparse:
+            # r = sqrt(dt_j) lam_j(eps, V): d eps_hat / dV = -J^+ dr/dV (Gauss-Newton)
+            try:
+                D = -least_squares_jacobian(J) @ dr_dv
+            except NonIdentifiableError as e:
+                return Uncertainty.failed(f"uncertainty not computed: {e}")
+            return estimate_uncertainty(None, eps, data, s2, model, dof=dof, deps_dv=D)
         if formulation == "standard":
             # r = sqrt(dt) (M theta - V): d eps_hat / dV = sqrt(dt) J^+
             try:

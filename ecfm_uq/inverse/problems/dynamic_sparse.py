@@ -36,7 +36,7 @@ from ..._validation import as_finite_array
 from ...errors import ConvergenceError
 from ...system import GalerkinSystem, LoadTerm, march
 
-__all__ = ["IntervalForces", "data_steps"]
+__all__ = ["IntervalForces", "data_derivatives", "data_steps"]
 
 #: Newton iterations of the exact match before the forces are declared not found
 MAX_NEWTON = 25
@@ -160,6 +160,9 @@ class IntervalForces:
             The force of every data interval.
         dlam : (J, C, n_eps) ndarray or None
             :math:`d\\lambda/d\\epsilon` (with ``sensitivities``).
+        G_lam : (J C, J C) ndarray
+            The match's derivative in the forces, :math:`\\partial(\\mathcal M\\,\\mathbb
+            E[\\theta(t_i)])/\\partial\\lambda_j` (block lower triangular).
 
         Raises
         ------
@@ -214,7 +217,7 @@ class IntervalForces:
             traj, lam=self.expand(lam_j), dTheta=dTheta,
             dlam=None if dlam is None else self.expand(dlam),
         )  # fmt: skip
-        return out, lam_j, dlam
+        return out, lam_j, dlam, G_lam
 
 
 class _IntervalLoad(LoadTerm):
@@ -262,3 +265,25 @@ class _IntervalLoad(LoadTerm):
         for i in np.unique(j[held]):
             dF[np.flatnonzero(j == i), :, :, self._columns(i)] = block
         return F, dF
+
+
+def data_derivatives(problem, eps):
+    """The ECFM residual :math:`r = (\\sqrt{\\Delta t_j}\\lambda_j)_j` of a problem with
+    data times, its Jacobian in :math:`\\epsilon` and its derivative in the fitted data
+    ``V[1:]`` (flattened time by time): the forces move with the data through the match,
+    :math:`d\\lambda/dv = G_\\lambda^{-1}` (times ``reading_sigma`` in a copy whitened per
+    reading, whose constraint is in the data's units).
+
+    Returns
+    -------
+    r : (J C,) ndarray
+    J : (J C, n_eps) ndarray
+    dr_dv : (J C, J C) ndarray
+    """
+    _, lam, dlam, G_lam = problem._interval_forces(eps, True)
+    w = np.repeat(np.sqrt(problem._forces.widths), lam.shape[1])
+    du = np.ones(w.size)
+    if problem.reading_sigma is not None:
+        du = np.asarray(problem.reading_sigma[1:], dtype=float).ravel()
+    dr_dv = w[:, None] * np.linalg.solve(G_lam, np.diag(du))
+    return w * lam.ravel(), w[:, None] * dlam.reshape(w.size, -1), dr_dv
