@@ -105,12 +105,16 @@ def test_a_missing_source_shows_up_as_the_force_of_its_interval():
     assert np.all(traj.lam[0] == 0)
 
 
-@pytest.mark.parametrize("steps", [STEPS, np.array([0, 3, 4, 9, 17, 24])])
-def test_ecfm_objective_and_gradient_against_central_differences(steps):
-    """z = 1/2 sum_j dt_j |lam_j|^2 (uneven intervals too, a reading at t0 not fitted)."""
+@pytest.mark.parametrize(
+    "steps, scheme",
+    [(STEPS, "euler"), (np.array([0, 3, 4, 9, 17, 24]), "euler"), (STEPS, "bdf2")],
+)
+def test_ecfm_objective_and_gradient_against_central_differences(steps, scheme):
+    """z = 1/2 sum_j dt_j |lam_j|^2 (uneven intervals too, a reading at t0 not fitted;
+    BDF2 marches across the data times)."""
     f = np.array([0.5, 0.3])
     V = _be_states(A_TRUE, lambda s: f if s >= 10 else np.zeros(2))[steps]
-    prob = _problem(V, steps)
+    prob = _problem(V, steps, scheme=scheme)
     x = np.array([0.55])
     z, g, traj = prob.ecfm_objective(x)
     fitted = steps[steps > 0]
@@ -300,3 +304,17 @@ def test_ecfm_uncertainty_data_derivative_against_refits():
         fd[i] = (moved[0] - moved[1]) / (2 * h)
     np.testing.assert_allclose(D[0], fd, rtol=1e-4, atol=1e-6 * np.max(np.abs(fd)))
     assert res.uncertainty.stderr[0] == pytest.approx(0.01 * np.linalg.norm(fd), rel=1e-4)
+
+
+def test_log_likelihood_counts_the_readings_at_the_data_times():
+    """The negative log-likelihood with known sigma is 1/2 sum (e/sigma)^2 over the fitted
+    readings only (not scaled by the data spacing), its gradient by hand."""
+    V = _be_states(A_TRUE)[STEPS] + 0.01 * np.sin(np.arange(STEPS.size))[:, None]
+    like = _problem(V, STEPS).log_likelihood("standard", 0.02)
+    a = 0.7
+    value, grad = like.evaluate(np.array([a]))
+    e = _be_states(a)[STEPS] - V
+    assert like.n_data == e.size
+    assert value == pytest.approx(0.5 * np.sum(e**2) / 0.02**2, rel=1e-10)
+    de = _be_rate_derivative(a, STEPS)
+    assert grad[0] == pytest.approx(np.sum(e * de) / 0.02**2, rel=1e-8)
