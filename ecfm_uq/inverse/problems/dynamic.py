@@ -51,7 +51,7 @@ from ...system.schemes import SCHEMES
 from ...system.step_control import check_steps, check_tolerances, choose_steps
 from ..core.gradients import choose_gradient
 from ..core.result import Uncertainty
-from .dynamic_sparse import IntervalForces, data_derivatives, data_steps
+from .dynamic_sparse import data_derivatives, data_steps, interval_forces
 from .interface import InverseProblem
 
 FORMULATIONS = ("standard", "ecfm")
@@ -257,7 +257,7 @@ class DynamicInverseProblem(InverseProblem):
 
     data_attribute = "V"
 
-    #: ``(n_steps + 1, C)``: the standard deviation of every reading (row 0, unused: 1)
+    #: ``(n_readings + 1, C)``: the standard deviation of every reading (row 0, unused: 1)
     #: in a copy whitened for a sigma per reading
     #: (:func:`~ecfm_uq.inverse.problems.whitening.whitened_problem`, the only place that sets
     #: it): its ``V`` and its predicted readings are then divided by it, and so is every
@@ -271,7 +271,7 @@ class DynamicInverseProblem(InverseProblem):
 
     @property
     def n_data(self):
-        """Number of readings fitted, ``n_steps * C`` (``V[0]`` is the initial time)."""
+        """Number of readings fitted, ``n_readings * C`` (``V[0]`` is the initial time)."""
         return int(np.size(self.V[1:]))
 
     @property
@@ -357,25 +357,8 @@ class DynamicInverseProblem(InverseProblem):
         return traj
 
     def _interval_forces(self, eps, sensitivities=False):
-        """The ECFM with data at some steps: the march whose force, one per data interval,
-        matches the data (:meth:`.dynamic_sparse.IntervalForces.solve`); ``(traj, lam (J,
-        C), dlam (J, C, n_eps) or None, G_lam (J C, J C))``."""
-        if self._forces is None:
-            self._forces = IntervalForces(self)
-        last = self._last.get("ecfm") if self.warm_start else None
-        lam0 = None if last is None else last.lam[self._rows[1:]]
-        try:
-            out = self._forces.solve(self, eps, sensitivities, lam0)
-        except ConvergenceError as e:
-            if lam0 is not None:  # forces far from this eps can mislead Newton: retry cold
-                del self._last["ecfm"]
-                return self._interval_forces(eps, sensitivities)
-            raise ConvergenceError(
-                f"ecfm forward solve at eps={np.array2string(eps)} failed: {e}"
-            ) from e
-        if self.warm_start:
-            self._last["ecfm"] = out[0]
-        return out
+        """The ECFM with data at some steps (:func:`.dynamic_sparse.interval_forces`)."""
+        return interval_forces(self, eps, sensitivities)
 
     def predictions(self, trajectory):
         """Sensor readings of the mean state, :math:`\\mathcal M\\,\\Theta_i\\mathbb E[\\Psi]`,
@@ -408,6 +391,9 @@ class DynamicInverseProblem(InverseProblem):
     # -- objectives ------------------------------------------------------------------------
     def standard_objective(self, eps, gradient=True):
         """:math:`z^{INV}` (Eq. inv_obj) and its gradient (Eqs. grad, discrete_sens).
+
+        With data times ``t``: the sum over the readings at the data times, weighted by
+        the mean data spacing :math:`\\bar w = (t_J - t_0)/J` instead of :math:`\\Delta t`.
 
         Parameters
         ----------
@@ -477,7 +463,9 @@ class DynamicInverseProblem(InverseProblem):
 
         :math:`z = \\tfrac12\\|r\\|^2` with :math:`r = \\sqrt{\\Delta t}\\,
         (\\mathcal M\\theta_i - v_i)_{i=1..\\mathcal P}` (standard) or
-        :math:`\\sqrt{\\Delta t}\\,(\\lambda_i)_{i=1..\\mathcal P}` (ECFM), stacked;
+        :math:`\\sqrt{\\Delta t}\\,(\\lambda_i)_{i=1..\\mathcal P}` (ECFM), stacked
+        (with data times ``t``: :math:`\\sqrt{\\bar w}` and the readings at the data times;
+        :math:`\\sqrt{\\Delta t_j}\\lambda_j` over the data intervals);
         :math:`J = \\partial r/\\partial\\epsilon` by forward sensitivities (one extra
         solve per parameter and step with the factored step Jacobian).
 

@@ -36,7 +36,7 @@ from ..._validation import as_finite_array
 from ...errors import ConvergenceError
 from ...system import GalerkinSystem, LoadTerm, march
 
-__all__ = ["IntervalForces", "data_derivatives", "data_steps"]
+__all__ = ["IntervalForces", "data_derivatives", "data_steps", "interval_forces"]
 
 #: Newton iterations of the exact match before the forces are declared not found
 MAX_NEWTON = 25
@@ -265,6 +265,33 @@ class _IntervalLoad(LoadTerm):
         for i in np.unique(j[held]):
             dF[np.flatnonzero(j == i), :, :, self._columns(i)] = block
         return F, dF
+
+
+def interval_forces(problem, eps, sensitivities=False):
+    """The ECFM of a problem with data times: the march whose force, one per data
+    interval, matches the data (:meth:`IntervalForces.solve`, built on first use), warm
+    started from the problem's last forces (a cold retry if Newton fails from there).
+
+    Returns
+    -------
+    ``(traj, lam (J, C), dlam (J, C, n_eps) or None, G_lam (J C, J C))``
+    """
+    if problem._forces is None:
+        problem._forces = IntervalForces(problem)
+    last = problem._last.get("ecfm") if problem.warm_start else None
+    lam0 = None if last is None else last.lam[problem._rows[1:]]
+    try:
+        out = problem._forces.solve(problem, eps, sensitivities, lam0)
+    except ConvergenceError as e:
+        if lam0 is not None:  # forces far from this eps can mislead Newton: retry cold
+            del problem._last["ecfm"]
+            return interval_forces(problem, eps, sensitivities)
+        raise ConvergenceError(
+            f"ecfm forward solve at eps={np.array2string(eps)} failed: {e}"
+        ) from e
+    if problem.warm_start:
+        problem._last["ecfm"] = out[0]
+    return out
 
 
 def data_derivatives(problem, eps):
