@@ -9,7 +9,7 @@ from ecfm_uq.chaos import ChaosBasis
 from ecfm_uq.inverse import fit
 from ecfm_uq.inverse.problems.dynamic import DynamicInverseProblem
 from ecfm_uq.problems.burgers import BurgersModel
-from ecfm_uq.system import Coefficient, GalerkinSystem, LinearTerm
+from ecfm_uq.system import Coefficient, GalerkinSystem, LinearTerm, LoadTerm, NonlinearTerm, march
 
 RATES = np.array([1.0, 2.5])  # theta_i' = -a k_i theta_i
 THETA0 = np.array([1.0, -0.7])
@@ -318,3 +318,41 @@ def test_log_likelihood_counts_the_readings_at_the_data_times():
     assert value == pytest.approx(0.5 * np.sum(e**2) / 0.02**2, rel=1e-10)
     de = _be_rate_derivative(a, STEPS)
     assert grad[0] == pytest.approx(np.sum(e * de) / 0.02**2, rel=1e-8)
+
+
+def test_user_callback_terms_see_the_model_parameters_only():
+    """A NonlinearTerm (logistic growth) and a LoadTerm.linear source: their callbacks get
+    the model's eps (not the forces), the forces match the data, and the ECFM gradient
+    equals central differences; at the parameters that made the data the forces vanish."""
+
+    def res(u, w, e):
+        assert len(e) == 3
+        return -e[0] * u * (1 - u / e[1])
+
+    def jac(u, w, e):
+        return np.array([[-e[0] * (1 - 2 * u[0] / e[1])]])
+
+    def deps(u, w, e):
+        return np.array([[-u[0] * (1 - u[0] / e[1]), -e[0] * u[0] ** 2 / e[1] ** 2, 0.0]])
+
+    terms = [
+        NonlinearTerm(res, jac, eps_jacobian=deps, degree=2, size=1),
+        LoadTerm.linear(np.array([[0.0, 0.0, 1.0]])),
+    ]
+    system = GalerkinSystem(terms, n_eps=3, Gamma=np.eye(1), M=np.eye(1), name="logistic")
+    truth = np.array([1.5, 2.0, 0.1])
+    full = march(system, truth, np.array([0.1]), 0.05, 40, tol=1e-13)
+    steps = np.array([6, 10, 20, 40])
+    prob = DynamicInverseProblem(
+        system, [0.1], 0.05, 40, np.eye(1), full.Theta[steps, :, 0], t=0.05 * steps,
+        solve_tol=1e-13,
+    )  # fmt: skip
+    assert prob.loss(truth, "ecfm") < 1e-20
+    x = np.array([1.2, 2.4, 0.05])
+    z, g, traj = prob.ecfm_objective(x)
+    np.testing.assert_allclose(traj.Theta[steps, 0, 0], full.Theta[steps, 0, 0], atol=1e-11)
+    h = 1e-6
+    fd = [
+        (prob.loss(x + h * e, "ecfm") - prob.loss(x - h * e, "ecfm")) / (2 * h) for e in np.eye(3)
+    ]
+    np.testing.assert_allclose(g, fd, rtol=1e-5)

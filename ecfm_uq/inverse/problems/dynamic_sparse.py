@@ -27,6 +27,7 @@ paper's, one force per step solved inside each step's Newton iteration.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 
 import numpy as np
@@ -34,7 +35,7 @@ import scipy.sparse as sp
 
 from ..._validation import as_finite_array
 from ...errors import ConvergenceError
-from ...system import GalerkinSystem, LoadTerm, march
+from ...system import GalerkinSystem, LoadTerm, NonlinearTerm, march
 
 __all__ = ["IntervalForces", "data_derivatives", "data_steps", "interval_forces"]
 
@@ -127,7 +128,7 @@ class IntervalForces:
         self.interval[0] = self.J  # the initial state: no force
         Gamma = system.Gamma.toarray() if sp.issparse(system.Gamma) else np.asarray(system.Gamma)
         load = _IntervalLoad(self, Gamma, problem.t0, problem.dt)
-        terms = (*system.terms, load)
+        terms = (*(_first_parameters(term, self.n_eps) for term in system.terms), load)
         self.system = GalerkinSystem(
             terms, self.n_eps + self.J * self.C, basis=system.basis, Gamma=system.Gamma, M=system.M,
             name=f"{system.name} + interval forces",
@@ -218,6 +219,40 @@ class IntervalForces:
             dlam=None if dlam is None else self.expand(dlam),
         )  # fmt: skip
         return out, lam_j, dlam, G_lam
+
+
+def _pad(D, n):
+    """``D`` (..., n_eps) with zero columns up to ``n`` (the forces move no model term)."""
+    D = np.asarray(D, dtype=float)
+    return np.concatenate([D, np.zeros(D.shape[:-1] + (n - D.shape[-1],))], axis=-1)
+
+
+def _first_parameters(term, n_eps):
+    """The system's term, reading only the first ``n_eps`` of the augmented parameters.
+
+    Coefficient terms (``LinearTerm``, ``QuadraticTerm``, a scaled ``LoadTerm``) read
+    their own indices and differentiate in any number of parameters: as they are. A user's
+    callbacks (``NonlinearTerm``, a ``LoadTerm`` of ``F(eps, t)``) see the model's
+    ``eps`` and their derivatives get zero columns for the forces.
+    """
+    if isinstance(term, NonlinearTerm):
+        new = copy.copy(term)
+        res, jac, deps = term.residual, term.jacobian, term.eps_jacobian_fn
+        new.residual = lambda u, w, e: res(u, w, e[:n_eps])
+        new.jacobian = lambda u, w, e: jac(u, w, e[:n_eps])
+        if deps is not None:
+            new.eps_jacobian_fn = lambda u, w, e: _pad(deps(u, w, e[:n_eps]), len(e))
+        return new
+    if isinstance(term, LoadTerm) and term.coef is None:
+        F, dF = term.F, term.dF
+        new = LoadTerm(
+            lambda e, t: F(e[:n_eps], t),
+            None if dF is None else (lambda e, t: _pad(dF(e[:n_eps], t), len(e))),
+            name=term.name,
+        )
+        new.size = term.size
+        return new
+    return term
 
 
 class _IntervalLoad(LoadTerm):
