@@ -321,7 +321,8 @@ def test_log_likelihood_counts_the_readings_at_the_data_times():
 
 
 def test_user_callback_terms_see_the_model_parameters_only():
-    """A NonlinearTerm (logistic growth) and a LoadTerm.linear source: their callbacks get
+    """A NonlinearTerm (logistic growth), a LoadTerm.linear source and user coefficients
+    (zero-valued, reading eps): their callbacks get
     the model's eps (not the forces), the forces match the data, and the ECFM gradient
     equals central differences; at the parameters that made the data the forces vanish."""
 
@@ -335,9 +336,15 @@ def test_user_callback_terms_see_the_model_parameters_only():
     def deps(u, w, e):
         return np.array([[-u[0] * (1 - u[0] / e[1]), -e[0] * u[0] ** 2 / e[1] ** 2, 0.0]])
 
+    def c_value(e):  # a user's coefficient: 0 * eps[2] ** 2, its gradient (3,)
+        assert len(e) == 3
+        return 0.0 * e[2] ** 2
+
     terms = [
         NonlinearTerm(res, jac, eps_jacobian=deps, degree=2, size=1),
         LoadTerm.linear(np.array([[0.0, 0.0, 1.0]])),
+        LinearTerm(np.eye(1), Coefficient(c_value, lambda e: np.zeros(3))),
+        LoadTerm.scaled(np.ones(1), Coefficient(c_value, lambda e: np.zeros(3))),
     ]
     system = GalerkinSystem(terms, n_eps=3, Gamma=np.eye(1), M=np.eye(1), name="logistic")
     truth = np.array([1.5, 2.0, 0.1])

@@ -35,7 +35,7 @@ import scipy.sparse as sp
 
 from ..._validation import as_finite_array
 from ...errors import ConvergenceError
-from ...system import GalerkinSystem, LoadTerm, NonlinearTerm, march
+from ...system import Coefficient, GalerkinSystem, LoadTerm, NonlinearTerm, march
 
 __all__ = ["IntervalForces", "data_derivatives", "data_steps", "interval_forces"]
 
@@ -230,10 +230,11 @@ def _pad(D, n):
 def _first_parameters(term, n_eps):
     """The system's term, reading only the first ``n_eps`` of the augmented parameters.
 
-    Coefficient terms (``LinearTerm``, ``QuadraticTerm``, a scaled ``LoadTerm``) read
-    their own indices and differentiate in any number of parameters: as they are. A user's
-    callbacks (``NonlinearTerm``, a ``LoadTerm`` of ``F(eps, t)``) see the model's
-    ``eps`` and their derivatives get zero columns for the forces.
+    Coefficient terms (``LinearTerm``, ``QuadraticTerm``, a scaled ``LoadTerm``) with the
+    library's coefficients read their own indices and differentiate in any number of
+    parameters: as they are. A user's callbacks (``NonlinearTerm``, a ``LoadTerm`` of
+    ``F(eps, t)``, a ``Coefficient(value, grad)``) see the model's ``eps`` and their
+    derivatives get zero columns for the forces.
     """
     if isinstance(term, NonlinearTerm):
         new = copy.copy(term)
@@ -242,6 +243,20 @@ def _first_parameters(term, n_eps):
         new.jacobian = lambda u, w, e: jac(u, w, e[:n_eps])
         if deps is not None:
             new.eps_jacobian_fn = lambda u, w, e: _pad(deps(u, w, e[:n_eps]), len(e))
+        return new
+    coef = getattr(term, "coef", None)
+    if isinstance(coef, Coefficient) and coef.indices is None:  # a user's c(eps)
+        wrapped = Coefficient(
+            lambda e: coef.value(e[:n_eps]),
+            lambda e: _pad(coef.grad(e[:n_eps]), len(e)),
+            label=coef.label,
+        )
+        if isinstance(term, LoadTerm):  # its F and dF hold the coefficient: rebuild it
+            new = LoadTerm.scaled(term._Ft, wrapped, name=term.name)
+            new.size = term.size
+            return new
+        new = copy.copy(term)
+        new.coef = wrapped
         return new
     if isinstance(term, LoadTerm) and term.coef is None:
         F, dF = term.F, term.dF
