@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from ecfm_uq.chaos import ChaosBasis
+from ecfm_uq.errors import ConvergenceError
 from ecfm_uq.inverse import fit
 from ecfm_uq.inverse.problems.dynamic import DynamicInverseProblem
 from ecfm_uq.problems.burgers import BurgersModel
@@ -363,3 +364,13 @@ def test_user_callback_terms_see_the_model_parameters_only():
         (prob.loss(x + h * e, "ecfm") - prob.loss(x - h * e, "ecfm")) / (2 * h) for e in np.eye(3)
     ]
     np.testing.assert_allclose(g, fd, rtol=1e-5)
+
+
+def test_a_force_that_reaches_no_sensor_is_a_convergence_error_naming_gamma():
+    terms = [LinearTerm(np.diag(RATES), Coefficient.parameter(0))]
+    Gamma = np.array([[1.0, 0.0], [0.0, 0.0]])  # the second force acts nowhere
+    system = GalerkinSystem(terms, n_eps=1, Gamma=Gamma, M=np.eye(2))
+    V = _be_states(A_TRUE)[STEPS] + 0.01
+    prob = DynamicInverseProblem(system, THETA0, DT, N_STEPS, np.eye(2), V, t=DT * STEPS)
+    with pytest.raises(ConvergenceError, match="Gamma"):
+        prob.ecfm_objective(np.array([0.5]))

@@ -176,6 +176,7 @@ class IntervalForces:
         scale = max(1.0, float(np.max(np.abs(target))))
         E1 = problem.system.E1
         small = False  # the last Newton step was at round-off: this march is the answer
+        last_size = np.inf
         for it in range(MAX_NEWTON + 1):
             traj = march(
                 self.system, np.r_[eps, lam], problem.Theta0, problem.dt, problem.n_steps,
@@ -188,13 +189,17 @@ class IntervalForces:
             dmean = np.einsum("tikm,k->tim", traj.dTheta[self.steps], E1)
             D = np.einsum("cj,tjm->tcm", problem.M_obs, dmean).reshape(J * C, -1)
             G_lam = D[:, ne:]
-            if small or np.max(np.abs(G)) <= 1e-12 * scale:
+            size = float(np.max(np.abs(G)))
+            if small or size <= 1e-12 * scale:
                 break
+            if size <= 1e-8 * scale and size > 0.5 * last_size:
+                break  # no more progress: the match at the march's own precision
+            last_size = size
             if it == MAX_NEWTON:
                 raise ConvergenceError(
                     f"the exact match at the data times is not met after {MAX_NEWTON} Newton "
                     f"iterations on the interval forces (largest mismatch "
-                    f"{np.max(np.abs(G)):.3e}); a finer dt, or parameters nearer the data"
+                    f"{size:.3e}); a finer dt, or parameters nearer the data"
                 )
             try:
                 step = np.linalg.solve(G_lam, -G)
