@@ -164,12 +164,12 @@ class Bordered:
         return op
 
 
-def _constraint_scale(Cth, theta, v):
+def constraint_scale(Cth, theta, v):
     """The round-off scale of the data-constraint rows :math:`C\\theta - v`."""
     return float(np.linalg.norm(abs(Cth) @ np.abs(theta)) + np.linalg.norm(v))
 
 
-def _check_constraint(system, constraint, n_rows=None):
+def check_constraint(system, constraint, n_rows=None):
     if constraint is None:
         return None, None
     if system.Gamma is None:

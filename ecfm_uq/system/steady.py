@@ -15,7 +15,7 @@ from .linear import (
     LinearSolver,
     solver_options,
 )
-from .nonlinear import Bordered, _check_constraint, _constraint_scale, newton
+from .nonlinear import Bordered, check_constraint, constraint_scale, newton
 from .plan import SolveStatus, dense_unknowns
 
 
@@ -231,7 +231,7 @@ def solve_steady(
         )
         solver = check_choice("structure", structure, ("auto", "dense"))
     opts = solver_options(solver)
-    M_obs, v = _check_constraint(system, constraint)
+    M_obs, v = check_constraint(system, constraint)
     N, P = system.shape
     n = N * P
     Theta0 = system.zeros() if Theta0 is None else as_finite_array("Theta0", Theta0, shape=(N, P))
@@ -262,7 +262,7 @@ def solve_steady(
 
         def scale(z):
             s = system.residual_scale(z[:n].reshape(N, P), eps, z[n:])
-            return s + _constraint_scale(Cth, z[:n], v)
+            return s + constraint_scale(Cth, z[:n], v)
 
         z0 = np.concatenate([Theta0.ravel(), np.zeros(system.n_forces)])
         z, factor, info = newton(fun, z0, tol, maxiter, linear_solver=linear, scale=scale)

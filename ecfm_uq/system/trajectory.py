@@ -44,7 +44,7 @@ class Trajectory:
         ``"compiled-sg"``) and ``plan.reason``, why (e.g. what kept the march off the
         compiled kernels).
     scheme : str
-        The time scheme: ``"euler"``, ``"bdf2"`` (:mod:`.schemes`) or, for
+        The time scheme: ``"euler"``, ``"bdf2"`` (:mod:`.time.base`) or, for
         :func:`.integrate`, ``"bdf"`` (variable order).
     stats : dict or None
         :func:`.integrate` only: steps, rejected steps, residual and Jacobian
@@ -73,7 +73,7 @@ class Trajectory:
         discrete adjoint of the march's scheme (needs ``march(..., keep_factors=True)``).
 
         Backward in time, with :math:`A_t` the (augmented) step Jacobian and the step
-        rules :math:`(h_s, w_s)` of :mod:`.schemes` (backward Euler: :math:`h = \\Delta t`,
+        rules :math:`(h_s, w_s)` of :mod:`.time.base` (backward Euler: :math:`h = \\Delta t`,
         :math:`w = (1)`),
 
         .. math::
@@ -117,12 +117,12 @@ class Trajectory:
         return self._adjoint(g_theta)
 
 
-def _generic_adjoint(system, eps, Theta, times, factors, mass_T, rules):
+def generic_adjoint(system, eps, Theta, times, factors, mass_T, rules):
     """The backward pass of :meth:`Trajectory.adjoint_gradient` with kept factors.
 
     ``rules[s] = (h_s, w_s)``: step ``s`` solves
     :math:`(M/h_s)(\\Theta_{s+1} - \\sum_j w_{s,j}\\Theta_{s-j}) + R(\\Theta_{s+1}) = 0`
-    (:mod:`.schemes`), so its multiplier reaches back to every state it combines.
+    (:mod:`.time.base`), so its multiplier reaches back to every state it combines.
     Returns ``adjoint(g)``, ``g`` of shape (n_t, NP + C) holding
     :math:`\\partial z/\\partial(\\Theta_t, \\lambda_t)`.
     """
