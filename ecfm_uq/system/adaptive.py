@@ -1,7 +1,7 @@
 """The former home of :func:`integrate`, kept importable: it lives in
-:mod:`.time.integrate` (the variable-order BDF in :mod:`.time.bdf`)."""
+:mod:`.time.integration` (the variable-order BDF in :mod:`.time.bdf`)."""
 
-from .time.integrate import integrate
+from .time.integration import integrate
 from .time.methods import ADAPTIVE
 
 #: the names ``integrate(method=)`` takes

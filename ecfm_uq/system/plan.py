@@ -91,7 +91,7 @@ Linear systems (a Jacobian operator with ``is_linear``; :attr:`GalerkinSystem.is
 :data:`WARM_START_STATES`
     A linear march step's Krylov solve starts from the last state plus the least-squares
     combination of the differences of this many previous states
-    (:func:`.time.march.warm_start`).
+    (:func:`.time.marching.warm_start`).
 :data:`CHORD_RATE`
     Default of ``SolverOptions.chord_rate``: the ``P > 1`` kernel's chord iteration hands
     a step to Newton-Krylov once the residual falls by less than this factor per

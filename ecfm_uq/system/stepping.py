@@ -1,6 +1,6 @@
-"""The former home of :func:`march`, kept importable: it lives in :mod:`.time.march`."""
+"""The former home of :func:`march`, kept importable: it lives in :mod:`.time.marching`."""
 
-from .time.march import march
-from .time.march import warm_start as _warm_start
+from .time.marching import march
+from .time.marching import warm_start as _warm_start
 
 __all__ = ["_warm_start", "march"]

@@ -24,7 +24,7 @@ UNIT_ROUNDOFF = float(np.finfo(float).eps)
 ROUNDOFF_FACTOR = 10.0
 CHORD_RATE = 0.25
 # a linear march step's Krylov solve starts from the last state plus the best combination
-# of the differences of this many previous states (time.march.warm_start; on
+# of the differences of this many previous states (time.marching.warm_start; on
 # benchmarks/transient.py 2 states took 20 % more Krylov iterations, 4 or 5 no fewer)
 WARM_START_STATES = 3
 # a chaos block (mean block, decoupled mode) below this fraction of the operator's scale

@@ -8,9 +8,9 @@ names the method, and the grid is fixed (``dt``, ``n_steps``), given (``times``)
 to a tolerance (:func:`~.grids.choose_steps` for a frozen calibration grid,
 ``integrate(..., rtol=)`` as it goes).
 
-* :func:`~.march.march` — a fixed or given grid, the ECFM data constraint, forward
+* :func:`~.marching.march` — a fixed or given grid, the ECFM data constraint, forward
   sensitivities and the exact discrete adjoint;
-* :func:`~.integrate.integrate` — steps chosen to a tolerance, dense output at
+* :func:`~.integration.integrate` — steps chosen to a tolerance, dense output at
   ``t_eval``, forward sensitivities (``sensitivities=True``);
 * :func:`~.grids.choose_steps` — a grid through the data times that meets a tolerance.
 """
@@ -20,8 +20,8 @@ from .bdf import VariableBDF
 from .bdf2 import BDF2
 from .euler import BackwardEuler
 from .grids import StepSequence, check_steps, choose_steps, step_errors
-from .integrate import integrate
-from .march import march
+from .integration import integrate
+from .marching import march
 from .methods import ADAPTIVE, FIXED, METHODS, check_method
 
 __all__ = [

@@ -1,4 +1,4 @@
-"""The variable-order, variable-step BDF of :func:`.integrate.integrate` (``method="bdf"``).
+"""The variable-order, variable-step BDF of :func:`.integration.integrate` (``method="bdf"``).
 
 :func:`integrate` solves :math:`M\\dot\\Theta + R(\\Theta; \\epsilon, t) = 0`, i.e. in the
 chaos coefficients :math:`(M\\otimes\\mathbb E[\\Psi\\Psi^T])\\,\\dot{\\mathrm{vec}\\Theta} =

@@ -30,7 +30,7 @@ divided differences :math:`\\Theta[t_i, \\dots, t_{i+k}]` of the trajectory,
   backward Euler.
 
 A step meets the tolerance when the norm of :func:`scipy.integrate.solve_ivp` and of
-:func:`.adaptive.integrate`,
+:func:`.integration.integrate`,
 
 .. math::
 
@@ -58,7 +58,7 @@ import numpy as np
 from ..._validation import as_finite_array, check_int, check_positive
 from ...errors import ConvergenceError
 from .base import check_times, time_grid
-from .march import march
+from .marching import march
 from .methods import check_method
 
 __all__ = [
@@ -274,7 +274,7 @@ def choose_steps(
     max_steps : int
         Largest grid allowed.
     tol, maxiter, solver
-        The march's Newton and linear-solver settings (:func:`.march.march`).
+        The march's Newton and linear-solver settings (:func:`.marching.march`).
     times : None
         Not an argument of this function (``march``'s grid): given, it is refused with
         a TypeError that points to ``t_data`` (the data times) and ``start`` (a grid).

@@ -5,7 +5,7 @@
 :data:`.methods.METHODS` that chooses its own steps (today ``"bdf"``, :mod:`.bdf`), and
 with ``sensitivities=True`` their derivatives in :math:`\\epsilon`. For calibration, where
 gradients must be the exact derivatives of what was computed, march a frozen grid
-instead (:func:`.march.march`, :func:`.grids.choose_steps`).
+instead (:func:`.marching.march`, :func:`.grids.choose_steps`).
 """
 
 from __future__ import annotations
