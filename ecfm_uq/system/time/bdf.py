@@ -53,8 +53,10 @@ differences :math:`D^S_j` of :math:`S`,
 one linear solve per parameter with the step's iteration matrix :math:`M/c + J`. The
 simplified Newton keeps an older :math:`J`; the solve is then refined with the exact
 Jacobian at :math:`\\Theta_{n+1}` (matrix-free products, the iteration matrix as the
-preconditioner; a fresh factorization if that does not converge), so :math:`S_{n+1}` is
-the step's exact derivative. The sensitivities are not part of the error test (CVODES'
+preconditioner) to a relative residual ``min(1e-10, rtol/100)``; when a sweep contracts
+the residual by less than 10x, or 10 sweeps do not reach it, :math:`M/c + J(\\Theta_{n+1})`
+is factorized and that factor preconditions the next steps' sensitivity solves while
+:math:`c` is unchanged. So :math:`S_{n+1}` is the step's exact derivative. The sensitivities are not part of the error test (CVODES'
 ``errconS = False``): the steps are those of the state alone, and the sensitivities'
 accuracy follows from the state's. Their values at ``t_eval`` come from the same
 interpolant.
@@ -81,8 +83,9 @@ KAPPA = np.array([0.0, -0.1850, -1.0 / 9.0, -0.0823, -0.0415, 0.0])
 GAMMA = np.concatenate([[0.0], np.cumsum(1.0 / np.arange(1, MAX_ORDER + 1))])
 ALPHA = (1.0 - KAPPA) * GAMMA
 ERROR_CONST = KAPPA * GAMMA + 1.0 / np.arange(1, MAX_ORDER + 2)
-#: the sensitivity solve's relative residual, and its refinement sweeps before refactorizing
-SENS_RTOL, SENS_MAXITER = 1e-12, 10
+#: the sensitivity solve's relative residual, its refinement sweeps before refactorizing,
+#: and the slowest contraction per sweep worth continuing
+SENS_RTOL, SENS_MAXITER, SENS_RATE = 1e-10, 10, 0.1
 
 
 def _rms(x):
@@ -186,6 +189,8 @@ class BDFIntegration:
         self.D = np.zeros((MAX_ORDER + 3, self.N, self.P))
         n = self.N * self.P
         self.DS = np.zeros((MAX_ORDER + 3, n, system.n_eps)) if sensitivities else None
+        # (c, factor) of M/c + J at a recent state, for the sensitivity solves
+        self.sens_factor = None
 
     # -- model evaluations ---------------------------------------------------------------
     def residual(self, y, t):
@@ -295,20 +300,32 @@ class BDFIntegration:
         system, eps = self.system, self.eps
         S_pred, _, psi = BDF.step(0.0, order, self.DS)
         rhs = self._mass_columns(S_pred - psi) / c - system.eps_jacobian(y_new, eps, t_new)
-        S = self._solve(factor, rhs)
         exact = system.is_linear and not self.linear.iterative  # the factor is M/c + J itself
+        if not exact and self.sens_factor is not None and self.sens_factor[0] == c:
+            factor = self.sens_factor[1]  # M/c + J at a later state than Newton's
+        S = self._solve(factor, rhs)
         if not exact:
             A = system.jacobian_operator(y_new, eps, t_new, dt=c)
-            bound = SENS_RTOL * np.linalg.norm(rhs, axis=0) + np.finfo(float).tiny
+            bound = (
+                min(SENS_RTOL, 1e-2 * self.rtol) * np.linalg.norm(rhs, axis=0)
+                + np.finfo(float).tiny
+            )
+            old = None
             for _ in range(SENS_MAXITER):
                 r = rhs - np.column_stack([A.matvec(S[:, j]) for j in range(S.shape[1])])
-                if np.all(np.linalg.norm(r, axis=0) <= bound):
+                norm = np.linalg.norm(r, axis=0)
+                if np.all(norm <= bound):
                     break
-                S = S + self._solve(factor, r)
-            else:  # the kept Jacobian is too far from the new one: factorize the exact one
+                if old is not None and np.any(norm > SENS_RATE * old):
+                    break  # the kept Jacobian is too far from the new one
+                S, old = S + self._solve(factor, r), norm
+            else:
+                norm = None
+            if norm is None or not np.all(norm <= bound):  # factorize the exact matrix
                 self.stats["n_factorizations"] += 1
                 fresh = self.linear.factorize(A)
                 if fresh is not None:
+                    self.sens_factor = (c, fresh)
                     S = self._solve(fresh, rhs)
         BDF.advance(self.DS, order, S - S_pred)
 
