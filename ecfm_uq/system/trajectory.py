@@ -24,7 +24,8 @@ class Trajectory:
     lam : (n_steps + 1, C) ndarray
         Constraint forces (zero at t = 0).
     dTheta : (n_steps + 1, N, P, n_eps) ndarray or None
-        :math:`\\partial\\Theta_t/\\partial\\epsilon` (Eq. discrete_sens / discrete_sens_ecfm).
+        :math:`\\partial\\Theta_t/\\partial\\epsilon` (Eq. discrete_sens / discrete_sens_ecfm;
+        for ``integrate(..., sensitivities=True)`` at ``t_eval``, :mod:`.time.bdf`).
     dlam : (n_steps + 1, C, n_eps) ndarray or None
     success : bool
     message : str
@@ -44,7 +45,8 @@ class Trajectory:
         ``"compiled-sg"``) and ``plan.reason``, why (e.g. what kept the march off the
         compiled kernels).
     scheme : str
-        The time scheme: ``"euler"``, ``"bdf2"`` (:mod:`.time.base`) or, for
+        The time method (``method=``, :data:`.time.methods.METHODS`): ``"euler"``,
+        ``"bdf2"`` or, for
         :func:`.integrate`, ``"bdf"`` (variable order).
     stats : dict or None
         :func:`.integrate` only: steps, rejected steps, residual and Jacobian
