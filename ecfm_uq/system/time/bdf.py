@@ -51,15 +51,17 @@ differences :math:`D^S_j` of :math:`S`,
         - R_\\epsilon(\\Theta_{n+1}; \\epsilon, t_{n+1}),
 
 one linear solve per parameter with the step's iteration matrix :math:`M/c + J`. The
-simplified Newton keeps an older :math:`J`; the solve is then refined with the exact
-Jacobian at :math:`\\Theta_{n+1}` (matrix-free products, the iteration matrix as the
-preconditioner) to a relative residual ``min(1e-10, rtol/100)``; when a sweep contracts
-the residual by less than 10x, or 10 sweeps do not reach it, :math:`M/c + J(\\Theta_{n+1})`
-is factorized and that factor preconditions the next steps' sensitivity solves while
-:math:`c` is unchanged. So :math:`S_{n+1}` is the step's exact derivative. The sensitivities are not part of the error test (CVODES'
-``errconS = False``): the steps are those of the state alone, and the sensitivities'
-accuracy follows from the state's. Their values at ``t_eval`` come from the same
-interpolant.
+simplified Newton keeps an older :math:`J`. With a Krylov solver the sensitivities are
+solved with the exact operator :math:`M/c + J(\\Theta_{n+1})` (matrix-free, the plan's
+preconditioner) to a relative residual ``min(1e-10, rtol/100)``; with a direct solver
+the solve is refined with the exact Jacobian at :math:`\\Theta_{n+1}` (matrix-free
+products, the iteration matrix as the preconditioner) to the same residual; when a sweep
+contracts the residual by less than 10x, or 10 sweeps do not reach it, :math:`M/c +
+J(\\Theta_{n+1})` is factorized and that factor preconditions the next steps'
+sensitivity solves while :math:`c` is unchanged. So :math:`S_{n+1}` is the step's exact
+derivative. The sensitivities are not part of the error test (CVODES' ``errconS =
+False``): the steps are those of the state alone, and the sensitivities' accuracy
+follows from the state's. Their values at ``t_eval`` come from the same interpolant.
 """
 
 from __future__ import annotations
@@ -289,45 +291,59 @@ class BDFIntegration:
         cols = [self.system.apply_mass(X[:, j].reshape(N, P)).ravel() for j in range(X.shape[1])]
         return np.column_stack(cols) if cols else np.zeros_like(X)
 
-    def _solve(self, factor, rhs):
+    def _solve(self, factor, rhs, rtol=None):
         self.stats["n_sensitivity_solves"] += rhs.shape[1]
-        return np.asarray(factor.solve(rhs)).reshape(rhs.shape)
+        return np.asarray(factor.solve(rhs, rtol=rtol)).reshape(rhs.shape)
 
     def sensitivity_step(self, t_new, y_new, c, order, factor):
-        """Advance the sensitivity differences over the accepted step (module notes)."""
+        """Advance the sensitivity differences over the accepted step (module notes);
+        ``None``, or the message of a Krylov solve that failed."""
         if self.system.n_eps == 0:
-            return
-        system, eps = self.system, self.eps
+            return None
+        system, eps, linear = self.system, self.eps, self.linear
         S_pred, _, psi = BDF.step(0.0, order, self.DS)
         rhs = self._mass_columns(S_pred - psi) / c - system.eps_jacobian(y_new, eps, t_new)
-        exact = system.is_linear and not self.linear.iterative  # the factor is M/c + J itself
-        if not exact and self.sens_factor is not None and self.sens_factor[0] == c:
+        rel = min(SENS_RTOL, 1e-2 * self.rtol)
+        if system.is_linear and not linear.iterative:  # the factor is M/c + J itself
+            S = self._solve(factor, rhs)
+        elif linear.iterative:  # a Krylov solve with the exact operator at the new state
+            A = system.jacobian_operator(y_new, eps, t_new, dt=c)
+            if not system.is_linear:  # (a linear system's operator keeps its factor)
+                self.stats["n_factorizations"] += 1
+            try:
+                S = self._solve(linear.factorize(A), rhs, rtol=rel)
+            except KrylovError as e:
+                return f"the sensitivity solve failed at t={t_new:.6g}: {e}"
+        else:
+            S = self._refined(factor, rhs, system.jacobian_operator(y_new, eps, t_new, dt=c),
+                              c, rel)  # fmt: skip
+        BDF.advance(self.DS, order, S - S_pred)
+        return None
+
+    def _refined(self, factor, rhs, A, c, rel):
+        """:math:`A^{-1}` ``rhs`` by refinement with the direct ``factor`` of an older
+        :math:`M/c + J` (or the one kept from an earlier sensitivity solve at this ``c``);
+        when a sweep contracts the residual by less than ``1/SENS_RATE``, or
+        ``SENS_MAXITER`` sweeps do not reach ``rel``, ``A`` itself is factorized (and kept)."""
+        if self.sens_factor is not None and self.sens_factor[0] == c:
             factor = self.sens_factor[1]  # M/c + J at a later state than Newton's
         S = self._solve(factor, rhs)
-        if not exact:
-            A = system.jacobian_operator(y_new, eps, t_new, dt=c)
-            bound = (
-                min(SENS_RTOL, 1e-2 * self.rtol) * np.linalg.norm(rhs, axis=0)
-                + np.finfo(float).tiny
-            )
-            old = None
-            for _ in range(SENS_MAXITER):
-                r = rhs - np.column_stack([A.matvec(S[:, j]) for j in range(S.shape[1])])
-                norm = np.linalg.norm(r, axis=0)
-                if np.all(norm <= bound):
-                    break
-                if old is not None and np.any(norm > SENS_RATE * old):
-                    break  # the kept Jacobian is too far from the new one
-                S, old = S + self._solve(factor, r), norm
-            else:
-                norm = None
-            if norm is None or not np.all(norm <= bound):  # factorize the exact matrix
-                self.stats["n_factorizations"] += 1
-                fresh = self.linear.factorize(A)
-                if fresh is not None:
-                    self.sens_factor = (c, fresh)
-                    S = self._solve(fresh, rhs)
-        BDF.advance(self.DS, order, S - S_pred)
+        bound = rel * np.linalg.norm(rhs, axis=0) + np.finfo(float).tiny
+        old = None
+        for _ in range(SENS_MAXITER):
+            r = rhs - np.column_stack([A.matvec(S[:, j]) for j in range(S.shape[1])])
+            norm = np.linalg.norm(r, axis=0)
+            if np.all(norm <= bound):
+                return S
+            if old is not None and np.any(norm > SENS_RATE * old):
+                break  # the kept Jacobian is too far from the new one
+            S, old = S + self._solve(factor, r), norm
+        self.stats["n_factorizations"] += 1
+        fresh = self.linear.factorize(A)
+        if fresh is None:  # singular at the new state: the refined solve is the best there is
+            return S
+        self.sens_factor = (c, fresh)
+        return self._solve(fresh, rhs)
 
     # -- the march -----------------------------------------------------------------------
     def run(self):
@@ -426,7 +442,10 @@ class BDFIntegration:
             nits.append(nit)
             n_equal += 1
             if DS is not None:
-                self.sensitivity_step(t_new, y_new, c, order, factor)
+                failed = self.sensitivity_step(t_new, y_new, c, order, factor)
+                if failed is not None:
+                    return self.result(out, out_S, n_out, False, f"{system.name}: {failed}",
+                                       nits, SolveStatus.KRYLOV_FAILED)  # fmt: skip
             self.t, self.y = t_new, y_new
             current_jac = False
             BDF.advance(D, order, d)
