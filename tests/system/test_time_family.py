@@ -10,7 +10,18 @@ from scipy.linalg import expm, expm_frechet
 import ecfm_uq.system as system_pkg
 from ecfm_uq.chaos import ChaosBasis
 from ecfm_uq.problems.burgers import BurgersModel
-from ecfm_uq.system import Coefficient, GalerkinSystem, LinearTerm, LoadTerm, integrate, march
+from ecfm_uq.system import (
+    Coefficient,
+    GalerkinSystem,
+    LinearTerm,
+    LoadTerm,
+    adaptive,
+    integrate,
+    march,
+    schemes,
+    step_control,
+    stepping,
+)
 from ecfm_uq.system.time import (
     BDF2,
     METHODS,
@@ -18,7 +29,10 @@ from ecfm_uq.system.time import (
     Stepper,
     VariableBDF,
     check_method,
+    grids,
 )
+from ecfm_uq.system.time import integration as integrate_module
+from ecfm_uq.system.time import marching as march_module
 
 
 def _decay_system(N=4, seed=3):
@@ -95,11 +109,6 @@ def test_method_is_the_keyword_and_scheme_its_alias():
 
 
 def test_the_old_module_paths_still_import_the_same_objects():
-    from ecfm_uq.system import adaptive, schemes, step_control, stepping
-    from ecfm_uq.system.time import grids
-    from ecfm_uq.system.time import integration as integrate_module
-    from ecfm_uq.system.time import marching as march_module
-
     assert stepping.march is march_module.march is march
     assert adaptive.integrate is integrate_module.integrate is integrate
     assert step_control.choose_steps is grids.choose_steps is system_pkg.choose_steps
