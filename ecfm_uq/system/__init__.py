@@ -7,17 +7,17 @@ adjoint), ``choose_steps`` (a grid through the data times meeting rtol/atol, to 
 for a calibration) and ``integrate`` (variable-order BDF with error control and forward
 sensitivities); ``METHODS`` is the table of methods."""
 
-from .galerkin import GalerkinSystem
-from .linear import LinearSolver
-from .nonlinear import NewtonInfo, newton
-from .nonlinear_term import NonlinearTerm
-from .operator import AugmentedOperator, GalerkinOperator
-from .options import SOLVERS, SolverOptions, solver_options
+from .model.galerkin import GalerkinSystem
+from .model.nonlinear_term import NonlinearTerm
+from .model.operator import AugmentedOperator, GalerkinOperator
+from .model.terms import Coefficient, DenseQuadraticForm, LinearTerm, LoadTerm, QuadraticTerm
+from .model.trajectory import Trajectory
+from .solve.linear import LinearSolver
+from .solve.nonlinear import NewtonInfo, newton
+from .solve.options import SOLVERS, SolverOptions, solver_options
 from .steady import SteadySolution, solve_continuation, solve_steady
-from .terms import Coefficient, DenseQuadraticForm, LinearTerm, LoadTerm, QuadraticTerm
 from .time import FIXED as SCHEMES
 from .time import METHODS, StepSequence, choose_steps, integrate, march
-from .trajectory import Trajectory
 
 __all__ = [
     "METHODS",

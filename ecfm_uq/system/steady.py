@@ -11,12 +11,12 @@ import numpy as np
 from .._validation import as_finite_array, check_choice, check_int, check_positive
 from ..errors import ConvergenceError
 from ..threads import library_threads
-from .linear import (
+from .solve.linear import (
     LinearSolver,
     solver_options,
 )
-from .nonlinear import Bordered, check_constraint, constraint_scale, newton
-from .plan import SolveStatus, dense_unknowns
+from .solve.nonlinear import Bordered, check_constraint, constraint_scale, newton
+from .solve.plan import SolveStatus, dense_unknowns
 
 
 @dataclass

@@ -69,10 +69,10 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import KrylovError, ModelEvaluationError
-from ..operator import GalerkinOperator
-from ..plan import NEWTON_ETA_MAX
-from ..thresholds import SolveStatus
-from ..trajectory import Trajectory
+from ..model.operator import GalerkinOperator
+from ..model.thresholds import SolveStatus
+from ..model.trajectory import Trajectory
+from ..solve.plan import NEWTON_ETA_MAX
 from .base import Stepper
 
 __all__ = ["VariableBDF"]

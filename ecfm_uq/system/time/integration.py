@@ -16,9 +16,9 @@ import scipy.sparse.linalg as spla
 
 from ..._validation import as_finite_array, check_int, check_positive
 from ...threads import library_threads
-from ..linear import LinearSolver
-from ..options import solver_options
-from ..plan import dense_unknowns
+from ..solve.linear import LinearSolver
+from ..solve.options import solver_options
+from ..solve.plan import dense_unknowns
 from .bdf import BDFIntegration
 from .methods import check_method
 

@@ -33,12 +33,12 @@ import numpy as np
 from ..._validation import check_int, check_positive
 from ...errors import ConvergenceError
 from ...threads import library_threads
-from ..compiled import compiled_march
-from ..linear import LinearSolver
-from ..nonlinear import Bordered, check_constraint, constraint_scale, newton
-from ..options import solver_options
-from ..plan import WARM_START_STATES, dense_unknowns
-from ..trajectory import Trajectory, generic_adjoint
+from ..model.trajectory import Trajectory, generic_adjoint
+from ..solve.compiled import compiled_march
+from ..solve.linear import LinearSolver
+from ..solve.nonlinear import Bordered, check_constraint, constraint_scale, newton
+from ..solve.options import solver_options
+from ..solve.plan import WARM_START_STATES, dense_unknowns
 from .base import Stepper, time_grid
 from .methods import METHODS, check_method
 

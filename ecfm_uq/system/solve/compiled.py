@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .terms import LoadTerm
-from .thresholds import SolveStatus, failure_message
-from .trajectory import Trajectory
+from ..model.terms import LoadTerm
+from ..model.thresholds import SolveStatus, failure_message
+from ..model.trajectory import Trajectory
 
 # the compiled kernels: loaded once, given up once if numba cannot run them
 _KERNELS = {"module": None, "failed": False}

@@ -28,7 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..memory import check_allocation
+from ...memory import check_allocation
 
 __all__ = ["AugmentedOperator", "GalerkinOperator"]
 

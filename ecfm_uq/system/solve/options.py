@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from .._validation import check_choice, check_int, check_positive, check_real
+from ..._validation import check_choice, check_int, check_positive, check_real
 from .plan import CHORD_RATE
 
 __all__ = ["SOLVERS", "PRECONDITIONERS", "SolverOptions", "solver_options"]

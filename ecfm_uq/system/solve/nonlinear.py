@@ -6,13 +6,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validation import as_finite_array, as_operator
-from ..errors import KrylovError, ModelEvaluationError
+from ..._validation import as_finite_array, as_operator
+from ...errors import KrylovError, ModelEvaluationError
+from ..model.operator import AugmentedOperator
 from .linear import (
     DenseFactor,
     dense_lu,
 )
-from .operator import AugmentedOperator
 from .plan import (
     NEWTON_ETA_FACTOR,
     SolveStatus,
