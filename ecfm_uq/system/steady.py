@@ -37,7 +37,7 @@ class SteadySolution:
         Krylov iterations of every linear solve so far (Newton steps, then sensitivities);
         empty for direct solvers.
     status : SolveStatus
-        Why Newton stopped (:class:`.plan.SolveStatus`: ``CONVERGED``, ``MAX_ITERATIONS``,
+        Why Newton stopped (:class:`.solve.plan.SolveStatus`: ``CONVERGED``, ``MAX_ITERATIONS``,
         ``SINGULAR_JACOBIAN``, ``KRYLOV_FAILED``, ``NON_FINITE``, ``MODEL_FAILURE``).
     """
 
@@ -206,7 +206,7 @@ def solve_steady(
         Raise :class:`ConvergenceError` instead of returning ``success=False``.
     solver : str, SolverOptions or dict
         Linear solver: ``"auto"`` (default), ``"dense"``, ``"decoupled"``,
-        ``"sparse-direct"``, ``"cg"`` or ``"gmres"`` (see :mod:`ecfm_uq.system.plan`);
+        ``"sparse-direct"``, ``"cg"`` or ``"gmres"`` (see :mod:`ecfm_uq.system.solve.plan`);
         a :class:`~ecfm_uq.system.SolverOptions` or dict also sets the preconditioner,
         Krylov tolerance and iteration limits. A linear system is solved by Newton too:
         one Krylov solve aimed at ``tol`` (more only if it falls short), or a direct

@@ -222,7 +222,7 @@ class GalerkinSystem:
         :math:`\\sum \\| |c|\\,|K||\\Theta||G| \\| + \\| |c|\\,|A|:|\\Theta||\\Theta| \\|
         + \\|F\\| + \\|\\Gamma\\lambda\\|`: floating point cannot evaluate :math:`R` (nor
         drive it) below a small multiple of the unit round-off times this, whatever the
-        model's units (:func:`.plan.residual_floor`).
+        model's units (:func:`..solve.plan.residual_floor`).
         """
         s = 0.0
         for term in self.terms:

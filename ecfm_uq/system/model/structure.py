@@ -6,7 +6,7 @@ sparsity, the decoupling of the couplings, the germ's Gauss nodes, the stacked
 operators and node tables of the compiled kernels, the triple products' nonzero pairs,
 the mass matrices) is therefore a property of the system, computed on first use and kept
 in one :class:`SystemStructure` that the system owns (``system.structure``). No other
-object writes onto the system; the solve plan (:mod:`.plan`) reads its decisions from
+object writes onto the system; the solve plan (:mod:`..solve.plan`) reads its decisions from
 here.
 """
 

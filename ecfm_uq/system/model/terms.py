@@ -228,7 +228,7 @@ class LinearTerm:
     -----
     The term only describes itself (``coef``, ``K``, ``G``); whether its Jacobian
     :math:`c\\,K \\otimes G^T` is assembled dense, assembled sparse or applied matrix-free
-    is decided by the solver layer (:mod:`.operator`, :mod:`.linear`).
+    is decided by the solver layer (:mod:`.operator`, :mod:`..solve.linear`).
     """
 
     def __init__(self, K, coef=1.0, G=None, name="linear"):
@@ -263,7 +263,7 @@ class LinearTerm:
 
     def magnitude(self, X):
         """:math:`|K|\\,|X|\\,|G|` (N, P), without the coefficient: the scale of the
-        round-off in :meth:`action` (see :func:`.plan.residual_floor`)."""
+        round-off in :meth:`action` (see :func:`..solve.plan.residual_floor`)."""
         if self._abs is None:
             self._abs = (abs(self.K), np.abs(self.G))
         absK, absG = self._abs

@@ -1,7 +1,7 @@
 """The thresholds and status codes that the Python solvers and the compiled kernels share.
 
-They live apart from the solve plan (:mod:`.plan`, which re-exports them and documents
-each in its module docstring) so that the compiled kernels (:mod:`._kernels`), the
+They live apart from the solve plan (:mod:`..solve.plan`, which re-exports them and documents
+each in its module docstring) so that the compiled kernels (:mod:`..solve._kernels`), the
 trajectories and the plan itself all read them without importing one another.
 """
 

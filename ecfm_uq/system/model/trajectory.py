@@ -38,7 +38,7 @@ class Trajectory:
     linear_iterations : list of int
         Krylov iterations of every linear solve (empty for direct solvers).
     status : SolveStatus
-        ``CONVERGED``, or why the failed step stopped (:class:`.plan.SolveStatus`; the
+        ``CONVERGED``, or why the failed step stopped (:class:`.thresholds.SolveStatus`; the
         same codes whichever path marched).
     plan : SolvePlan or None
         The solve plan that ran: ``plan.path`` (``"generic"``, ``"compiled-p1"``,

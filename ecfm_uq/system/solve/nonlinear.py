@@ -48,7 +48,7 @@ def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None, scale=None, fi
     ----------
     fun : callable
         Returns the residual ``r`` (n,) and its Jacobian ``J``: a dense ``(n, n)`` array, or
-        a :class:`~.operator.GalerkinOperator` / :class:`~.operator.AugmentedOperator`
+        a :class:`~..model.operator.GalerkinOperator` / :class:`~..model.operator.AugmentedOperator`
         handled by ``linear_solver``.
     z0 : (n,) array_like
     tol : float

@@ -55,7 +55,7 @@ class SolverOptions:
     -----
     Which path, solver and preconditioner run, and every threshold they share (the
     singular pivot, the inexact-Newton forcing term, the Krylov acceptance rule), are
-    decided in one place, :mod:`ecfm_uq.system.plan`.
+    decided in one place, :mod:`ecfm_uq.system.solve.plan`.
     """
 
     solver: str = "auto"

@@ -153,7 +153,7 @@ DENSE_AUTO_BYTES = 256 * 2**20
 SPLU_AUTO_SIZE = 400_000
 # the decoupled or nodal preconditioner (P factorizations) up to this N
 DECOUPLED_AUTO_SIZE = 5_000
-# the compiled marches (system/_kernels: march_p1, march_sg) handle N up to this
+# the compiled marches (system/solve/_kernels: march_p1, march_sg) handle N up to this
 COMPILED_MARCH_MAX_N = 128
 
 PATHS = ("generic", "compiled-p1", "compiled-sg")

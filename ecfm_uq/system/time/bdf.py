@@ -16,7 +16,7 @@ accepted states, a step of size :math:`h` and order :math:`k` solves for
 
 :math:`\\gamma_j = \\sum_{i\\le j} 1/i`, :math:`\\alpha_k = (1 - \\kappa_k)\\gamma_k`. This
 is a backward-Euler step of length :math:`c` (the same Jacobian :math:`M/c + J`), so the
-solve plan's linear solvers, Krylov methods and preconditioners (:mod:`.linear`) serve it
+solve plan's linear solvers, Krylov methods and preconditioners (:mod:`..solve.linear`) serve it
 unchanged; the predictor :math:`\\Theta^{(0)}` (the extrapolated interpolant of the last
 states) is the warm start. Newton is the simplified iteration: the Jacobian :math:`J` is
 kept from step to step and evaluated again only when the iteration does not converge;

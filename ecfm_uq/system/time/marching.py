@@ -23,7 +23,7 @@ The march is three parts: the setup of a march (:class:`MarchSetup`: the mass pr
 :class:`MassProducts`, the linear solver, the constraint's border), the solve of one
 step (:class:`StepProblem`, the residual and scale handed to Newton) and the
 sensitivity bookkeeping (:class:`Sensitivities`); :func:`march` validates, dispatches to
-the compiled kernels (:mod:`..compiled`) or loops over the steps.
+the compiled kernels (:mod:`..solve.compiled`) or loops over the steps.
 """
 
 from __future__ import annotations
@@ -140,8 +140,8 @@ def march(
 
     Notes
     -----
-    Small systems are marched by a compiled kernel (:mod:`._kernels`) with the same
-    maths and no Python work per step when the solve plan (:mod:`.plan`) says so:
+    Small systems are marched by a compiled kernel (:mod:`..solve._kernels`) with the same
+    maths and no Python work per step when the solve plan (:mod:`..solve.plan`) says so:
     ``P = 1`` with the dense solver (``Trajectory.solver`` then reads
     ``"dense (compiled)"``), or a nonlinear one-germ ``P > 1`` system with GMRES and the
     nodal preconditioner (``"gmres+nodal (compiled)"``). ``solver={"compiled": False}``
