@@ -5,7 +5,13 @@ Transients (the time family, :mod:`.time`): ``march`` (fixed steps or a given gr
 ``times=``, ``method="euler"`` or ``"bdf2"``, sensitivities and the exact discrete
 adjoint), ``choose_steps`` (a grid through the data times meeting rtol/atol, to be frozen
 for a calibration) and ``integrate`` (variable-order BDF with error control and forward
-sensitivities); ``METHODS`` is the table of methods."""
+sensitivities); ``METHODS`` is the table of methods.
+
+Layers, each importing only the ones below it: :mod:`.model` (terms, the system, its
+operators, trajectories, status codes), :mod:`.solve` (the solve plan, linear and Newton
+solvers, compiled marches), :mod:`.time` (the time family) and this package (steady solves
+in :mod:`.steady`, the public names, the former module paths ``plan``, ``linear``,
+``trajectory``, ``galerkin``, ``schemes``, ``step_control``, ``stepping``, ``adaptive``)."""
 
 from .model.galerkin import GalerkinSystem
 from .model.nonlinear_term import NonlinearTerm
