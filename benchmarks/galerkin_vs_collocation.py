@@ -21,7 +21,7 @@ For chaos orders p = 1..6, in one run:
   of ``BurgersModel(viscosity_chaos=ChaosBasis(p), viscosity_spread=spread)``, the
   convection coupled through E[Psi_b Psi_c Psi_l], with the engine's default solver for
   this march: iterations preconditioned by the P node-wise deterministic Jacobians at
-  the germ's Gauss nodes, compiled (``solver`` column; ``ecfm_uq.system.linear.
+  the germ's Gauss nodes, compiled (``solver`` column; ``ecfm_uq.system.solve.linear.
   NodalPreconditioner``). Timed: the march only (building the order-p model, about
   0.05 s, is excluded and printed). Also timed, for reference: the same march with
   ``solver="dense"`` (an (NP x NP) Newton Jacobian factorized per iteration, the v0.1

@@ -1,6 +1,6 @@
 """Benchmark: the solver and preconditioner choices of ``solver="auto"``, side by side.
 
-The claims behind the ``"auto"`` rules of :mod:`ecfm_uq.system.plan`, each measured in
+The claims behind the ``"auto"`` rules of :mod:`ecfm_uq.system.solve.plan`, each measured in
 this one run (BLAS on one thread, best of ``--repeats``):
 
 1. **Sparse LU of the chaos-coupled block matrix vs mean-preconditioned CG** on the
@@ -40,7 +40,7 @@ from ecfm_uq.chaos import ChaosBasis  # noqa: E402
 from ecfm_uq.problems.burgers import BurgersModel  # noqa: E402
 from ecfm_uq.problems.fem_diffusion import build_fem_diffusion  # noqa: E402
 from ecfm_uq.system import SolverOptions, march, solve_steady  # noqa: E402
-from ecfm_uq.system.preconditioners import make_preconditioner  # noqa: E402
+from ecfm_uq.system.solve.preconditioners import make_preconditioner  # noqa: E402
 
 EPS = np.array([0.1, 0.5])
 

@@ -493,7 +493,7 @@ class GaussNodes:
     :math:`\\mathbb E[g\\,\\Psi\\Psi^T]` evaluated with this rule instead of exactly is
     :math:`\\Phi^T W \\mathrm{diag}(g(\\omega_k))\\,\\Phi`: in node values it is diagonal
     (Galerkin with the quadrature's aliasing is collocation). The solver layer builds its
-    node-wise preconditioner from this (:class:`ecfm_uq.system.linear.NodalPreconditioner`).
+    node-wise preconditioner from this (:class:`ecfm_uq.system.solve.linear.NodalPreconditioner`).
 
     Parameters
     ----------

@@ -55,7 +55,7 @@ import re
 import numpy as np
 
 from .._validation import check_int, check_positive
-from ..system.plan import dense_unknowns
+from ..system.solve.plan import dense_unknowns
 from ..threads import library_threads
 from .core.settings import FitSettings
 from .problems.noise_model import NoiseModel, noise_model

@@ -11,12 +11,12 @@ import numpy as np
 from .._validation import as_finite_array, check_choice, check_int, check_positive
 from ..errors import ConvergenceError
 from ..threads import library_threads
-from .linear import (
+from .solve.linear import (
     LinearSolver,
     solver_options,
 )
-from .nonlinear import Bordered, _check_constraint, _constraint_scale, newton
-from .plan import SolveStatus, dense_unknowns
+from .solve.nonlinear import Bordered, check_constraint, constraint_scale, newton
+from .solve.plan import SolveStatus, dense_unknowns
 
 
 @dataclass
@@ -37,7 +37,7 @@ class SteadySolution:
         Krylov iterations of every linear solve so far (Newton steps, then sensitivities);
         empty for direct solvers.
     status : SolveStatus
-        Why Newton stopped (:class:`.plan.SolveStatus`: ``CONVERGED``, ``MAX_ITERATIONS``,
+        Why Newton stopped (:class:`.solve.plan.SolveStatus`: ``CONVERGED``, ``MAX_ITERATIONS``,
         ``SINGULAR_JACOBIAN``, ``KRYLOV_FAILED``, ``NON_FINITE``, ``MODEL_FAILURE``).
     """
 
@@ -206,7 +206,7 @@ def solve_steady(
         Raise :class:`ConvergenceError` instead of returning ``success=False``.
     solver : str, SolverOptions or dict
         Linear solver: ``"auto"`` (default), ``"dense"``, ``"decoupled"``,
-        ``"sparse-direct"``, ``"cg"`` or ``"gmres"`` (see :mod:`ecfm_uq.system.plan`);
+        ``"sparse-direct"``, ``"cg"`` or ``"gmres"`` (see :mod:`ecfm_uq.system.solve.plan`);
         a :class:`~ecfm_uq.system.SolverOptions` or dict also sets the preconditioner,
         Krylov tolerance and iteration limits. A linear system is solved by Newton too:
         one Krylov solve aimed at ``tol`` (more only if it falls short), or a direct
@@ -231,7 +231,7 @@ def solve_steady(
         )
         solver = check_choice("structure", structure, ("auto", "dense"))
     opts = solver_options(solver)
-    M_obs, v = _check_constraint(system, constraint)
+    M_obs, v = check_constraint(system, constraint)
     N, P = system.shape
     n = N * P
     Theta0 = system.zeros() if Theta0 is None else as_finite_array("Theta0", Theta0, shape=(N, P))
@@ -262,7 +262,7 @@ def solve_steady(
 
         def scale(z):
             s = system.residual_scale(z[:n].reshape(N, P), eps, z[n:])
-            return s + _constraint_scale(Cth, z[:n], v)
+            return s + constraint_scale(Cth, z[:n], v)
 
         z0 = np.concatenate([Theta0.ravel(), np.zeros(system.n_forces)])
         z, factor, info = newton(fun, z0, tol, maxiter, linear_solver=linear, scale=scale)

@@ -13,7 +13,7 @@ import scipy.sparse.linalg as spla
 
 from ecfm_uq.chaos import ChaosBasis, weighted_gram
 from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm, QuadraticTerm, march, solve_steady
-from ecfm_uq.system.plan import SolveStatus, newton_converged, residual_floor
+from ecfm_uq.system.solve.plan import SolveStatus, newton_converged, residual_floor
 
 
 def _poisson(N):

@@ -11,7 +11,7 @@ from scipy.linalg import expm
 from ecfm_uq.chaos import Inputs, input_basis, input_coefficients, input_gram
 from ecfm_uq.problems.pendulum import build_pendulum
 from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm, NonlinearTerm, integrate
-from ecfm_uq.system.thresholds import SolveStatus
+from ecfm_uq.system.model.thresholds import SolveStatus
 
 T_GRID = np.linspace(0.0, 10.0, 1000)
 

@@ -20,7 +20,7 @@ from ecfm_uq.system import (
     SolverOptions,
     solve_steady,
 )
-from ecfm_uq.system.preconditioners import KroneckerPreconditioner, MeanPreconditioner
+from ecfm_uq.system.solve.preconditioners import KroneckerPreconditioner, MeanPreconditioner
 
 
 def _laplacian(N):

@@ -11,8 +11,8 @@ import scipy.sparse.linalg as spla
 
 from ecfm_uq.chaos import ChaosBasis, expectation_tensor, weighted_gram
 from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm, march, solve_steady
+from ecfm_uq.system.model.terms import _sparse_coupling, _without_roundoff
 from ecfm_uq.system.stepping import _warm_start
-from ecfm_uq.system.terms import _sparse_coupling, _without_roundoff
 
 
 def _random_heat(N=300, order=3, units=1.0):

@@ -9,7 +9,7 @@ from ecfm_uq.chaos import ChaosBasis, GaussNodes, gauss_legendre, weighted_gram
 from ecfm_uq.errors import ConvergenceError
 from ecfm_uq.problems.burgers import BurgersModel
 from ecfm_uq.system import march
-from ecfm_uq.system.linear import NodalPreconditioner, choose_solver, solver_options
+from ecfm_uq.system.solve.linear import NodalPreconditioner, choose_solver, solver_options
 
 EPS = np.array([1.6, 1.5, 1.7, 0.9])
 NODAL = {"solver": "gmres", "preconditioner": "nodal"}

@@ -21,7 +21,7 @@ from ecfm_uq.system import (
     march,
     solve_steady,
 )
-from ecfm_uq.system.nonlinear_term import nonlinear_rule_points, smolyak_quadrature
+from ecfm_uq.system.model.nonlinear_term import nonlinear_rule_points, smolyak_quadrature
 
 N = 15
 H = 1.0 / (N + 1)

@@ -12,8 +12,8 @@ from ecfm_uq.system import (
     solve_steady,
     solver_options,
 )
-from ecfm_uq.system import compiled as compiled_module
-from ecfm_uq.system.plan import SolveStatus, krylov_accepts, newton_rtol, plan_solve
+from ecfm_uq.system.solve import compiled as compiled_module
+from ecfm_uq.system.solve.plan import SolveStatus, krylov_accepts, newton_rtol, plan_solve
 
 N = 6
 

@@ -25,7 +25,7 @@ from ecfm_uq.system import (
     march,
     solve_steady,
 )
-from ecfm_uq.system.linear import choose_solver, solver_options
+from ecfm_uq.system.solve.linear import choose_solver, solver_options
 
 EPS = np.array([0.1, 1.3])
 TIGHT = {"rtol": 1e-12}

@@ -12,10 +12,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .schemes import step_rule
-from .terms import LoadTerm
-from .thresholds import SolveStatus, failure_message
-from .trajectory import Trajectory
+from ..model.terms import LoadTerm
+from ..model.thresholds import SolveStatus, failure_message
+from ..model.trajectory import Trajectory
 
 # the compiled kernels: loaded once, given up once if numba cannot run them
 _KERNELS = {"module": None, "failed": False}
@@ -46,12 +45,13 @@ def kernels_failed():
 
 
 def compiled_march(linear, system, eps, Theta0, dt, n_steps, t0, M_obs, V, sens, tol, maxiter,
-                   keep, guess, scheme="euler"):  # fmt: skip
+                   keep, guess, scheme, rules):  # fmt: skip
     """March on the plan's compiled path; ``None`` if the kernel does not compile.
 
-    ``scheme`` (:mod:`.schemes`) reaches the kernels as the mass term of the two-step
-    steps, ``Mdt2``, which steps use it (``hsel``) and the weights of the states each
-    step starts from (``wts``).
+    The step rules ``rules[s] = (h_s, w_s)`` of the method ``scheme`` on the fixed grid
+    (:meth:`.time.base.Stepper.rules`) reach the kernels as the mass term of the
+    two-step steps, ``Mdt2``, which steps use it (``hsel``) and the weights of the states
+    each step starts from (``wts``).
 
     ``linear.plan.path`` is ``"compiled-p1"`` (:func:`._kernels.march_p1`: ``P = 1``,
     dense, data constraint, sensitivities and kept factors allowed) or ``"compiled-sg"``
@@ -82,7 +82,6 @@ def compiled_march(linear, system, eps, Theta0, dt, n_steps, t0, M_obs, V, sens,
         if dFt is not None:
             dF += dFt
     Mdt = system.mass_matrix() / dt if P == 1 else system.M / dt
-    rules = [step_rule(scheme, s, dt) for s in range(n_steps)]
     h2 = next((h for h, _ in rules if h != dt), dt)
     Mdt2 = system.mass_matrix() / h2 if P == 1 else system.M / h2
     hsel = np.array([0 if h == dt else 1 for h, _ in rules], dtype=np.int64)

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import scipy.sparse.linalg as spla
 
-from ..errors import KrylovError
+from ...errors import KrylovError
 from .plan import ROUNDOFF_FACTOR, UNIT_ROUNDOFF, krylov_accepts
 
 

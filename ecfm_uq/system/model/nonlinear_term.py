@@ -36,8 +36,8 @@ import math
 import numpy as np
 import scipy.sparse as sp
 
-from .._validation import check_int, is_sparse
-from .._validation import describe as _describe
+from ..._validation import check_int, is_sparse
+from ..._validation import describe as _describe
 
 __all__ = ["MAX_RULE_NODES", "NonlinearTerm", "nonlinear_rule_points"]
 
@@ -80,7 +80,7 @@ def smolyak_quadrature(level, basis):
     The combination of the tensor rules of :func:`ecfm_uq.chaos.smolyak_rule`, summed on
     its distinct nodes (weights may be negative; they sum to one).
     """
-    from ..chaos import smolyak_rule
+    from ...chaos import smolyak_rule
 
     nodes, parts = smolyak_rule(level, basis.dim, "gauss", basis.germs)
     if len(nodes) > MAX_RULE_NODES:
@@ -95,7 +95,7 @@ def smolyak_quadrature(level, basis):
 
 
 def _model_error(message):
-    from ..errors import ModelEvaluationError
+    from ...errors import ModelEvaluationError
 
     return ModelEvaluationError(message)
 
@@ -364,7 +364,7 @@ class NonlinearTerm:
         U = self._node_states(Theta)
         first = self._jacobian_at(U[:, 0], 0, eps)
         if not is_sparse(first) and self.n_nodes > 1:
-            from ..memory import check_allocation
+            from ...memory import check_allocation
 
             check_allocation(
                 8.0 * self._N**2 * self.n_nodes,

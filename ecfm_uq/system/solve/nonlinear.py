@@ -6,13 +6,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validation import as_finite_array, as_operator
-from ..errors import KrylovError, ModelEvaluationError
+from ..._validation import as_finite_array, as_operator
+from ...errors import KrylovError, ModelEvaluationError
+from ..model.operator import AugmentedOperator
 from .linear import (
     DenseFactor,
     dense_lu,
 )
-from .operator import AugmentedOperator
 from .plan import (
     NEWTON_ETA_FACTOR,
     SolveStatus,
@@ -48,7 +48,7 @@ def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None, scale=None, fi
     ----------
     fun : callable
         Returns the residual ``r`` (n,) and its Jacobian ``J``: a dense ``(n, n)`` array, or
-        a :class:`~.operator.GalerkinOperator` / :class:`~.operator.AugmentedOperator`
+        a :class:`~..model.operator.GalerkinOperator` / :class:`~..model.operator.AugmentedOperator`
         handled by ``linear_solver``.
     z0 : (n,) array_like
     tol : float
@@ -164,12 +164,12 @@ class Bordered:
         return op
 
 
-def _constraint_scale(Cth, theta, v):
+def constraint_scale(Cth, theta, v):
     """The round-off scale of the data-constraint rows :math:`C\\theta - v`."""
     return float(np.linalg.norm(abs(Cth) @ np.abs(theta)) + np.linalg.norm(v))
 
 
-def _check_constraint(system, constraint, n_rows=None):
+def check_constraint(system, constraint, n_rows=None):
     if constraint is None:
         return None, None
     if system.Gamma is None:

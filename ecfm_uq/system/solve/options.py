@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from .._validation import check_choice, check_int, check_positive, check_real
+from ..._validation import check_choice, check_int, check_positive, check_real
 from .plan import CHORD_RATE
 
 __all__ = ["SOLVERS", "PRECONDITIONERS", "SolverOptions", "solver_options"]
@@ -55,7 +55,7 @@ class SolverOptions:
     -----
     Which path, solver and preconditioner run, and every threshold they share (the
     singular pivot, the inexact-Newton forcing term, the Krylov acceptance rule), are
-    decided in one place, :mod:`ecfm_uq.system.plan`.
+    decided in one place, :mod:`ecfm_uq.system.solve.plan`.
     """
 
     solver: str = "auto"

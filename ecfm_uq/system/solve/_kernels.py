@@ -26,7 +26,7 @@ import numpy as np
 from numba import types
 from numba.np.linalg import ensure_lapack
 
-from .thresholds import (
+from ..model.thresholds import (
     KRYLOV_ACCEPT,
     NEWTON_ETA_FACTOR,
     NEWTON_ETA_MAX,

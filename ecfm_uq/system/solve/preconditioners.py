@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ..errors import SingularSystemError
+from ...errors import SingularSystemError
 from .factors import DenseFactor, _lu_any, dense_lu
 from .plan import VANISHING_BLOCK
 
@@ -287,7 +287,7 @@ class DecoupledPreconditioner(_ChaosBlockDiagonal):
     """
 
     def __init__(self, op):
-        from ..chaos.tensors import common_eigenbasis
+        from ...chaos.tensors import common_eigenbasis
 
         system = op.system
         E2 = np.asarray(system.E2, dtype=float)

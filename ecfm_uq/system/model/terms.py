@@ -25,8 +25,8 @@ import numbers
 import numpy as np
 import scipy.sparse as sp
 
-from .._validation import as_finite_array, as_operator, check_int, check_real, is_sparse
-from .._validation import describe as _describe
+from ..._validation import as_finite_array, as_operator, check_int, check_real, is_sparse
+from ..._validation import describe as _describe
 
 
 class Coefficient:
@@ -149,7 +149,7 @@ def call_user(fn, what, signature, *args):
 
 
 def _evaluation_error(label, eps, cause):
-    from ..errors import ModelEvaluationError
+    from ...errors import ModelEvaluationError
 
     if isinstance(cause, OverflowError):
         cause = "overflow"
@@ -228,7 +228,7 @@ class LinearTerm:
     -----
     The term only describes itself (``coef``, ``K``, ``G``); whether its Jacobian
     :math:`c\\,K \\otimes G^T` is assembled dense, assembled sparse or applied matrix-free
-    is decided by the solver layer (:mod:`.operator`, :mod:`.linear`).
+    is decided by the solver layer (:mod:`.operator`, :mod:`..solve.linear`).
     """
 
     def __init__(self, K, coef=1.0, G=None, name="linear"):
@@ -263,7 +263,7 @@ class LinearTerm:
 
     def magnitude(self, X):
         """:math:`|K|\\,|X|\\,|G|` (N, P), without the coefficient: the scale of the
-        round-off in :meth:`action` (see :func:`.plan.residual_floor`)."""
+        round-off in :meth:`action` (see :func:`..solve.plan.residual_floor`)."""
         if self._abs is None:
             self._abs = (abs(self.K), np.abs(self.G))
         absK, absG = self._abs
@@ -613,7 +613,7 @@ class LoadTerm:
                 f"{want} (N={N} state size, P={P} chaos terms); fix the load's size"
             )
         if not np.isfinite(v).all():
-            from ..errors import ModelEvaluationError
+            from ...errors import ModelEvaluationError
 
             raise ModelEvaluationError(f"load term {self.name!r}: F(eps, t) returned NaN or inf")
         return np.outer(v, self._E1) if v.ndim == 1 else v

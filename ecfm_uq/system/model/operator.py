@@ -14,7 +14,7 @@ a sum of Kronecker products, as in Trilinos Stokhos and the solvers of Powell & 
 solver needs: the matrix-free product (cost :math:`O(\\sum_q \\mathrm{nnz}(K_q) P +
 N\\,\\mathrm{nnz}(G_q))`), the dense or sparse assembled matrix, and the mean block
 :math:`\\sum_q c_q\\,\\mathbb E[g_q] K_q` used by the mean-based preconditioner. Which
-form is used is decided in one place, :mod:`.linear`.
+form is used is decided in one place, :mod:`..solve.linear`.
 
 :class:`AugmentedOperator` adds the ECFM data constraint (Eq. ecfm_solve): unknowns
 :math:`(\\Theta, \\lambda)` with the bordered matrix
@@ -28,7 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..memory import check_allocation
+from ...memory import check_allocation
 
 __all__ = ["AugmentedOperator", "GalerkinOperator"]
 
@@ -175,7 +175,7 @@ class GalerkinOperator:
     def magnitude(self, X):
         """:math:`\\| |J|\\,|\\mathrm{vec}X| \\|` (a float): the round-off scale of :meth:`apply`
         at ``X`` (N, P), against which a Krylov answer's residual is judged
-        (:func:`.plan.krylov_accepts`)."""
+        (:func:`..solve.plan.krylov_accepts`)."""
         Y = np.zeros((self.N, self.P))
         for part in self.parts:
             Y += part.magnitude(X)

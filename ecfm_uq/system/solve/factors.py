@@ -13,7 +13,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..errors import SingularSystemError
+from ...errors import SingularSystemError
 from .plan import pivots_singular
 
 

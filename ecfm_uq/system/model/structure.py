@@ -6,7 +6,7 @@ sparsity, the decoupling of the couplings, the germ's Gauss nodes, the stacked
 operators and node tables of the compiled kernels, the triple products' nonzero pairs,
 the mass matrices) is therefore a property of the system, computed on first use and kept
 in one :class:`SystemStructure` that the system owns (``system.structure``). No other
-object writes onto the system; the solve plan (:mod:`.plan`) reads its decisions from
+object writes onto the system; the solve plan (:mod:`..solve.plan`) reads its decisions from
 here.
 """
 
@@ -17,7 +17,7 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
-from ..memory import check_allocation
+from ...memory import check_allocation
 from .nonlinear_term import NonlinearTerm
 from .terms import LinearTerm, QuadraticTerm, _symmetric
 
@@ -116,7 +116,7 @@ class SystemStructure:
         ``None`` for nonlinear systems, ``P = 1`` or couplings without a common eigenbasis
         (see :meth:`GalerkinSystem.decoupling`).
         """
-        from ..chaos.tensors import common_eigenbasis
+        from ...chaos.tensors import common_eigenbasis
 
         if self._system.P == 1 or not self.is_linear:
             return None
@@ -126,7 +126,7 @@ class SystemStructure:
     def couplings_decouple(self):
         """The linear couplings and :math:`\\mathbb E[\\Psi\\Psi^T]` share an eigenbasis
         (the ``"decoupled"`` preconditioner applies)."""
-        from ..chaos.tensors import common_eigenbasis
+        from ...chaos.tensors import common_eigenbasis
 
         s = self._system
         Gs = [t.G for t in self.linear_terms]
@@ -136,7 +136,7 @@ class SystemStructure:
     def gauss_nodes(self):
         """The one-germ basis at its ``P``-node Gauss rule (:class:`ecfm_uq.chaos.GaussNodes`),
         or ``None`` for ``P = 1`` or several germs."""
-        from ..chaos.tensors import GaussNodes
+        from ...chaos.tensors import GaussNodes
 
         s = self._system
         one_germ = s.basis is not None and s.basis.dim == 1 and s.P > 1

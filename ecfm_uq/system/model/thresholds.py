@@ -1,7 +1,7 @@
 """The thresholds and status codes that the Python solvers and the compiled kernels share.
 
-They live apart from the solve plan (:mod:`.plan`, which re-exports them and documents
-each in its module docstring) so that the compiled kernels (:mod:`._kernels`), the
+They live apart from the solve plan (:mod:`..solve.plan`, which re-exports them and documents
+each in its module docstring) so that the compiled kernels (:mod:`..solve._kernels`), the
 trajectories and the plan itself all read them without importing one another.
 """
 
@@ -24,7 +24,7 @@ UNIT_ROUNDOFF = float(np.finfo(float).eps)
 ROUNDOFF_FACTOR = 10.0
 CHORD_RATE = 0.25
 # a linear march step's Krylov solve starts from the last state plus the best combination
-# of the differences of this many previous states (stepping._warm_start; on
+# of the differences of this many previous states (time.marching.warm_start; on
 # benchmarks/transient.py 2 states took 20 % more Krylov iterations, 4 or 5 no fewer)
 WARM_START_STATES = 3
 # a chaos block (mean block, decoupled mode) below this fraction of the operator's scale
