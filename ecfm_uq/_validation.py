@@ -39,7 +39,14 @@ def all_finite(arr):
     """Whether every value of the float array ``arr`` is finite: a finite sum says so (NaN
     and inf propagate through it) in one reduction; the elementwise test runs only when
     the sum is not finite (a bad value, or finite values whose sum overflows)."""
-    return bool(np.isfinite(arr.sum())) or bool(np.isfinite(arr).all())
+    total = _add_reduce(arr, axis=None)
+    if type(total) is np.float64:  # the common case, without numpy's scalar ufunc call
+        return math.isfinite(total) or bool(np.isfinite(arr).all())
+    return bool(np.isfinite(total)) or bool(np.isfinite(arr).all())
+
+
+_add_reduce = np.add.reduce
+_FLOAT64 = np.dtype(np.float64)
 
 
 def describe(value):
@@ -234,6 +241,13 @@ def as_model_output(value, *, name, at, shape=None, complex_ok=False):
     ValueError
         The wrong shape.
     """
+
+    if (
+        type(value) is np.ndarray
+        and value.dtype is _FLOAT64
+        and (shape is None or value.shape == shape)
+    ):  # the common case (a float64 array of the data's shape): one copy, no checks
+        return value.copy()
 
     def where():
         return f"`{name}` {at() if callable(at) else at}"

@@ -10,6 +10,7 @@ optimizer, records the path and the inner-solve failures, and returns an
 
 from __future__ import annotations
 
+import struct
 import warnings
 from dataclasses import dataclass, field
 
@@ -36,6 +37,9 @@ __all__ = [
     "minimize_scaled",
     "verify_least_squares",
 ]
+
+#: a float as the 8 bytes of a native float64 array element (``x.tobytes()``'s slots)
+_pack_double = struct.Struct("=d").pack
 
 #: gradient methods of scipy.optimize.minimize the reduced fits accept by name
 MINIMIZE_METHODS = ("BFGS", "CG", "L-BFGS-B", "TNC", "SLSQP", "Newton-CG", "trust-constr")
@@ -463,34 +467,41 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     best = {"loss": np.inf}
     # MINPACK's differencing (lmdif's fdjac2): column j at base + h_j e_j, h_j =
     # sqrt(machine eps) |base_j| (sqrt(eps) at 0), right after each iterate; recognized
-    # bit for bit, they count as one Jacobian per iterate and stay out of the path
+    # bit for bit, they count as one Jacobian per iterate and stay out of the path. The
+    # expected point's bytes are spliced from the base's (Python floats are IEEE doubles:
+    # the same sum as MINPACK's), one 8-byte slot per column, without an array copy.
     root_eps = float(np.sqrt(np.finfo(float).eps))
-    fd = {"base": None, "j": 0, "next": None, "njev": 0}
+    fd = {"base": None, "bytes": b"", "j": 0, "next": None, "njev": 0}
+    p = eps0.size
 
     def expect_next():
         base, j = fd["base"], fd["j"]
-        if j < base.size:
-            e = base.copy()
-            e[j] = base[j] + (root_eps * abs(base[j]) or root_eps)
-            fd["next"] = e.tobytes()
+        if j < p:
+            b = fd["bytes"]
+            bj = base[j]
+            e = _pack_double(bj + (root_eps * abs(bj) or root_eps))
+            fd["next"] = b[: 8 * j] + e + b[8 * j + 8 :]
         else:
             fd["next"] = None
 
     def fun(x):
         key = x.tobytes()
-        ev = evaluate(x, key)
+        if key != last["key"]:
+            ev = evaluate(x, key)
+        else:
+            ev = last["ev"]
         if differences:
             if key == fd["next"]:  # a column of MINPACK's Jacobian
                 fd["j"] += 1
-                fd["njev"] += fd["j"] == x.size
+                fd["njev"] += fd["j"] == p
                 expect_next()
                 return rejected if ev is None else ev[0]
-            fd["base"], fd["j"] = x.copy(), 0
+            fd["base"], fd["bytes"], fd["j"] = x.tolist(), key, 0
             expect_next()
         if ev is None:
             return rejected
         r = ev[0]
-        z = 0.5 * float(r @ r)
+        z = 0.5 * float(r.dot(r))
         if z < best["loss"]:
             best["loss"] = z
             hist_eps.append(x.copy())

@@ -31,6 +31,7 @@ import numpy as np
 
 from ..._validation import as_finite_array
 from ...errors import ConvergenceError, NonIdentifiableError
+from ..core.convergence import scaled_svd
 from ..core.finite_differences import fd_jacobian
 from ..core.result import Uncertainty, interval_quantile
 
@@ -161,8 +162,8 @@ def least_squares_jacobian(J, names=None, rcond=JACOBIAN_RCOND):
         When the scaled ``J`` is singular to ``rcond``, naming the combination.
     """
     J = as_finite_array("J", J, ndim=2)
-    d = np.linalg.norm(J, axis=0)
-    if np.any(d == 0):
+    d, U, sv, Vt = scaled_svd(J)  # the status test's factorization when it judged this J
+    if U is None:
         k = int(np.flatnonzero(d == 0)[0])
         u = np.eye(J.shape[1])[k]
         raise NonIdentifiableError(
@@ -170,7 +171,6 @@ def least_squares_jacobian(J, names=None, rcond=JACOBIAN_RCOND):
             "(its sensitivity is zero); fix it or add sensors that see it",
             null_vector=u,
         )
-    U, sv, Vt = np.linalg.svd(J / d, full_matrices=False)
     if sv[-1] <= rcond * sv[0]:
         u = Vt[-1] / d
         u = u / np.linalg.norm(u)
