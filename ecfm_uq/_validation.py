@@ -36,11 +36,17 @@ def as_finite_array(name, value, *, ndim=None, shape=None, dtype=float):
 
 
 def all_finite(arr):
-    """Whether every value of the float array ``arr`` is finite: a finite sum says so (NaN
-    and inf propagate through it) in one reduction; the elementwise test runs only when
-    the sum is not finite (a bad value, or finite values whose sum overflows)."""
+    """Whether every value of the float array ``arr`` is finite: one reduction says so
+    when it is finite (NaN and inf propagate through it) -- the inner product
+    :math:`a^Ta` of a 1-D float64 array (a BLAS call, a third of a sum's cost), else the
+    sum; the elementwise test runs only when that is not finite (a bad value, or finite
+    values whose reduction overflows)."""
+    if type(arr) is np.ndarray and arr.ndim == 1 and arr.dtype is _FLOAT64:
+        if math.isfinite(arr.dot(arr)):
+            return True
+        return bool(np.isfinite(arr).all())
     total = _add_reduce(arr, axis=None)
-    if type(total) is np.float64:  # the common case, without numpy's scalar ufunc call
+    if type(total) is np.float64:  # without numpy's scalar ufunc call
         return math.isfinite(total) or bool(np.isfinite(arr).all())
     return bool(np.isfinite(total)) or bool(np.isfinite(arr).all())
 

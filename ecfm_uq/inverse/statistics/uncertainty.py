@@ -27,6 +27,8 @@ one yet.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..._validation import as_finite_array
@@ -241,6 +243,14 @@ def residual_variance(r, n_eps):
     return float(r @ r) / (r.size - n_eps)
 
 
+@functools.lru_cache(maxsize=64)
+def _quantile(level, dof):
+    """:func:`~ecfm_uq.inverse.core.result.interval_quantile`, remembered (a Student-t
+    quantile is an iterative inverse: tens of microseconds, as much as a small fit's
+    uncertainty)."""
+    return interval_quantile(level, dof)
+
+
 def confidence_intervals(eps, eps_cov, level=0.95, dof=None):
     """Standard errors and ``level`` intervals: normal quantile, or Student-t with
     ``dof`` degrees of freedom when sigma was estimated from the residual (C - n_eps).
@@ -255,7 +265,7 @@ def confidence_intervals(eps, eps_cov, level=0.95, dof=None):
     eps = np.asarray(eps, dtype=float).ravel()
     cov = as_finite_array("eps_cov", eps_cov, shape=(eps.size, eps.size))
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    z = interval_quantile(level, dof)
+    z = _quantile(level, dof)
     return se, np.column_stack([eps - z * se, eps + z * se])
 
 
