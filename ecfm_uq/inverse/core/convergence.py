@@ -65,6 +65,7 @@ convergence criterion for nonlinear least squares, Technometrics 23, 179-183.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -216,8 +217,10 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
         ur = U.T @ r
         keep = sv > _EPS * max(n, p) * sv[0]  # lstsq's default cut-off
         delta = -(Vt[keep].T @ (ur[keep] / sv[keep])) / norms
-        norm_orth = float(np.linalg.norm(r - U @ ur))
-        norm_proj = float(np.linalg.norm(ur))
+        orth = r - U @ ur
+        # np.linalg.norm of a vector is sqrt(x.x): the same bits without its wrapper
+        norm_orth = math.sqrt(orth.dot(orth))
+        norm_proj = math.sqrt(ur.dot(ur))
     else:
         rank_ok = False
         delta = np.full(p, np.inf)
@@ -284,7 +287,7 @@ def scaled_svd(J):
     last_key, last_value = _last_svd[0]
     if last_key == key:
         return last_value
-    norms = np.linalg.norm(J, axis=0)
+    norms = np.sqrt(np.add.reduce(J * J, axis=0))  # np.linalg.norm(J, axis=0), same bits
     if (norms > 0).all():
         U, sv, Vt = np.linalg.svd(J / norms, full_matrices=False)
     else:

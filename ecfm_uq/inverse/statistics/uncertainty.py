@@ -31,7 +31,7 @@ import functools
 
 import numpy as np
 
-from ..._validation import as_finite_array
+from ..._validation import all_finite, as_finite_array
 from ...errors import ConvergenceError, NonIdentifiableError
 from ..core.convergence import scaled_svd
 from ..core.finite_differences import fd_jacobian
@@ -202,7 +202,7 @@ def delta_method_covariance(deps_dv, Sigma_v):
     D = as_finite_array("deps_dv", deps_dv, ndim=2)
     C = D.shape[1]
     S = np.asarray(Sigma_v, dtype=float)
-    if not np.all(np.isfinite(S)):
+    if not all_finite(S):
         raise ValueError("`Sigma_v` has non-finite entries")
     if S.ndim == 0:
         if S <= 0:
@@ -264,9 +264,12 @@ def confidence_intervals(eps, eps_cov, level=0.95, dof=None):
         raise ValueError(f"`level` must lie in (0, 1), got {level}")
     eps = np.asarray(eps, dtype=float).ravel()
     cov = as_finite_array("eps_cov", eps_cov, shape=(eps.size, eps.size))
-    se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    se = np.sqrt(np.maximum(cov.diagonal(), 0.0))  # clip at 0: round-off negatives
     z = _quantile(level, dof)
-    return se, np.column_stack([eps - z * se, eps + z * se])
+    ci = np.empty((eps.size, 2))
+    np.subtract(eps, z * se, out=ci[:, 0])
+    np.add(eps, z * se, out=ci[:, 1])
+    return se, ci
 
 
 def implicit_covariance(grad, eps, v, Sigma_v, rel_step=1e-6, stencil=2):
