@@ -27,7 +27,9 @@ Last lines: ``ode fit/scipy time ratio: <float>``, ``ode no-jac fit/scipy time r
 profile/scipy-profile time ratio: <float>`` and ``ode no-jac profile/scipy-profile time
 ratio: <float>``.
 
-Run: ``python benchmarks/ode_calibration.py [--repeat 3]``.
+Run: ``python benchmarks/ode_calibration.py [--repeat 3] [--no-profile]``; ``--options``
+prints only the table of docs/ode.md (the sensitivity routes without ``jac``, among them
+scipy's own: differences of the whole solution).
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ from scipy import optimize
 from scipy.integrate import solve_ivp
 
 from ecfm_uq.datasets import lynx_hare
-from ecfm_uq.inverse import OdeProblem, fit, profile_likelihood
+from ecfm_uq.inverse import ModelProblem, OdeProblem, fit, profile_likelihood
 from ecfm_uq.problems.lotka_volterra import initial_state as y0
 from ecfm_uq.problems.lotka_volterra import jac_eps, jac_y, rhs
 
@@ -66,12 +68,48 @@ def scipy_profile(t, data, ls, se, level=0.95):
     return peer.scipy_profile(scipy_residual(t, data), ls, se, level)
 
 
+def options_table(t, data, repeat=2):
+    """``--options``: the ways to get the sensitivities without ``jac`` (docs/ode.md),
+    each fit timed in turns with scipy's, best of ``repeat``."""
+    kw = {"t0": t[0], "rtol": RTOL, "atol": ATOL}
+    problems = {
+        "with jac (reference)": OdeProblem(rhs, y0, t, data, jac=(jac_y, jac_eps), **kw),
+        "(b) complex steps, columns": OdeProblem(rhs, y0, t, data, **kw),
+        "(b) complex steps, per parameter": OdeProblem(rhs, y0, t, data, vectorized=False,
+                                                       **kw),
+        "(a) differences, columns": OdeProblem(rhs, y0, t, data,
+                                               sensitivities="differences", **kw),
+        "(a) differences, per parameter": OdeProblem(rhs, y0, t, data, vectorized=False,
+                                                     sensitivities="differences", **kw),
+    }  # fmt: skip
+
+    def solution(e):
+        s = solve_ivp(lambda x, y: rhs(x, y, e), (t[0], t[-1]), e[4:6], method="DOP853",
+                      t_eval=t, rtol=RTOL, atol=ATOL)  # fmt: skip
+        return s.y.T
+
+    # (c): MINPACK differences the whole solution, as scipy's least_squares does
+    problems["(c) differences of the whole solution"] = ModelProblem(solution, data)
+    fns = [lambda p=p: fit(p, START) for p in problems.values()]
+    times, values = peer.best_of([*fns, lambda: scipy_fit(t, data)], repeat)
+    ref = values[0].eps
+    for name, tt, res in zip(problems, times, values, strict=False):
+        print(f"  {name}: fit/scipy {tt / times[-1]:.2f}, {res.nfev} evaluations, "
+              f"{res.status.name}, estimates {np.max(np.abs(res.eps / ref - 1)):.1e} from "
+              "the fit with jac")  # fmt: skip
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--no-profile", action="store_true")
+    parser.add_argument("--options", action="store_true",
+                        help="only the table of sensitivity routes without jac")  # fmt: skip
     args = parser.parse_args(argv)
     t, data = lynx_hare()
+    if args.options:
+        options_table(t, data)
+        return
     problem = OdeProblem(rhs, y0, t, data, t0=t[0], rtol=RTOL, atol=ATOL,
                          jac=(jac_y, jac_eps), names=NAMES, state_names=["hare", "lynx"])  # fmt: skip
     no_jac = OdeProblem(rhs, y0, t, data, t0=t[0], rtol=RTOL, atol=ATOL, names=NAMES)
