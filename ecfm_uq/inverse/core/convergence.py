@@ -269,6 +269,9 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
 
 #: the last scaled SVD, ``(key, value)`` in one slot (replaced whole: thread-safe)
 _last_svd = [(None, None)]
+#: Jacobians up to this many entries are remembered (a copy of their bytes is the key;
+#: a larger one is factorized each time, not held in memory)
+_SVD_KEEP_MAX = 100_000
 
 
 def scaled_svd(J):
@@ -278,14 +281,14 @@ def scaled_svd(J):
     The one factorization of a least-squares Jacobian that both the status test
     (:func:`least_squares_optimality`) and the Gauss-Newton uncertainty
     (:func:`~ecfm_uq.inverse.statistics.uncertainty.least_squares_jacobian`) need: the
-    last one is kept, keyed by ``J``'s shape and bytes, so the second asks for it at the
-    cost of a comparison (same bits in, same bits out). The returned arrays are shared:
-    do not modify them.
+    last one is kept (up to ``_SVD_KEEP_MAX`` entries), keyed by ``J``'s shape and bytes,
+    so the second asks for it at the cost of a comparison (same bits in, same bits out).
+    The returned arrays are shared and read-only.
     """
     J = np.asarray(J, dtype=float)
-    key = (J.shape, J.tobytes())
+    key = (J.shape, J.tobytes()) if J.size <= _SVD_KEEP_MAX else None
     last_key, last_value = _last_svd[0]
-    if last_key == key:
+    if key is not None and last_key == key:
         return last_value
     norms = np.sqrt(np.add.reduce(J * J, axis=0))  # np.linalg.norm(J, axis=0), same bits
     if (norms > 0).all():
@@ -296,7 +299,8 @@ def scaled_svd(J):
     for a in value:
         if a is not None:
             a.flags.writeable = False
-    _last_svd[0] = (key, value)
+    if key is not None:
+        _last_svd[0] = (key, value)
     return value
 
 
