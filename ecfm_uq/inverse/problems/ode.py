@@ -54,8 +54,6 @@ _SQRT_EPS = np.sqrt(np.finfo(float).eps)
 #: underflow (no subtraction: nothing cancels); 1e-30 serves directions |S| from 1e-270
 #: to about 1e22 times the state's size
 _CS_STEP = 1e-30
-#: how the sensitivities get the right-hand side's derivatives
-SENSITIVITY_METHODS = ("jac", "complex-step", "differences")
 
 
 def solve_with_sensitivities(problem, eps, t_span, y_start, S0, T_eps, G=None, force=None,
