@@ -44,3 +44,31 @@ def test_decorator_and_override(two_threads):
     for bad in (0, -1, 1.5, True):
         with pytest.raises(ValueError, match="`threads`"):
             set_blas_threads(bad)
+
+
+def test_no_dense_work_switches_nothing_and_nested_calls_decide(two_threads):
+    from ecfm_uq.threads import NO_DENSE
+
+    with blas_threads(NO_DENSE):
+        assert blas() == {2}  # the caller's threads, untouched
+        with blas_threads():  # an engine call inside (a user's model solving a system)
+            assert blas() == {1}
+        assert blas() == {2}
+    assert blas() == {2}
+
+
+def test_a_model_problem_fit_leaves_the_callers_threads(two_threads):
+    import numpy as np
+
+    from ecfm_uq.inverse import ModelProblem, fit
+
+    seen = []
+    x = np.linspace(0.0, 1.0, 8)
+
+    def model(e):
+        seen.append(frozenset(blas()))
+        return e[0] + e[1] * x
+
+    res = fit(ModelProblem(model, 1.0 + 2.0 * x + 0.01 * np.sin(7 * x)), [0.5, 0.5])
+    assert res.success and set(seen) == {frozenset({2})}
+    assert blas() == {2}

@@ -174,6 +174,9 @@ def _check_formulation(kind, settings):
 
 
 def _size(problem, *args, **kwargs):
+    own = getattr(problem, "dense_unknowns", None)  # a ModelProblem: none (NO_DENSE)
+    if own is not None:
+        return own
     system = getattr(problem, "system", None)
     return None if system is None else dense_unknowns(system)
 

@@ -65,6 +65,7 @@ convergence criterion for nonlinear least squares, Technometrics 23, 179-183.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -85,6 +86,7 @@ __all__ = [
     "bounds_arrays",
     "polish_least_squares",
     "scaled_gradient_optimality",
+    "scaled_svd",
 ]
 
 #: a parameter within this fraction of its box's width of a bound is at it (the verdict's
@@ -195,11 +197,13 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
     eps = np.asarray(eps, dtype=float).ravel()
     if not (all_finite(r) and all_finite(J)):
         return Optimality(False, np.inf, "relative offset", tol, "non-finite residual or Jacobian")
-    g = J.T @ r
-    free = ~active_bounds(eps, g, bounds)
-    if not free.any():
-        return Optimality(True, 0.0, "kkt", tol, "every parameter held at a bound (KKT)")
-    Jf = J[:, free]
+    if bounds is None:  # every parameter free
+        free, Jf = slice(None), J
+    else:
+        free = ~active_bounds(eps, J.T @ r, bounds)
+        if not free.any():
+            return Optimality(True, 0.0, "kkt", tol, "every parameter held at a bound (KKT)")
+        Jf = J[:, free]
     n, p = Jf.shape
     # one SVD of the columns scaled to unit norm (parameters' units do not matter) gives
     # all three: the rank, the orthonormal basis of the column space for the offset (the
@@ -207,15 +211,16 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
     # the minimum-norm Gauss-Newton step on the scaled columns, so a column of tiny norm (a
     # rate gone to infinity, the model flat in it) still counts, and only exactly parallel
     # columns (a combination the data cannot see) are left out
-    norms = np.linalg.norm(Jf, axis=0)
-    if (norms > 0).all():
-        U, sv, Vt = np.linalg.svd(Jf / norms, full_matrices=False)
+    norms, U, sv, Vt = scaled_svd(Jf)
+    if U is not None:
         rank_ok = bool(sv[-1] > RANK_RCOND * sv[0])
         ur = U.T @ r
         keep = sv > _EPS * max(n, p) * sv[0]  # lstsq's default cut-off
         delta = -(Vt[keep].T @ (ur[keep] / sv[keep])) / norms
-        norm_orth = float(np.linalg.norm(r - U @ ur))
-        norm_proj = float(np.linalg.norm(ur))
+        orth = r - U @ ur
+        # np.linalg.norm of a vector is sqrt(x.x): the same bits without its wrapper
+        norm_orth = math.sqrt(orth.dot(orth))
+        norm_proj = math.sqrt(ur.dot(ur))
     else:
         rank_ok = False
         delta = np.full(p, np.inf)
@@ -260,6 +265,43 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
             "infinity, where the model flattens out)"
         )
     return Optimality(False, value, test, t, msg)
+
+
+#: the last scaled SVD, ``(key, value)`` in one slot (replaced whole: thread-safe)
+_last_svd = [(None, None)]
+#: Jacobians up to this many entries are remembered (a copy of their bytes is the key;
+#: a larger one is factorized each time, not held in memory)
+_SVD_KEEP_MAX = 100_000
+
+
+def scaled_svd(J):
+    """The thin SVD of ``J`` with its columns scaled to unit norm: ``(norms, U, sv, Vt)``
+    with ``J / norms = U diag(sv) Vt`` (``U = sv = Vt = None`` when a column is zero).
+
+    The one factorization of a least-squares Jacobian that both the status test
+    (:func:`least_squares_optimality`) and the Gauss-Newton uncertainty
+    (:func:`~ecfm_uq.inverse.statistics.uncertainty.least_squares_jacobian`) need: the
+    last one is kept (up to ``_SVD_KEEP_MAX`` entries), keyed by ``J``'s shape and bytes,
+    so the second asks for it at the cost of a comparison (same bits in, same bits out).
+    The returned arrays are shared and read-only.
+    """
+    J = np.asarray(J, dtype=float)
+    key = (J.shape, J.tobytes()) if J.size <= _SVD_KEEP_MAX else None
+    last_key, last_value = _last_svd[0]
+    if key is not None and last_key == key:
+        return last_value
+    norms = np.sqrt(np.add.reduce(J * J, axis=0))  # np.linalg.norm(J, axis=0), same bits
+    if (norms > 0).all():
+        U, sv, Vt = np.linalg.svd(J / norms, full_matrices=False)
+    else:
+        U = sv = Vt = None
+    value = (norms, U, sv, Vt)
+    for a in value:
+        if a is not None:
+            a.flags.writeable = False
+    if key is not None:
+        _last_svd[0] = (key, value)
+    return value
 
 
 def gradient_optimality(z, g, H, *, x=None, bounds=None, tol=DECREMENT_TOL):

@@ -10,6 +10,7 @@ optimizer, records the path and the inner-solve failures, and returns an
 
 from __future__ import annotations
 
+import struct
 import warnings
 from dataclasses import dataclass, field
 
@@ -36,6 +37,9 @@ __all__ = [
     "minimize_scaled",
     "verify_least_squares",
 ]
+
+#: a float as the 8 bytes of a native float64 array element (``x.tobytes()``'s slots)
+_pack_double = struct.Struct("=d").pack
 
 #: gradient methods of scipy.optimize.minimize the reduced fits accept by name
 MINIMIZE_METHODS = ("BFGS", "CG", "L-BFGS-B", "TNC", "SLSQP", "Newton-CG", "trust-constr")
@@ -438,20 +442,23 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     tol = OFFSET_TOL if tol is None else tol
     eps0 = np.array(eps0, dtype=float)
     hist_eps, hist_loss, failures = [], [], []
-    last = {"key": None, "ev": None}
     counts = {"nfev": 0}
+    # the last point evaluated (MINPACK asks again for the one it just had, e.g. the
+    # Jacobian's base): plain closure cells, the cheapest state Python has per call
+    last_key, last_ev = None, None
 
     def evaluate(x, key=None):
+        nonlocal last_key, last_ev
         key = x.tobytes() if key is None else key
-        if key != last["key"]:
+        if key != last_key:
             counts["nfev"] += 1
             try:
                 ev = list(residual(x.copy()))
             except ConvergenceError as e:
                 failures.append(str(e))
                 ev = None
-            last["key"], last["ev"] = key, ev
-        return last["ev"]
+            last_key, last_ev = key, ev
+        return last_ev
 
     first = evaluate(eps0)
     if first is None:
@@ -460,39 +467,43 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     # a rejected trial point: a residual far above any other (MINPACK then shrinks the
     # step; inf would turn its norms into nan)
     rejected = np.full(m, 1e150)
-    best = {"loss": np.inf}
+    best_loss = np.inf
     # MINPACK's differencing (lmdif's fdjac2): column j at base + h_j e_j, h_j =
     # sqrt(machine eps) |base_j| (sqrt(eps) at 0), right after each iterate; recognized
-    # bit for bit, they count as one Jacobian per iterate and stay out of the path
+    # bit for bit, they count as one Jacobian per iterate and stay out of the path. The
+    # expected point's bytes are spliced from the base's (Python floats are IEEE doubles:
+    # the same sum as MINPACK's), one 8-byte slot per column, without an array copy.
     root_eps = float(np.sqrt(np.finfo(float).eps))
-    fd = {"base": None, "j": 0, "next": None, "njev": 0}
+    p = eps0.size
+    fd_base, fd_bytes, fd_j, fd_next, fd_njev = None, b"", 0, None, 0
 
     def expect_next():
-        base, j = fd["base"], fd["j"]
-        if j < base.size:
-            e = base.copy()
-            e[j] = base[j] + (root_eps * abs(base[j]) or root_eps)
-            fd["next"] = e.tobytes()
+        nonlocal fd_next
+        if fd_j < p:
+            bj = fd_base[fd_j]
+            e = _pack_double(bj + (root_eps * abs(bj) or root_eps))
+            fd_next = fd_bytes[: 8 * fd_j] + e + fd_bytes[8 * fd_j + 8 :]
         else:
-            fd["next"] = None
+            fd_next = None
 
     def fun(x):
+        nonlocal best_loss, fd_base, fd_bytes, fd_j, fd_njev
         key = x.tobytes()
-        ev = evaluate(x, key)
+        ev = evaluate(x, key) if key != last_key else last_ev
         if differences:
-            if key == fd["next"]:  # a column of MINPACK's Jacobian
-                fd["j"] += 1
-                fd["njev"] += fd["j"] == x.size
+            if key == fd_next:  # a column of MINPACK's Jacobian
+                fd_j += 1
+                fd_njev += fd_j == p
                 expect_next()
                 return rejected if ev is None else ev[0]
-            fd["base"], fd["j"] = x.copy(), 0
+            fd_base, fd_bytes, fd_j = x.tolist(), key, 0
             expect_next()
         if ev is None:
             return rejected
         r = ev[0]
-        z = 0.5 * float(r @ r)
-        if z < best["loss"]:
-            best["loss"] = z
+        z = 0.5 * float(r.dot(r))
+        if z < best_loss:
+            best_loss = z
             hist_eps.append(x.copy())
             hist_loss.append(z)
         return r
@@ -519,7 +530,7 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
         maxfev=maxiter * (eps0.size + 1) if differences else maxiter, **kw,
     )  # fmt: skip
     x = np.asarray(x, dtype=float)
-    nit = int(info.get("njev", fd["njev"]))
+    nit = int(info.get("njev", fd_njev))
     msg = f"Levenberg-Marquardt (MINPACK): {mesg}"
     if failures:
         msg += f" ({len(failures)} model evaluations failed; first: {failures[0]})"
@@ -548,7 +559,7 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     out = verify_least_squares(out, judge, None, out.exhausted, polish=polish, tol=tol)
     out.grad = None if out.jacobian is None else out.jacobian.T @ out.residual
     out.nfev = counts["nfev"]
-    if out.loss < best["loss"]:
+    if out.loss < best_loss:
         hist_eps.append(np.array(out.x))
         hist_loss.append(out.loss)
     out.eps_history, out.loss_history = np.array(hist_eps), np.array(hist_loss)

@@ -28,9 +28,17 @@ import numpy as np
 
 from ..._validation import all_finite, as_finite_array, as_model_output
 from ...errors import ConvergenceError, ModelEvaluationError
+from ...threads import NO_DENSE
+from ..core.drivers import least_squares_lm, least_squares_scaled
 from ..core.finite_differences import fd_jacobian
+from ..core.result import InverseResult, Uncertainty
 from ..core.settings import check_least_squares_options
+from ..core.status import FitStatus
+from ..statistics.loglik import gaussian_likelihood, remember_last_point
+from ..statistics.uncertainty import estimate_uncertainty, least_squares_jacobian
+from ..statistics.verdict import check_bounds, model_verdict
 from .interface import InverseProblem
+from .noise_model import noise_model
 
 __all__ = ["ModelProblem"]
 
@@ -77,6 +85,10 @@ class ModelProblem(InverseProblem):
     """
 
     formulations = ("standard",)
+    #: the dense systems the library factorizes for this problem: none of note (an
+    #: n-by-p SVD), so a fit leaves the BLAS threads as the caller set them
+    #: (:data:`ecfm_uq.threads.NO_DENSE`; the user's model keeps its own threads)
+    dense_unknowns = NO_DENSE
 
     def __init__(self, model, data, *, jac=None, executor=None, names=None):
         if not callable(model):
@@ -243,15 +255,17 @@ class ModelProblem(InverseProblem):
         v = self.v
         # the central-difference residual runs after the fit's: its first call is no
         # longer the start, where a failing model is the user's error
-        calls = {"n": 1 if accurate else 0}
+        first = not accurate
         method = "3-point" if accurate and self.jac == "2-point" else None
 
         whiten = noise.whiten if noise.known else None  # unknown sigma: W = I
+        predict = self.predict
 
         def residual(eps):
+            nonlocal first
             # the first call (at eps0) raises the user's errors: nothing was computed yet
-            calls["n"] += 1
-            y = self.predict(eps, first=calls["n"] == 1)
+            at_start, first = first, False
+            y = predict(eps, first=at_start)
             r = y - v if whiten is None else whiten(y - v)
 
             def J():
@@ -293,14 +307,6 @@ class ModelProblem(InverseProblem):
 
 def fit_model_problem(problem, eps0, s):
     """:func:`~ecfm_uq.inverse.fit` for a :class:`ModelProblem` (validated settings ``s``)."""
-    from ..core.drivers import least_squares_lm, least_squares_scaled
-    from ..core.result import InverseResult, Uncertainty
-    from ..core.status import FitStatus
-    from ..statistics.loglik import gaussian_likelihood, remember_last_point
-    from ..statistics.uncertainty import estimate_uncertainty, least_squares_jacobian
-    from ..statistics.verdict import check_bounds, model_verdict
-    from .noise_model import noise_model
-
     if s.formulation not in problem.formulations:
         raise ValueError(
             f"formulation={s.formulation!r} needs the model's equations (constraint forces "

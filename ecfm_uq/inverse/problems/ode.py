@@ -13,8 +13,11 @@ default, any of its methods for stiff models) together with the forward sensitiv
 
 so one solve gives the readings and their Jacobian, to the solver's tolerance. :math:`J_y
 S` and :math:`J_\\epsilon` come from the user's ``jac = (jac_y, jac_eps)`` (matrix
-products, no loop over parameters) or, without it, from one directional difference of
-``rhs`` per parameter.
+products, no loop over parameters) or, without it, from complex steps of ``rhs``
+(:math:`\\mathrm{Im}\\,g(t, y + ihS, \\epsilon + ihT_\\epsilon)/h`: its directional
+derivatives to machine precision, one call with a column per parameter when ``rhs`` takes
+columns) when ``rhs`` is complex-analytic, else one-sided directional differences
+(``sensitivities`` of :class:`OdeProblem`; the choice is measured in docs/ode.md).
 
 The standard formulation is a :class:`~ecfm_uq.inverse.problems.model.ModelProblem`
 whose model is the solve and whose Jacobian the sensitivities, on the readings present
@@ -29,6 +32,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import numbers
+import warnings
 
 import numpy as np
 import scipy.linalg
@@ -45,6 +49,11 @@ __all__ = ["OdeProblem", "solve_with_sensitivities"]
 
 _METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
 _SQRT_EPS = np.sqrt(np.finfo(float).eps)
+#: complex step of the sensitivities: Im g(y + ih S) / h is g's directional derivative
+#: to machine precision for any h with h |S| far below the round-off of y and above
+#: underflow (no subtraction: nothing cancels); 1e-30 serves directions |S| from 1e-270
+#: to about 1e22 times the state's size
+_CS_STEP = 1e-30
 
 
 def solve_with_sensitivities(problem, eps, t_span, y_start, S0, T_eps, G=None, force=None,
@@ -100,35 +109,61 @@ def solve_with_sensitivities(problem, eps, t_span, y_start, S0, T_eps, G=None, f
             dS = np.asarray(jac_y(t, y, eps)) @ S + np.asarray(jac_eps(t, y, eps)) @ T_eps + Gc
             return np.concatenate((dy, dS.ravel()))
 
-    elif problem.vectorized:
+    elif problem.sensitivity_method == "complex-step":
+        # Im g(y + ih S_j, eps + ih T_j) / h = J_y S_j + J_eps T_j to machine precision for
+        # any h small enough (nothing cancels): one fixed step, far below round-off and far
+        # above underflow, for every direction
+        hi = _CS_STEP * 1j
+        E = eps[:, None] + T_eps * hi  # the parameters' directions: fixed for the solve
+        extra = None if G is None else Gc
 
         def aug(t, z):
             y = z[:n]
             S = z[n:].reshape(n, q)
             f0 = np.asarray(rhs(t, y, eps), dtype=float)
-            scale = _SQRT_EPS * max(1.0, np.max(np.abs(y)), np.max(np.abs(eps)))
-            size = np.maximum(np.max(np.abs(S), axis=0), np.max(np.abs(T_eps), axis=0))
-            h = scale / np.where(size > 0, size, 1.0)
-            F1 = np.asarray(rhs(t, y[:, None] + h * S, eps[:, None] + h * T_eps), dtype=float)
-            dS = (F1 - f0[:, None]) / h + Gc
+            if problem.vectorized:
+                dS = np.asarray(rhs(t, y[:, None] + S * hi, E)).imag / _CS_STEP
+            else:
+                dS = np.empty((n, q))
+                for j in range(q):
+                    dS[:, j] = np.asarray(rhs(t, y + S[:, j] * hi, E[:, j])).imag / _CS_STEP
+            if extra is not None:
+                dS = dS + extra
             return np.concatenate((f0 + phi, dS.ravel()))
 
     else:
+        # constants of the directions' steps, once per solve
+        eps_max = float(np.max(np.abs(eps), initial=0.0))
+        t_size = np.max(np.abs(T_eps), axis=0, initial=0.0)
+        if problem.vectorized:
 
-        def aug(t, z):
-            y = z[:n]
-            S = z[n:].reshape(n, q)
-            f0 = np.asarray(rhs(t, y, eps), dtype=float)
-            dS = Gc.copy()
-            scale = _SQRT_EPS * max(1.0, np.max(np.abs(y)), np.max(np.abs(eps)))
-            for j in np.flatnonzero(moves | np.any(S != 0, axis=0)):
-                size = max(np.max(np.abs(S[:, j])), np.max(np.abs(T_eps[:, j])))
-                if size == 0:
-                    continue
-                h = scale / size
-                f1 = np.asarray(rhs(t, y + h * S[:, j], eps + h * T_eps[:, j]), dtype=float)
-                dS[:, j] += (f1 - f0) / h
-            return np.concatenate((f0 + phi, dS.ravel()))
+            def aug(t, z):
+                y = z[:n]
+                S = z[n:].reshape(n, q)
+                f0 = np.asarray(rhs(t, y, eps), dtype=float)
+                scale = _SQRT_EPS * max(1.0, float(np.abs(y).max()), eps_max)
+                size = np.maximum(np.abs(S).max(axis=0), t_size)
+                h = scale / np.where(size > 0, size, 1.0)
+                F1 = np.asarray(rhs(t, y[:, None] + h * S, eps[:, None] + h * T_eps), dtype=float)
+                dS = (F1 - f0[:, None]) / h + Gc
+                return np.concatenate((f0 + phi, dS.ravel()))
+
+        else:
+
+            def aug(t, z):
+                y = z[:n]
+                S = z[n:].reshape(n, q)
+                f0 = np.asarray(rhs(t, y, eps), dtype=float)
+                dS = Gc.copy()
+                scale = _SQRT_EPS * max(1.0, float(np.abs(y).max()), eps_max)
+                for j in np.flatnonzero(moves | np.any(S != 0, axis=0)):
+                    size = max(float(np.abs(S[:, j]).max()), float(t_size[j]))
+                    if size == 0:
+                        continue
+                    h = scale / size
+                    f1 = np.asarray(rhs(t, y + h * S[:, j], eps + h * T_eps[:, j]), dtype=float)
+                    dS[:, j] += (f1 - f0) / h
+                return np.concatenate((f0 + phi, dS.ravel()))
 
     z0 = np.concatenate((y_start, S0.ravel()))
     atol = np.broadcast_to(np.asarray(problem.atol, dtype=float), (n,))
@@ -189,6 +224,19 @@ class OdeProblem(InverseProblem):
         (default) detects it at the fit's start (:meth:`check`: the columns of one call
         equal single calls), else one call per parameter; ``True`` refuses an ``rhs``
         that does not; ``False`` never tries.
+    sensitivities : {None, "complex-step", "differences"}
+        Without ``jac``, how the sensitivity equations get :math:`J_y S + J_\\epsilon`:
+        ``"complex-step"``, :math:`\\mathrm{Im}\\,g(t, y + ihS_j, \\epsilon + ihT_j)/h` with
+        ``h`` far below round-off (the directional derivative of ``rhs`` to machine
+        precision, so the sensitivities are those of the computed solution; ``rhs`` must
+        be complex-analytic: no ``abs``, comparisons, ``float()`` or ``dtype=float``);
+        ``"differences"``, one-sided directional differences (error about
+        :math:`\\sqrt{\\varepsilon}` relative: the fit then takes about twice the
+        evaluations to reach the status test's optimum); ``None`` (default): complex steps
+        when :meth:`check` finds ``rhs`` analytic at the fit's start (complex steps agree
+        with central differences), else differences. The choice is recorded in
+        ``sensitivity_method`` (``"jac"`` with ``jac``). Measured (lynx-hare, rtol 1e-10):
+        docs/ode.md.
     sensitivity_error_control : bool
         Whether the integrator's error test includes the sensitivities (default
         ``False``, as CVODES: the steps the state needs carry them, and differenced
@@ -211,7 +259,8 @@ class OdeProblem(InverseProblem):
 
     def __init__(self, rhs, y0, t, data, *, t0, observe=None, rtol=1e-8, atol=None,
                  method="DOP853", jac=None, vectorized=None, forced=None,
-                 sensitivity_error_control=False, names=None, state_names=None):  # fmt: skip
+                 sensitivity_error_control=False, names=None, state_names=None,
+                 sensitivities=None):  # fmt: skip
         if not callable(rhs):
             raise TypeError(f"`rhs` must be a callable rhs(t, y, eps) -> dy/dt, got {rhs!r}")
         self.rhs = rhs
@@ -272,6 +321,19 @@ class OdeProblem(InverseProblem):
             )
         self._vectorized_asked = vectorized
         self.vectorized = bool(vectorized)
+        if sensitivities not in (None, "complex-step", "differences"):
+            raise ValueError(
+                "`sensitivities` must be None (complex steps when rhs is analytic, else "
+                f"differences), 'complex-step' or 'differences', got {sensitivities!r}"
+            )
+        if jac is not None and sensitivities is not None:
+            raise ValueError(
+                "`sensitivities` is for an rhs without `jac`: with jac=(jac_y, jac_eps) the "
+                "sensitivities use it; pass one or the other"
+            )
+        self._sensitivities_asked = sensitivities
+        #: ``"jac"``, ``"complex-step"`` or ``"differences"`` (decided by :meth:`check`)
+        self.sensitivity_method = "jac" if jac is not None else (sensitivities or "differences")
         self.forced = None if forced is None else np.asarray(forced)
         self.sensitivity_error_control = bool(sensitivity_error_control)
         self.names = None if names is None else [str(n) for n in names]
@@ -418,6 +480,15 @@ class OdeProblem(InverseProblem):
             raise ValueError(f"`names` has {len(self.names)} entries for {eps0.size} parameters")
         if self.jac is None and self._vectorized_asked is not False:
             self.vectorized = self._check_vectorized(y, eps0)
+        if self.jac is None and self._sensitivities_asked != "differences":
+            ok, why = self._check_complex_step(y, eps0)
+            if not ok and self._sensitivities_asked == "complex-step":
+                raise ValueError(
+                    f"sensitivities='complex-step': `rhs` {why} at eps0; it must be "
+                    "complex-analytic (no abs, comparisons, float() or dtype=float): write "
+                    "it so, or pass sensitivities='differences'"
+                )
+            self.sensitivity_method = "complex-step" if ok else "differences"
         if self.jac is not None:
             Jy = np.asarray(self.jac[0](self.t0, y, eps0))
             Je = np.asarray(self.jac[1](self.t0, y, eps0))
@@ -452,6 +523,52 @@ class OdeProblem(InverseProblem):
                 "evaluation: pass vectorized=False"
             )
         return ok
+
+    def _check_complex_step(self, y, eps0):
+        """Whether ``rhs`` is complex-analytic at ``(t0, y, eps0)``: the complex-step
+        derivative along a few directions equals central differences (to 1e-6 of the
+        derivative's size; they differ by ~1e-10 on an analytic ``rhs``, by O(1) when an
+        ``abs``, a comparison or a cast drops the imaginary step), through the call the
+        solve will make (columns when ``rhs`` is vectorized). Returns ``(ok, why)``."""
+        n, p = y.size, eps0.size
+        k = 3  # directions: every state and parameter moved, by distinct amounts
+        rng = np.random.default_rng(0)
+        dY = (1.0 + np.abs(y))[:, None] * rng.uniform(0.5, 1.5, (n, k))
+        dE = (1.0 + np.abs(eps0))[:, None] * rng.uniform(0.5, 1.5, (p, k))
+        scale = max(1.0, float(np.abs(y).max()), float(np.abs(eps0).max()))
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", np.exceptions.ComplexWarning)
+            try:
+                with np.errstate(all="ignore"):
+                    hi = _CS_STEP * 1j  # the solve's step (solve_with_sensitivities)
+                    if self.vectorized:
+                        F = np.asarray(self.rhs(self.t0, y[:, None] + dY * hi,
+                                                eps0[:, None] + dE * hi))  # fmt: skip
+                        cs = F.imag / _CS_STEP
+                    else:
+                        cs = np.empty((n, k))
+                        for j in range(k):
+                            f = np.asarray(self.rhs(self.t0, y + dY[:, j] * hi,
+                                                    eps0 + dE[:, j] * hi))  # fmt: skip
+                            cs[:, j] = f.imag / _CS_STEP
+            except Exception as e:  # a user callback that does not take complex numbers
+                return False, f"raised {type(e).__name__} on complex arguments: {e}"
+        if cs.shape != (n, k) or not np.all(np.isfinite(cs)):
+            return False, "returned a complex-step derivative of the wrong shape or non-finite"
+        cd = np.empty((n, k))
+        for j in range(k):
+            hj = 1e-5 * scale / max(np.abs(dY[:, j]).max(), np.abs(dE[:, j]).max())
+            fp = np.asarray(self.rhs(self.t0, y + hj * dY[:, j], eps0 + hj * dE[:, j]), float)
+            fm = np.asarray(self.rhs(self.t0, y - hj * dY[:, j], eps0 - hj * dE[:, j]), float)
+            cd[:, j] = (fp - fm) / (2 * hj)
+        size = max(float(np.abs(cd).max()), float(np.abs(cs).max()), np.finfo(float).tiny)
+        err = float(np.abs(cs - cd).max()) / size
+        if err > 1e-6:
+            return (
+                False,
+                f"gives complex-step derivatives {err:.1e} (relative) off central differences",
+            )
+        return True, ""
 
     def initial_sensitivity(self, eps):
         """:math:`\\partial y_0/\\partial\\epsilon` (n_state, p): zeros for a fixed ``y0``,

@@ -27,10 +27,13 @@ one yet.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
-from ..._validation import as_finite_array
+from ..._validation import all_finite, as_finite_array
 from ...errors import ConvergenceError, NonIdentifiableError
+from ..core.convergence import scaled_svd
 from ..core.finite_differences import fd_jacobian
 from ..core.result import Uncertainty, interval_quantile
 
@@ -161,8 +164,8 @@ def least_squares_jacobian(J, names=None, rcond=JACOBIAN_RCOND):
         When the scaled ``J`` is singular to ``rcond``, naming the combination.
     """
     J = as_finite_array("J", J, ndim=2)
-    d = np.linalg.norm(J, axis=0)
-    if np.any(d == 0):
+    d, U, sv, Vt = scaled_svd(J)  # the status test's factorization when it judged this J
+    if U is None:
         k = int(np.flatnonzero(d == 0)[0])
         u = np.eye(J.shape[1])[k]
         raise NonIdentifiableError(
@@ -170,7 +173,6 @@ def least_squares_jacobian(J, names=None, rcond=JACOBIAN_RCOND):
             "(its sensitivity is zero); fix it or add sensors that see it",
             null_vector=u,
         )
-    U, sv, Vt = np.linalg.svd(J / d, full_matrices=False)
     if sv[-1] <= rcond * sv[0]:
         u = Vt[-1] / d
         u = u / np.linalg.norm(u)
@@ -200,7 +202,7 @@ def delta_method_covariance(deps_dv, Sigma_v):
     D = as_finite_array("deps_dv", deps_dv, ndim=2)
     C = D.shape[1]
     S = np.asarray(Sigma_v, dtype=float)
-    if not np.all(np.isfinite(S)):
+    if not all_finite(S):
         raise ValueError("`Sigma_v` has non-finite entries")
     if S.ndim == 0:
         if S <= 0:
@@ -241,6 +243,14 @@ def residual_variance(r, n_eps):
     return float(r @ r) / (r.size - n_eps)
 
 
+@functools.lru_cache(maxsize=64)
+def _quantile(level, dof):
+    """:func:`~ecfm_uq.inverse.core.result.interval_quantile`, remembered (a Student-t
+    quantile is an iterative inverse: tens of microseconds, as much as a small fit's
+    uncertainty)."""
+    return interval_quantile(level, dof)
+
+
 def confidence_intervals(eps, eps_cov, level=0.95, dof=None):
     """Standard errors and ``level`` intervals: normal quantile, or Student-t with
     ``dof`` degrees of freedom when sigma was estimated from the residual (C - n_eps).
@@ -254,9 +264,12 @@ def confidence_intervals(eps, eps_cov, level=0.95, dof=None):
         raise ValueError(f"`level` must lie in (0, 1), got {level}")
     eps = np.asarray(eps, dtype=float).ravel()
     cov = as_finite_array("eps_cov", eps_cov, shape=(eps.size, eps.size))
-    se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    z = interval_quantile(level, dof)
-    return se, np.column_stack([eps - z * se, eps + z * se])
+    se = np.sqrt(np.maximum(cov.diagonal(), 0.0))  # clip at 0: round-off negatives
+    z = _quantile(level, dof)
+    ci = np.empty((eps.size, 2))
+    np.subtract(eps, z * se, out=ci[:, 0])
+    np.add(eps, z * se, out=ci[:, 1])
+    return se, ci
 
 
 def implicit_covariance(grad, eps, v, Sigma_v, rel_step=1e-6, stencil=2):
