@@ -22,7 +22,7 @@ Both sparse methods raise the candidate degree one by one, run the path on the c
 set of that degree, refit every nested active set by OLS and score it with the corrected
 leave-one-out error. By default (``q_norm=None``) the candidate sets are hyperbolic ones
 for q in (0.5, 0.75, 1), each q a chain of degrees with its own early stop, tried while
-affordable (:mod:`ecfm_uq.chaos.adaptive`); with a given ``q_norm`` the v0.3 selection
+affordable (:mod:`ecfm_uq.chaos.regression.adaptive`); with a given ``q_norm`` the v0.3 selection
 runs on that one q, stopping after ``early_stop`` degrees without improvement. A
 regression fit whose corrected LOO error exceeds 1e-2 of the output variance warns and
 points at :func:`ecfm_uq.mc.sobol_indices` to check its indices by sampling.
@@ -53,7 +53,7 @@ from .inputs import as_inputs, check_moments
 from .pce import PolynomialChaosExpansion
 from .projection import project
 from .quadrature import gauss_legendre
-from .sparse import _fit_sparse, _loo_nested  # noqa: F401  (tests import _loo_nested here)
+from .regression import fit_sparse
 
 __all__ = ["fit_pce", "sample_design", "smolyak_rule"]
 
@@ -451,7 +451,7 @@ def fit_pce(
         1-D rules of the Smolyak grid: Gauss-Legendre (not nested) or Clenshaw-Curtis
         (nested).
     q_norm : float, optional
-        Sparse methods. ``None`` (default): adaptive truncation (:mod:`ecfm_uq.chaos.adaptive`):
+        Sparse methods. ``None`` (default): adaptive truncation (:mod:`ecfm_uq.chaos.regression.adaptive`):
         for each q in (0.5, 0.75, 1) a chain of hyperbolic candidate sets
         :math:`\\|\\alpha\\|_q \\le p`, p = 1, 2, ..., while affordable and improving the
         corrected LOO error; the result keeps the selected terms only, and
@@ -580,8 +580,7 @@ def fit_pce(
             )
         if isinstance(compress_tol, bool) or not 0 <= float(compress_tol) < 1:
             raise ValueError(f"`compress_tol` must lie in [0, 1), got {compress_tol!r}")
-        pce, n_eval = _fit_sparse(
-            model,
+        basis, c, diagnostics, n_eval = fit_sparse(
             inputs,
             order,
             index_set,
@@ -592,7 +591,10 @@ def fit_pce(
             method,
             compress,
             float(compress_tol),
+            ChaosBasis,
         )
+        pce = PolynomialChaosExpansion(basis, c, inputs)
+        pce.diagnostics.update(diagnostics)
     pce.diagnostics.update(
         method=method,
         n_evaluations=n_eval,
