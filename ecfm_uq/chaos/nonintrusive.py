@@ -46,14 +46,13 @@ import scipy.linalg as sla
 from .._validation import as_finite_array, check_choice, check_int, rng_from_seed
 from ..executor import NonFiniteOutputError, evaluate_samples
 from ..memory import check_allocation
-from ._kernels import legendre_table
 from .basis import ChaosBasis
 from .germs import as_germs
 from .inputs import as_inputs, check_moments
 from .pce import PolynomialChaosExpansion
 from .pce_options import UNSET, method_options
 from .projection import project
-from .quadrature import gauss_legendre
+from .quadrature import clenshaw_curtis, gauss_legendre
 from .regression import fit_sparse
 
 __all__ = ["fit_pce", "sample_design", "smolyak_rule"]
@@ -109,26 +108,13 @@ def _design_to_germ(u, germs):
     return u
 
 
-def _clenshaw_curtis(n):
-    """Clenshaw-Curtis nodes on [0, 1] and probability weights (exact to degree n - 1)."""
-    if n == 1:
-        return np.array([0.5]), np.array([1.0])
-    x = 0.5 * (1.0 - np.cos(np.pi * np.arange(n) / (n - 1)))
-    # weights from the moment equations E[L_m] = delta_m0 in the orthonormal Legendre basis
-    V = legendre_table(np.ascontiguousarray(x), n - 1)
-    e0 = np.zeros(n)
-    e0[0] = 1.0
-    w = np.linalg.solve(V.T, e0)
-    return x, w
-
-
 def _rule_1d(rule, level):
     """1-D rule of a Smolyak level (1-based) and the degree its projection is exact for."""
     if rule == "gauss":
         x, w = gauss_legendre(level)
         return x, w, level - 1
     n = 1 if level == 1 else 2 ** (level - 1) + 1
-    x, w = _clenshaw_curtis(n)
+    x, w = clenshaw_curtis(n)
     return x, w, (n - 1) // 2
 
 
