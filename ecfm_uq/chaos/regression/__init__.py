@@ -1,18 +1,20 @@
 """Sparse polynomial chaos regression: LAR/OMP paths, leave-one-out errors, adaptivity.
 
 The regression behind ``fit_pce(method="lars" | "omp")`` (Blatman & Sudret 2011), one
-concept in four modules, each importing only the ones below it:
+concept in five modules, each importing only the ones below it:
 
 * :mod:`.fit` -- the sparse fit itself (:func:`fit_sparse`): candidate sets of a fixed
   q-norm up to the candidate degree (:func:`candidate_degree`), in design or Gram form,
-  and the compression of field outputs (:mod:`.compression`);
+  and the compression of field outputs;
 * :mod:`.adaptive` -- the default, degree- and q-norm-adaptive candidate sets
   (:func:`hyperbolic_indices`), grown while affordable and improving;
 * :mod:`.paths` -- the order in which the candidate columns enter a least-angle
   regression or orthogonal matching pursuit path (design or Gram form), and the hybrid
   selection that refits every nested active set by OLS;
 * :mod:`.loo` -- the corrected leave-one-out errors of all nested refits at once
-  (:func:`loo_nested`).
+  (:func:`loo_nested`);
+* :mod:`.compression` -- the principal components of a field output (PCA-PCE), on which
+  the selection runs (``compress_outputs``, a streaming sketch).
 
 Public API
 ----------
