@@ -510,7 +510,8 @@ def fit_pce(
         density that does not integrate to 1; a negative ``seed``.
     TypeError
         ``model`` not callable or returning ``None``, a tuple, complex values; a discrete
-        input distribution; a seed that is not one.
+        input distribution; a seed that is not one; an option the method does not read
+        (naming those it does), ``options`` not a dict, an option given twice.
     Exception
         An exception of ``model``, as its own type, naming the point it was called at
         (the original chained).
