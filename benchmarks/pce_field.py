@@ -36,7 +36,7 @@ import numpy as np  # noqa: E402
 from scipy import stats  # noqa: E402
 
 from ecfm_uq.chaos import fit_pce  # noqa: E402
-from ecfm_uq.chaos.compression import _exact_pca_bytes  # noqa: E402
+from ecfm_uq.chaos.regression.compression import exact_pca_bytes  # noqa: E402
 from ecfm_uq.memory import format_bytes, set_memory_budget  # noqa: E402
 
 N_FIELD = 10_000
@@ -108,7 +108,7 @@ def main():
     diff_s = max(np.abs(S_s - S).max(), np.abs(T_s - T).max())
     print(
         f"budget {format_bytes(budget)} (exact SVD needs "
-        f"{format_bytes(_exact_pca_bytes(N_RUNS, N_FIELD))}): compression "
+        f"{format_bytes(exact_pca_bytes(N_RUNS, N_FIELD))}): compression "
         f"{ds['compression']}, {t_small:.2f} s, peak traced {format_bytes(peak)} "
         f"(evaluations {format_bytes(8 * N_RUNS * N_FIELD)}), components kept "
         f"{ds['n_components']}, max compression error {ds['compression_error'].max():.1e}, "

@@ -52,7 +52,8 @@ import numpy as np  # noqa: E402
 from scipy import stats  # noqa: E402
 from scipy.stats import qmc  # noqa: E402
 
-from ecfm_uq.chaos import adaptive, fit_pce  # noqa: E402
+from ecfm_uq.chaos import fit_pce  # noqa: E402
+from ecfm_uq.chaos.regression import adaptive  # noqa: E402
 
 # the borehole function and its quadrature indices are the tests' (tests/_models.py)
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))

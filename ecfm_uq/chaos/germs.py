@@ -28,10 +28,11 @@ from __future__ import annotations
 import numbers
 
 import numpy as np
-from scipy import special, stats
+from scipy import stats
 
 from ._kernels import hermite_triple_1d, legendre_table, orthonormal_table, recurrence_triple_1d
 from ._kernels import triple_1d as legendre_triple_1d
+from .quadrature import gauss_hermite, gauss_jacobi, gauss_laguerre, gauss_legendre
 
 __all__ = ["FAMILIES", "Germ", "as_germs"]
 
@@ -186,18 +187,12 @@ class Germ:
         Exact for polynomials of degree :math:`\\le 2n - 1`.
         """
         if self.family == "legendre":
-            from .quadrature import gauss_legendre
-
             return gauss_legendre(n)
         if self.family == "hermite":
-            x, w = special.roots_hermitenorm(n)
-        elif self.family == "laguerre":
-            x, w = special.roots_genlaguerre(n, self.params[0] - 1.0)
-        else:
-            pa, pb = self.params
-            t, w = special.roots_jacobi(n, pb - 1.0, pa - 1.0)
-            x = 0.5 * (t + 1.0)
-        return x, w / w.sum()
+            return gauss_hermite(n)
+        if self.family == "laguerre":
+            return gauss_laguerre(n, self.params[0])
+        return gauss_jacobi(n, *self.params)
 
     def triple(self, p, normalized=True):
         """Exact table :math:`t_{ijk} = \\mathbb E[\\psi_i\\psi_j\\psi_k]`, ``i, j, k <= p``."""

@@ -22,7 +22,7 @@ Both sparse methods raise the candidate degree one by one, run the path on the c
 set of that degree, refit every nested active set by OLS and score it with the corrected
 leave-one-out error. By default (``q_norm=None``) the candidate sets are hyperbolic ones
 for q in (0.5, 0.75, 1), each q a chain of degrees with its own early stop, tried while
-affordable (:mod:`ecfm_uq.chaos.adaptive`); with a given ``q_norm`` the v0.3 selection
+affordable (:mod:`ecfm_uq.chaos.regression.adaptive`); with a given ``q_norm`` the v0.3 selection
 runs on that one q, stopping after ``early_stop`` degrees without improvement. A
 regression fit whose corrected LOO error exceeds 1e-2 of the output variance warns and
 points at :func:`ecfm_uq.mc.sobol_indices` to check its indices by sampling.
@@ -46,14 +46,14 @@ import scipy.linalg as sla
 from .._validation import as_finite_array, check_choice, check_int, rng_from_seed
 from ..executor import NonFiniteOutputError, evaluate_samples
 from ..memory import check_allocation
-from ._kernels import legendre_table
 from .basis import ChaosBasis
 from .germs import as_germs
 from .inputs import as_inputs, check_moments
 from .pce import PolynomialChaosExpansion
+from .pce_options import UNSET, method_options
 from .projection import project
-from .quadrature import gauss_legendre
-from .sparse import _fit_sparse, _loo_nested  # noqa: F401  (tests import _loo_nested here)
+from .quadrature import clenshaw_curtis, gauss_legendre
+from .regression import fit_sparse
 
 __all__ = ["fit_pce", "sample_design", "smolyak_rule"]
 
@@ -108,26 +108,13 @@ def _design_to_germ(u, germs):
     return u
 
 
-def _clenshaw_curtis(n):
-    """Clenshaw-Curtis nodes on [0, 1] and probability weights (exact to degree n - 1)."""
-    if n == 1:
-        return np.array([0.5]), np.array([1.0])
-    x = 0.5 * (1.0 - np.cos(np.pi * np.arange(n) / (n - 1)))
-    # weights from the moment equations E[L_m] = delta_m0 in the orthonormal Legendre basis
-    V = legendre_table(np.ascontiguousarray(x), n - 1)
-    e0 = np.zeros(n)
-    e0[0] = 1.0
-    w = np.linalg.solve(V.T, e0)
-    return x, w
-
-
 def _rule_1d(rule, level):
     """1-D rule of a Smolyak level (1-based) and the degree its projection is exact for."""
     if rule == "gauss":
         x, w = gauss_legendre(level)
         return x, w, level - 1
     n = 1 if level == 1 else 2 ** (level - 1) + 1
-    x, w = _clenshaw_curtis(n)
+    x, w = clenshaw_curtis(n)
     return x, w, (n - 1) // 2
 
 
@@ -250,7 +237,9 @@ def _evaluate(model, x, executor, workers, progress, label, check=None):
 def _fit_quadrature(model, inputs, order, n_points, index_set, ev):
     dim = inputs.dim
     order = check_int("order", 3 if order is None else order, minimum=0)
-    n_points = order + 1 if n_points is None else check_int("n_points", n_points, minimum=1)
+    n_points = (
+        order + 1 if n_points is None else check_int("options['n_points']", n_points, minimum=1)
+    )
     basis = ChaosBasis(order, dim, index_set=index_set or "tensor", germ=inputs.germs)
     n_nodes, P = n_points**dim, basis.size
     check_allocation(
@@ -396,18 +385,19 @@ def fit_pce(
     n_samples=None,
     samples=None,
     evaluations=None,
-    design="lhs",
-    index_set=None,
-    n_points=None,
-    rule="gauss",
-    q_norm=None,
-    early_stop=2,
-    compress=None,
-    compress_tol=1e-6,
+    options=None,
     executor=None,
     workers=1,
     seed=None,
     progress=False,
+    design=UNSET,
+    index_set=UNSET,
+    n_points=UNSET,
+    rule=UNSET,
+    q_norm=UNSET,
+    early_stop=UNSET,
+    compress=UNSET,
+    compress_tol=UNSET,
 ):
     """A polynomial chaos expansion of a black-box model from its evaluations.
 
@@ -441,43 +431,53 @@ def fit_pce(
         Regression points on the inputs' ranges instead of a generated design.
     evaluations : (n, *output_shape) array_like, optional
         Model outputs at ``samples`` (then the model is not called).
-    design : {"lhs", "sobol", "halton", "random"}
-        Generated regression design (``scipy.stats.qmc``). Default Latin hypercube.
-    index_set : {"total", "tensor"}, optional
-        Basis truncation (default ``"tensor"`` for quadrature, ``"total"`` else).
-    n_points : int, optional
-        Gauss points per variable for ``"quadrature"`` (default ``order + 1``).
-    rule : {"gauss", "clenshaw-curtis"}
-        1-D rules of the Smolyak grid: Gauss-Legendre (not nested) or Clenshaw-Curtis
-        (nested).
-    q_norm : float, optional
-        Sparse methods. ``None`` (default): adaptive truncation (:mod:`ecfm_uq.chaos.adaptive`):
-        for each q in (0.5, 0.75, 1) a chain of hyperbolic candidate sets
-        :math:`\\|\\alpha\\|_q \\le p`, p = 1, 2, ..., while affordable and improving the
-        corrected LOO error; the result keeps the selected terms only, and
-        ``diagnostics`` says what was chosen (``degree``, ``q_norm``, ``n_candidates``,
-        ``adaptive_trace`` of (degree, q, candidates, error)). A number in (0, 1]: the
-        v0.3 selection on that fixed q up to the candidate degree (1 = total degree).
-    early_stop : int
-        Sparse methods: stop raising the degree (of each q chain) after this many degrees
-        without improvement.
-    compress : bool, "exact" or "randomized", optional
-        Sparse methods on a field output: select on the leading principal components of
-        the evaluations instead of on every component (PCA-PCE, Blatman & Sudret 2013),
-        so a 10 000-value field costs about what a scalar does. Default: for outputs of
-        more than 64 components. ``True`` computes them by the exact SVD when it fits the
-        memory budget and by a randomized SVD in blocks (Halko, Martinsson & Tropp 2011;
-        the evaluations held once) otherwise, and when even the evaluations do not fit,
-        compresses them as they arrive by a one-pass sketch (Tropp et al. 2017; the
-        discarded share then estimated, ``compression="streaming"``); ``"exact"`` or
-        ``"randomized"`` forces one.
-        ``diagnostics`` then holds ``n_components``, ``compression`` (which SVD ran),
-        ``compression_info``, ``compression_error`` (per output component, its discarded
-        variance over its variance; measured on the data for the randomized SVD) beside
-        ``corrected_loo_error`` (per component, the scores' errors mapped onto it plus
-        the compression's).
-    compress_tol : float
-        Largest share of any component's variance the compression may discard.
+    options : dict, optional
+        The method's settings by name (:mod:`ecfm_uq.chaos.pce_options`); a name the
+        method does not read is refused (``TypeError`` naming those it does) before any
+        model run. The v0.4 spelling, each a keyword of ``fit_pce`` (``q_norm=0.75``),
+        works for this release with a ``DeprecationWarning``.
+
+        ``"design"`` : {"lhs", "sobol", "halton", "random"}
+            ``"lstsq"``, ``"lars"``, ``"omp"``: the generated regression design
+            (``scipy.stats.qmc``). Default Latin hypercube.
+        ``"index_set"`` : {"total", "tensor"}
+            ``"quadrature"``, ``"lstsq"`` (and ``"total"`` only for the sparse methods):
+            the basis truncation (default ``"tensor"`` for quadrature, ``"total"`` else).
+        ``"n_points"`` : int
+            ``"quadrature"``: Gauss points per variable (default ``order + 1``).
+        ``"rule"`` : {"gauss", "clenshaw-curtis"}
+            ``"smolyak"``: the 1-D rules of the grid, Gauss-Legendre (not nested, the
+            default) or Clenshaw-Curtis (nested).
+        ``"q_norm"`` : float or None
+            Sparse methods. ``None`` (default): adaptive truncation
+            (:mod:`ecfm_uq.chaos.regression.adaptive`): for each q in (0.5, 0.75, 1) a
+            chain of hyperbolic candidate sets :math:`\\|\\alpha\\|_q \\le p`, p = 1, 2,
+            ..., while affordable and improving the corrected LOO error; the result keeps
+            the selected terms only, and ``diagnostics`` says what was chosen
+            (``degree``, ``q_norm``, ``n_candidates``, ``adaptive_trace`` of (degree, q,
+            candidates, error)). A number in (0, 1]: the v0.3 selection on that fixed q
+            up to the candidate degree (1 = total degree).
+        ``"early_stop"`` : int
+            Sparse methods: stop raising the degree (of each q chain) after this many
+            degrees without improvement (default 2).
+        ``"compress"`` : bool, "exact" or "randomized"
+            Sparse methods on a field output: select on the leading principal components
+            of the evaluations instead of on every component (PCA-PCE, Blatman & Sudret
+            2013), so a 10 000-value field costs about what a scalar does. Default: for
+            outputs of more than 64 components. ``True`` computes them by the exact SVD
+            when it fits the memory budget and by a randomized SVD in blocks (Halko,
+            Martinsson & Tropp 2011; the evaluations held once) otherwise, and when even
+            the evaluations do not fit, compresses them as they arrive by a one-pass
+            sketch (Tropp et al. 2017; the discarded share then estimated,
+            ``compression="streaming"``); ``"exact"`` or ``"randomized"`` forces one.
+            ``diagnostics`` then holds ``n_components``, ``compression`` (which SVD
+            ran), ``compression_info``, ``compression_error`` (per output component, its
+            discarded variance over its variance; measured on the data for the
+            randomized SVD) beside ``corrected_loo_error`` (per component, the scores'
+            errors mapped onto it plus the compression's).
+        ``"compress_tol"`` : float
+            Sparse methods: the largest share of any component's variance the
+            compression may discard (default 1e-6).
     executor : object with ``map``, optional
         As in :func:`ecfm_uq.mc.monte_carlo`: a ``ThreadPoolExecutor``,
         ``ProcessPoolExecutor`` or ``dask.distributed.Client``.
@@ -488,6 +488,8 @@ def fit_pce(
     progress : bool or object with ``update(n)``
         ``True``: show a tqdm progress bar over the model evaluations; or the caller's
         own bar (e.g. a ``tqdm``), advanced by the number of finished runs.
+    design, index_set, n_points, rule, q_norm, early_stop, compress, compress_tol
+        Deprecated: pass them in ``options``.
 
     Returns
     -------
@@ -508,7 +510,8 @@ def fit_pce(
         density that does not integrate to 1; a negative ``seed``.
     TypeError
         ``model`` not callable or returning ``None``, a tuple, complex values; a discrete
-        input distribution; a seed that is not one.
+        input distribution; a seed that is not one; an option the method does not read
+        (naming those it does), ``options`` not a dict, an option given twice.
     Exception
         An exception of ``model``, as its own type, naming the point it was called at
         (the original chained).
@@ -523,6 +526,10 @@ def fit_pce(
     """
     t0 = time.perf_counter()
     method = check_choice("method", method, METHODS)
+    # the method's settings, checked by name (the v0.4 keywords: deprecated, still taken)
+    opts = method_options(method, options, dict(
+        design=design, index_set=index_set, n_points=n_points, rule=rule, q_norm=q_norm,
+        early_stop=early_stop, compress=compress, compress_tol=compress_tol))  # fmt: skip
     inputs = as_inputs(inputs)
     if inputs is None:
         raise TypeError("`inputs` must be given: bounds (dim, 2), UniformInputs or chaospy.J")
@@ -552,23 +559,28 @@ def fit_pce(
             n_default if n_samples is None else n_samples,
             samples,
             evaluations,
-            design,
+            data.design,
             seed,
             P,
             ev,
         )
 
-    data.design = check_choice("design", design, DESIGNS)
+    if "design" in opts:
+        data.design = check_choice("options['design']", opts["design"], DESIGNS)
     if method == "quadrature":
-        pce, n_eval = _fit_quadrature(model, inputs, order, n_points, index_set, ev)
+        pce, n_eval = _fit_quadrature(model, inputs, order, opts["n_points"], opts["index_set"], ev)
     elif method == "smolyak":
-        pce, n_eval = _fit_smolyak(model, inputs, order, rule, ev)
+        pce, n_eval = _fit_smolyak(model, inputs, order, opts["rule"], ev)
     elif method == "lstsq":
-        pce, n_eval = _fit_lstsq(model, inputs, order, index_set, data, ev)
+        pce, n_eval = _fit_lstsq(model, inputs, order, opts["index_set"], data, ev)
     else:
+        q_norm, early_stop = opts["q_norm"], opts["early_stop"]
+        compress, compress_tol = opts["compress"], opts["compress_tol"]
         if q_norm is not None and (isinstance(q_norm, bool) or not 0 < float(q_norm) <= 1):
-            raise ValueError(f"`q_norm` must be None (adaptive) or lie in (0, 1], got {q_norm!r}")
-        early_stop = check_int("early_stop", early_stop, minimum=1)
+            raise ValueError(
+                f"options['q_norm'] must be None (adaptive) or lie in (0, 1], got {q_norm!r}"
+            )
+        early_stop = check_int("options['early_stop']", early_stop, minimum=1)
         if isinstance(compress, np.bool_):
             compress = bool(compress)
         if compress is not None and not (
@@ -576,15 +588,15 @@ def fit_pce(
             or (isinstance(compress, str) and compress in ("exact", "randomized"))
         ):
             raise TypeError(
-                f"`compress` must be None, True, False, 'exact' or 'randomized', got {compress!r}"
+                f"options['compress'] must be None, True, False, 'exact' or 'randomized', got "
+                f"{compress!r}"
             )
         if isinstance(compress_tol, bool) or not 0 <= float(compress_tol) < 1:
-            raise ValueError(f"`compress_tol` must lie in [0, 1), got {compress_tol!r}")
-        pce, n_eval = _fit_sparse(
-            model,
+            raise ValueError(f"options['compress_tol'] must lie in [0, 1), got {compress_tol!r}")
+        basis, c, diagnostics, n_eval = fit_sparse(
             inputs,
             order,
-            index_set,
+            opts["index_set"],
             data,
             ev,
             None if q_norm is None else float(q_norm),
@@ -592,7 +604,10 @@ def fit_pce(
             method,
             compress,
             float(compress_tol),
+            ChaosBasis,
         )
+        pce = PolynomialChaosExpansion(basis, c, inputs)
+        pce.diagnostics.update(diagnostics)
     pce.diagnostics.update(
         method=method,
         n_evaluations=n_eval,

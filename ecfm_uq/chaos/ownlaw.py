@@ -33,6 +33,7 @@ import numpy as np
 from scipy import special
 
 from .germs import Germ
+from .quadrature import gauss_golub_welsch, gauss_legendre
 
 __all__ = ["OwnGerm", "stieltjes"]
 
@@ -44,13 +45,8 @@ _MAX_PANELS = 512
 _RTOL = 1e-13
 
 
-def _gauss_panel(n):
-    t, w = special.roots_legendre(n)
-    return 0.5 * (t + 1.0), 0.5 * w
-
-
-_HI = _gauss_panel(_NODES_HI)
-_LO = _gauss_panel(_NODES_LO)
+_HI = gauss_legendre(_NODES_HI)
+_LO = gauss_legendre(_NODES_LO)
 
 
 def _law_at_normal(law, z):
@@ -220,11 +216,7 @@ class OwnGerm(Germ):
 
     def gauss(self, n):
         """n-point Gauss rule of the law (Golub-Welsch): standardised nodes, weights summing to 1."""
-        a, b = self.recurrence(n)
-        J = np.diag(a) + np.diag(np.sqrt(b[1:]), 1) + np.diag(np.sqrt(b[1:]), -1)
-        t, V = np.linalg.eigh(J)
-        w = V[0] ** 2
-        return t, w / w.sum()
+        return gauss_golub_welsch(*self.recurrence(n))
 
     def triple(self, p, normalized=True):
         """Exact table :math:`t_{ijk} = \\mathbb E[\\psi_i\\psi_j\\psi_k]` from the recurrence."""

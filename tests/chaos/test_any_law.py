@@ -13,8 +13,8 @@ from _laws import TRUNC_GUMBEL
 from scipy import stats
 
 from ecfm_uq.chaos import ChaosBasis, Inputs, fit_pce
-from ecfm_uq.chaos.adaptive import hyperbolic_indices
 from ecfm_uq.chaos.ownlaw import OwnGerm
+from ecfm_uq.chaos.regression import hyperbolic_indices
 
 
 def _raw_moments(law):

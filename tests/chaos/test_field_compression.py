@@ -6,7 +6,7 @@ import pytest
 from scipy import stats
 
 from ecfm_uq.chaos import fit_pce
-from ecfm_uq.chaos.sparse import compress_outputs
+from ecfm_uq.chaos.regression.compression import compress_outputs
 
 S_GRID = np.linspace(0.0, 1.0, 2000)
 INPUTS = [stats.norm(0, 1), stats.uniform(-1, 2), stats.beta(2, 3)]

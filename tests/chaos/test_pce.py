@@ -23,7 +23,7 @@ from ecfm_uq.chaos import (
     smolyak_rule,
     weighted_gram,
 )
-from ecfm_uq.chaos.nonintrusive import _loo_nested
+from ecfm_uq.chaos.regression import loo_nested
 from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm, solve_steady
 
 PI = np.pi
@@ -334,7 +334,7 @@ def test_ols_leave_one_out_equals_brute_force_refits():
     X = basis.evaluate(w)
     y = np.sin(3 * w[:, 0]) + w[:, 1] ** 3
     Q, R = np.linalg.qr(X)
-    loo, corrected = _loo_nested(Q, R, y)
+    loo, corrected = loo_nested(Q, R, y)
     for k in range(1, basis.size + 1):
         e = []
         for i in range(len(y)):

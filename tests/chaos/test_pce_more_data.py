@@ -2,7 +2,7 @@
 
 Truth: the borehole function's first-order and total Sobol indices by tensor
 Gauss-Legendre quadrature (``tests/_models.py``), and the nested leave-one-out errors by
-the QR refits of ``_loo_nested``.
+the QR refits of ``loo_nested``.
 """
 
 import math
@@ -15,8 +15,8 @@ from _models import BOREHOLE_BOUNDS, borehole, borehole_indices
 from scipy.stats import qmc
 
 from ecfm_uq.chaos import fit_pce
-from ecfm_uq.chaos._paths import _loo_nested, _NestedLooRows
-from ecfm_uq.chaos.adaptive import _affordable, hyperbolic_indices
+from ecfm_uq.chaos.regression.adaptive import affordable, hyperbolic_indices
+from ecfm_uq.chaos.regression.loo import NestedLooRows, loo_nested
 from ecfm_uq.memory import set_memory_budget
 
 
@@ -44,13 +44,13 @@ def test_affordable_sets_never_shrink_with_n():
     previous = set_memory_budget(2.0**40)
     try:
         for P in (50, 100, 316, 500, 798, 1000, 1001, 5000):
-            ok = [_affordable(n, P) for n in ns]
+            ok = [affordable(n, P) for n in ns]
             assert ok == sorted(ok), (P, ok)
         # the set that wins on the borehole at n = 1e3 (degree 7, q = 0.75) stays affordable
         P = len(hyperbolic_indices(8, 7, 0.75))
         assert P == 798
-        assert all(_affordable(n, P) for n in ns)
-        assert not _affordable(10**5, 1001)  # capped: P min(n, P) <= 1e6 per run
+        assert all(affordable(n, P) for n in ns)
+        assert not affordable(10**5, 1001)  # capped: P min(n, P) <= 1e6 per run
     finally:
         set_memory_budget(previous)
 
@@ -62,11 +62,11 @@ def test_nested_loo_rows_equals_qr_refits():
     design = np.column_stack([np.ones(n), rng.standard_normal((n, P))])
     y = design[:, 1:9] @ rng.standard_normal(8) + 0.1 * rng.standard_normal(n)
     cols = [0, *rng.permutation(np.arange(1, P + 1))[:40].tolist()]
-    nested = _NestedLooRows(np.asfortranarray(design), y, design.T @ design, design.T @ y)
+    nested = NestedLooRows(np.asfortranarray(design), y, design.T @ design, design.T @ y)
     _, _, first = nested.errors(cols[:25])
     R, z, grown = nested.errors(cols)
     Q, Rq = sla.qr(design[:, cols], mode="economic")
-    _, expected = _loo_nested(Q, Rq, y)
+    _, expected = loo_nested(Q, Rq, y)
     np.testing.assert_allclose(first, expected[:25], rtol=1e-9)
     np.testing.assert_allclose(grown, expected, rtol=1e-9)
     # the refit: R^T R is the Gram block, z = R^{-T} X^T y

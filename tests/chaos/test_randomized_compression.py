@@ -9,7 +9,7 @@ import pytest
 from scipy import stats
 
 from ecfm_uq.chaos import fit_pce
-from ecfm_uq.chaos.sparse import _exact_pca_bytes, compress_outputs
+from ecfm_uq.chaos.regression.compression import compress_outputs, exact_pca_bytes
 from ecfm_uq.errors import MemoryBudgetError
 from ecfm_uq.executor import evaluate_samples
 from ecfm_uq.mc import monte_carlo
@@ -93,7 +93,7 @@ def test_randomized_svd_finds_the_rank_of_a_low_rank_field(rank):
 def test_the_randomized_path_holds_the_evaluations_once(env_budget):
     Y = _field_evaluations(300)
     env_budget(str(2 * Y.nbytes))
-    assert _exact_pca_bytes(*Y.shape) > 2 * Y.nbytes  # the exact SVD would be refused
+    assert exact_pca_bytes(*Y.shape) > 2 * Y.nbytes  # the exact SVD would be refused
     tracemalloc.start()
     try:
         _, V, _, err, info = compress_outputs(Y, 1e-6, return_info=True)
@@ -254,7 +254,7 @@ def test_a_zero_tolerance_keeps_every_direction_and_terminates():
 # evaluations that do not fit even once: compressed as they arrive (one-pass sketch)
 # --------------------------------------------------------------------------------------
 def _stream(Y, k, block=37):
-    from ecfm_uq.chaos.compression import StreamingSketch
+    from ecfm_uq.chaos.regression.compression import StreamingSketch
 
     sk = StreamingSketch(*Y.shape, k)
     for a in range(0, len(Y), block):
@@ -331,7 +331,7 @@ def test_a_consumer_receives_the_rows_in_order_and_nothing_is_stored():
 
 
 def test_the_streaming_sketch_stays_within_its_memory_model():
-    from ecfm_uq.chaos.compression import StreamingSketch, _streaming_bytes
+    from ecfm_uq.chaos.regression.compression import StreamingSketch, streaming_bytes
 
     Y = _field_evaluations(1500)
     tracemalloc.start()
@@ -343,7 +343,7 @@ def test_the_streaming_sketch_stays_within_its_memory_model():
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
-    assert peak <= _streaming_bytes(*Y.shape, 64) < Y.nbytes
+    assert peak <= streaming_bytes(*Y.shape, 64) < Y.nbytes
 
 
 def test_a_streamed_sketch_too_small_for_the_tolerance_warns():

@@ -7,9 +7,10 @@ import tracemalloc
 import numpy as np
 import pytest
 
-import ecfm_uq.chaos.sparse as sparse
+import ecfm_uq.chaos.regression.compression as compression
+import ecfm_uq.chaos.regression.fit as regression_fit
 from ecfm_uq.chaos import ChaosBasis, fit_pce
-from ecfm_uq.chaos.sparse import candidate_degree
+from ecfm_uq.chaos.regression import candidate_degree
 from ecfm_uq.errors import MemoryBudgetError
 from ecfm_uq.memory import check_covariance, set_memory_budget
 
@@ -58,7 +59,7 @@ def test_gram_form_selects_what_the_design_form_selects(method, monkeypatch):
     # q_norm=1.0: the fixed total-degree candidates, the path with a Gram form
     kw = dict(samples=x, evaluations=y, order=4, q_norm=1.0)
     ref = fit_pce(None, [(0.0, 1.0)] * 4, method, **kw)
-    monkeypatch.setattr(sparse, "_EXACT_DESIGN_BYTES", 0)
+    monkeypatch.setattr(regression_fit, "_EXACT_DESIGN_BYTES", 0)
     new = fit_pce(None, [(0.0, 1.0)] * 4, method, **kw)
     assert ref.diagnostics["selection"] == "design" and new.diagnostics["selection"] == "gram"
     assert ref.diagnostics["n_terms"] == new.diagnostics["n_terms"]
@@ -108,7 +109,7 @@ def test_compression_refuses_a_field_over_the_budget_naming_compress_false(budge
     budget(2**20)
     # the exact SVD is what is refused (issue 21: "auto" now falls back to a randomized SVD)
     with pytest.raises(MemoryBudgetError, match="compress=False"):
-        sparse.compress_outputs(np.zeros((400, 400)), 1e-6, "exact")
+        compression.compress_outputs(np.zeros((400, 400)), 1e-6, "exact")
 
 
 def test_covariance_check_names_variance(budget):

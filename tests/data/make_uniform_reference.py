@@ -25,14 +25,14 @@ def vector_model(x):
 
 FITS = {
     "quadrature": dict(method="quadrature", order=4),
-    "smolyak_gauss": dict(method="smolyak", order=4, rule="gauss"),
-    "smolyak_cc": dict(method="smolyak", order=3, rule="clenshaw-curtis"),
+    "smolyak_gauss": dict(method="smolyak", order=4, options={"rule": "gauss"}),
+    "smolyak_cc": dict(method="smolyak", order=3, options={"rule": "clenshaw-curtis"}),
     "lstsq": dict(method="lstsq", order=3, n_samples=60, seed=3),
-    "lstsq_sobol": dict(method="lstsq", order=3, n_samples=64, design="sobol", seed=4),
+    "lstsq_sobol": dict(method="lstsq", order=3, n_samples=64, options={"design": "sobol"}, seed=4),
     # q_norm=1.0: the fixed total-degree candidates that were the sparse default up to
     # v0.3 (the default is now the q-adaptive truncation, which selects other terms)
-    "lars": dict(method="lars", n_samples=120, seed=5, q_norm=1.0),
-    "omp": dict(method="omp", n_samples=120, seed=6, q_norm=1.0),
+    "lars": dict(method="lars", n_samples=120, seed=5, options={"q_norm": 1.0}),
+    "omp": dict(method="omp", n_samples=120, seed=6, options={"q_norm": 1.0}),
 }
 
 
@@ -53,7 +53,12 @@ def reference():
         out[f"{name}/sample"] = pce.sample(50, seed=1)
         out[f"{name}/call"] = pce(np.array([[0.1, -1.0, 2.0], [3.0, 0.5, -2.5]]))
     vec = fit_pce(
-        vector_model, [(0.0, 1.0), (-1.0, 2.0)], method="lars", n_samples=80, seed=7, q_norm=1.0
+        vector_model,
+        [(0.0, 1.0), (-1.0, 2.0)],
+        method="lars",
+        n_samples=80,
+        seed=7,
+        options={"q_norm": 1.0},
     )
     out["vector_lars/coefficients"] = vec.coefficients
     out["vector_lars/first_order"] = vec.first_order()

@@ -1,7 +1,7 @@
 """Principal components of field evaluations: the exact SVD, or a randomized SVD in blocks.
 
 The compression of a field output before the sparse selection (PCA-PCE, Blatman &
-Sudret 2013; :mod:`ecfm_uq.chaos.sparse`): the centred evaluations
+Sudret 2013; :mod:`ecfm_uq.chaos.regression`): the centred evaluations
 :math:`Y - \\bar y = USV^T` keep the leading principal components until every
 component's discarded variance is below ``tol`` of its own variance. The exact thin SVD
 holds about seven (n, m) arrays' worth of memory at its peak (the evaluations, their
@@ -23,8 +23,9 @@ import warnings
 import numpy as np
 import scipy.linalg as sla
 
-from .._validation import check_choice, check_int
-from ..memory import check_allocation, memory_budget
+from ..._validation import check_choice, check_int
+from ...executor import STREAM_CHUNK_BYTES
+from ...memory import check_allocation, memory_budget
 
 __all__ = ["StreamingSketch", "compress_outputs"]
 
@@ -33,7 +34,7 @@ __all__ = ["StreamingSketch", "compress_outputs"]
 _BLOCK_BYTES = 16 * 2**20
 
 
-def _row_blocks(n, width):
+def row_blocks(n, width):
     """Row ranges [a, b) holding about _BLOCK_BYTES of ``width`` floats each."""
     block = min(_BLOCK_BYTES, memory_budget() / 64)
     step = max(1, int(block // (8 * max(width, 1))))
@@ -47,19 +48,19 @@ def _constant(total, ybar, n):
     return total <= (1e-13 * scale) ** 2 * n
 
 
-def _exact_pca_bytes(n, m):
+def exact_pca_bytes(n, m):
     """Peak of the exact compression: Y, its centred copy, LAPACK's copy, U, V^T, energies."""
     r = min(n, m)
     return 8.0 * (3 * n * m + n * r + 4 * r * m)
 
 
-def _randomized_pca_bytes(n, m, ell):
+def randomized_pca_bytes(n, m, ell):
     """Peak of the randomized compression with a sketch of ``ell`` columns (Y held once).
 
     Y, the (n, l) sketches and QR factors, about eight (l, m) or (m, l) arrays (test
     matrix, products, the small SVD's factors and energies) and three row blocks.
     """
-    rows = _row_blocks(n, m)[0]
+    rows = row_blocks(n, m)[0]
     block = rows[1] - rows[0]
     return 8.0 * (n * m + 3 * n * ell + 8 * m * ell + ell * ell + 3 * block * m)
 
@@ -98,7 +99,7 @@ def _randomized_pca(Y, ybar, total, const, tol, oversample, power_iterations, se
     n, m = Y.shape
     r = min(n, m)
     rng = np.random.default_rng(seed)
-    blocks = _row_blocks(n, m)
+    blocks = row_blocks(n, m)
 
     # each block is centred before the product: subtracting ybar @ M afterwards would
     # cancel catastrophically when the mean dominates the fluctuations
@@ -118,7 +119,7 @@ def _randomized_pca(Y, ybar, total, const, tol, oversample, power_iterations, se
     passes = 0
     while True:
         check_allocation(
-            _randomized_pca_bytes(n, m, ell),
+            randomized_pca_bytes(n, m, ell),
             f"the randomized principal components (sketch of {ell} columns) of {n} runs of "
             f"a {m}-component output",
             "pass a larger `compress_tol` (fewer components), fewer `n_samples`, or let "
@@ -208,7 +209,7 @@ def compress_outputs(
     """
     method = check_choice("compress", method, ("auto", "exact", "randomized"))
     n, m = Y.shape
-    exact_bytes = _exact_pca_bytes(n, m)
+    exact_bytes = exact_pca_bytes(n, m)
     if method == "auto":
         method = "exact" if exact_bytes <= memory_budget() else "randomized"
     if method == "exact":
@@ -235,7 +236,7 @@ def compress_outputs(
         return (*out, info) if return_info else out
     oversample = check_int("oversample", oversample, minimum=0)
     power_iterations = check_int("power_iterations", power_iterations, minimum=0)
-    blocks = _row_blocks(n, m)
+    blocks = row_blocks(n, m)
     ybar = Y.mean(axis=0)
     total = np.zeros(m)
     for a, b in blocks:
@@ -260,7 +261,7 @@ def compress_outputs(
     return (*out, info) if return_info else out
 
 
-def _streaming_bytes(n, m, k):
+def streaming_bytes(n, m, k):
     """Peak memory of :class:`StreamingSketch` with a range sketch of ``k`` columns.
 
     Per output value: the test matrix (k), the co-range and error sketches (2k + 1 and
@@ -268,8 +269,6 @@ def _streaming_bytes(n, m, k):
     range sketch and its QR factor (3k); plus the chunks in flight
     (:data:`ecfm_uq.executor.STREAM_CHUNK_BYTES`, twice) and the column slices.
     """
-    from ..executor import STREAM_CHUNK_BYTES
-
     per_value = k + (2 * k + 1) + _ERROR_SKETCH + 3 * k + 6
     return 8.0 * (per_value * m + 3 * n * k) + 2 * STREAM_CHUNK_BYTES + 4 * _SLICE_BYTES
 

@@ -18,17 +18,11 @@ import math
 
 import numpy as np
 
-from ..memory import check_allocation, memory_budget
-from ..threads import library_threads
-from ._paths import (
-    _QR_BYTES,
-    _SELECTION_SHARE,
-    _grow_path,
-    _lar_order_gram,
-    _sparse_select,
-)
+from ...memory import check_allocation, memory_budget
+from ...threads import library_threads
+from .paths import QR_BYTES, SELECTION_SHARE, grow_path, lar_order_gram, sparse_select
 
-__all__ = ["hyperbolic_indices"]
+__all__ = ["affordable", "hyperbolic_indices", "select_adaptive"]
 
 # The q-norms tried at each degree (UQLab's qNorm-adaptive truncation; OpenTURNS' default
 # hyperbolic enumeration has q = 0.5): sparse candidate sets of high degree for few
@@ -100,13 +94,13 @@ def hyperbolic_indices(dim, p, q, cap=None):
     return rows[np.lexsort(keys)]
 
 
-def _affordable(n, P, K=0, solver="lars"):
+def affordable(n, P, K=0, solver="lars"):
     """A candidate set of P columns, with K columns held already, within the limits."""
     held = K + P + 1  # at most: the design's columns, the Gram's rows
     return (
         P <= _candidate_cap(n, solver)
         and n * P * min(n, P) <= _ADAPTIVE_WORK * max(1.0, n / _ADAPTIVE_WORK_RUNS)
-        and 8.0 * (2 * n * held + 3 * held * held) <= _SELECTION_SHARE * memory_budget()
+        and 8.0 * (2 * n * held + 3 * held * held) <= SELECTION_SHARE * memory_budget()
     )
 
 
@@ -172,7 +166,7 @@ class _GrowingDesign:
             self.XtY = np.vstack([self.XtY, Bn.T @ self.Y])
             if k1 > self._buffer.shape[1]:
                 width = max(k1, 3 * self._buffer.shape[1] // 2)
-                if 8.0 * self.n * (k0 + width) > _SELECTION_SHARE * memory_budget():
+                if 8.0 * self.n * (k0 + width) > SELECTION_SHARE * memory_budget():
                     width = k1  # no room to spare: v0.4's peak, old and new columns once
                 buffer = np.empty((self.n, width), order="F")
                 buffer[:, :k0] = self.B
@@ -199,8 +193,8 @@ class _GrowingDesign:
         # beyond n / 2 terms the LOO correction factor exceeds 2: such fits never win
         max_steps = min(len(pos), max(n // 2, 2))
         steps = min(max_steps, max(int(first_steps), 8))
-        return _grow_path(
-            lambda steps: _lar_order_gram(Gc, c, steps),
+        return grow_path(
+            lambda steps: lar_order_gram(Gc, c, steps),
             self.B,
             pos,
             y,
@@ -245,7 +239,7 @@ def _select_adaptive_column(design, j, solver, early_stop, max_degree):
         previous = None
         for q in list(live):
             alpha = hyperbolic_indices(dim, p, q, cap)
-            if alpha is None or not _affordable(n, len(alpha), design.B.shape[1], solver):
+            if alpha is None or not affordable(n, len(alpha), design.B.shape[1], solver):
                 # nested in q and p: every larger q, at every higher degree, is dearer
                 live = [r for r in live if r < q]
                 break
@@ -254,7 +248,7 @@ def _select_adaptive_column(design, j, solver, early_stop, max_degree):
             else:
                 pos = design.extend(alpha)
                 first = 32 if best is None else len(best[1]) + 16
-                if chain_terms[q] and 8.0 * n * first > _QR_BYTES:
+                if chain_terms[q] and 8.0 * n * first > QR_BYTES:
                     # refits in Gram form score only a grown path's new columns: start
                     # from this chain's best size, not the best of all chains (a q = 0.5
                     # set rarely needs as many terms as the total-degree winner)
@@ -263,7 +257,7 @@ def _select_adaptive_column(design, j, solver, early_stop, max_degree):
                     cols, coef, err = design.select(j, pos, first)
                 else:
                     y = design.Y[:, j]
-                    cols, coef, err = _sparse_select(design.B, y, pos, n, solver, first)
+                    cols, coef, err = sparse_select(design.B, y, pos, n, solver, first)
                 trace.append((p, q, len(alpha), err))
                 if best is None or err < best[2]:
                     best = (design.alpha[cols], coef, err, (p, q, len(alpha)))
@@ -282,7 +276,7 @@ def _select_adaptive_column(design, j, solver, early_stop, max_degree):
 
 
 @library_threads()  # many mid-sized products: a threaded BLAS only synchronizes (ecfm_uq.threads)
-def _select_adaptive(germs, omega, Y, early_stop, max_degree, solver):
+def select_adaptive(germs, omega, Y, early_stop, max_degree, solver):
     """:func:`_select_adaptive_column` for each column of Y (n, m), on one union basis.
 
     Returns

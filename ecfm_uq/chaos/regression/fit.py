@@ -12,7 +12,7 @@ of its own variance; the selection runs on those few score columns and the expan
 every component is :math:`c = c_Z V_K^T`. The compression's own error is reported beside
 the leave-one-out error, per output component. The compression itself (exact SVD, or a
 randomized SVD in blocks when the exact one is over the memory budget) is
-:mod:`ecfm_uq.chaos.compression`; the evaluations' array, and what the fit adds per
+:mod:`ecfm_uq.chaos.regression.compression`; the evaluations' array, and what the fit adds per
 output component, are checked after the first model run, before the others.
 
 Sizes and memory. The default candidate degree is the largest whose total-degree basis
@@ -31,39 +31,27 @@ columns only, again in blocks of rows: the n x P candidate matrix is never forme
 from __future__ import annotations
 
 import math
-import warnings
 
 import numpy as np
 import scipy.linalg as sla
 
-from .._validation import check_int
-from ..memory import check_allocation, memory_budget
-from ._paths import (  # noqa: F401  (_loo_nested, _path_order: imported from here by tests)
-    _CANDIDATES_PER_RUN,
-    _SELECTION_SHARE,
-    _cholesky_prefix,
-    _lar_order_gram,
-    _loo_nested,
-    _loo_nested_rows,
-    _path_order,
-    _sparse_select,
-)
-from .adaptive import _select_adaptive
-from .basis import ChaosBasis
+from ..._validation import check_int
+from ...memory import check_allocation, memory_budget
+from .adaptive import select_adaptive
 from .compression import (
     StreamingSketch,
-    _exact_pca_bytes,
-    _randomized_pca_bytes,
-    _row_blocks,
-    _streaming_bytes,
     compress_outputs,
+    exact_pca_bytes,
+    randomized_pca_bytes,
+    row_blocks,
+    streaming_bytes,
 )
-from .pce import PolynomialChaosExpansion
+from .loo import cholesky_prefix, loo_nested_rows
+from .paths import CANDIDATES_PER_RUN, SELECTION_SHARE, path_order_gram, sparse_select
 
-__all__ = ["candidate_degree", "compress_outputs"]
+__all__ = ["candidate_degree", "fit_sparse"]
 
-# Sparse regression: the highest degree tried (the degree loop stops earlier when the
-# corrected LOO error stops improving); the candidates per run are in _paths.
+# corrected LOO error stops improving); the candidates per run are in .paths.
 _MAX_DEGREE = 30
 # The default candidate set also fits the memory budget and a work limit: the selection
 # holds about _SELECTION_COPIES arrays of P * min(n, P) floats (design or Gram form); its
@@ -127,9 +115,9 @@ def candidate_degree(n, dim, budget=None):
         if order >= _MAX_DEGREE:
             return order, "max_degree"
         P = math.comb(order + 1 + dim, dim)
-        if P > _CANDIDATES_PER_RUN * n:
+        if P > CANDIDATES_PER_RUN * n:
             return order, "samples"
-        if _selection_bytes(n, P) > _SELECTION_SHARE * budget:
+        if _selection_bytes(n, P) > SELECTION_SHARE * budget:
             return order, "memory"
         if _selection_work(n, P) > _WORK_LIMIT:
             return order, "work"
@@ -142,7 +130,7 @@ def _uses_gram(n, P, budget=None):
         return False
     budget = memory_budget() if budget is None else float(budget)
     design = 8.0 * n * P
-    return design > _EXACT_DESIGN_BYTES or _SELECTION_COPIES * design > _SELECTION_SHARE * budget
+    return design > _EXACT_DESIGN_BYTES or _SELECTION_COPIES * design > SELECTION_SHARE * budget
 
 
 # --------------------------------------------------------------------------------------
@@ -191,7 +179,7 @@ class _GramDesign:
         cols = np.concatenate([self.cols, np.asarray(new, dtype=np.int64)])
         G_new = np.zeros((s1, s1 - s0))
         XtY_new = np.zeros((s1 - s0, self.Y.shape[1]))
-        for a, b in _row_blocks(self.n, s1):
+        for a, b in row_blocks(self.n, s1):
             B = self.rows(a, b, cols)
             Bn = B[:, s0:]
             G_new += B.T @ Bn
@@ -210,33 +198,13 @@ class _GramDesign:
         return np.array([self.position[int(c)] for c in cols], dtype=np.int64)
 
 
-def _path_order_gram(Gs, Xys, n, max_steps, solver):
-    """:func:`_path_order` from the Gram matrix and correlations of the scaled columns."""
-    from sklearn.exceptions import ConvergenceWarning
-    from sklearn.linear_model import orthogonal_mp_gram
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        warnings.simplefilter("ignore", RuntimeWarning)
-        if solver == "lars":
-            return _lar_order_gram(Gs, Xys, max_steps)
-        path = orthogonal_mp_gram(
-            Gs, Xys, n_nonzero_coefs=max_steps, return_path=True, copy_Gram=False
-        )
-    path = path.reshape(Gs.shape[0], -1)
-    nz = path != 0
-    first = np.where(nz.any(axis=1), np.argmax(nz, axis=1), path.shape[1])
-    entered = np.flatnonzero(first < path.shape[1])
-    return entered[np.argsort(first[entered], kind="stable")].tolist()
-
-
 def _loo_nested_gram(gd, cols, R, z, j):
-    """:func:`_loo_nested` from the selected columns, in blocks of rows (Q = X R^{-1})."""
-    return _loo_nested_rows(lambda a, b: gd.rows(a, b, cols), gd.Y[:, j], R, z)
+    """:func:`loo_nested` from the selected columns, in blocks of rows (Q = X R^{-1})."""
+    return loo_nested_rows(lambda a, b: gd.rows(a, b, cols), gd.Y[:, j], R, z)
 
 
 def _sparse_select_gram(gd, j, candidates, solver):
-    """:func:`_sparse_select` on the Gram matrix: (columns, coefficients, corrected LOO)."""
+    """:func:`sparse_select` on the Gram matrix: (columns, coefficients, corrected LOO)."""
     n = gd.n
     gd.extend(candidates)
     G = gd.G
@@ -252,11 +220,11 @@ def _sparse_select_gram(gd, j, candidates, solver):
     Gc /= scale[:, None]
     Gc /= scale[None, :]
     max_steps = min(len(candidates), max(n // 2, 2))
-    active = _path_order_gram(Gc, Xyc / scale, n, max_steps, solver)
+    active = path_order_gram(Gc, Xyc / scale, n, max_steps, solver)
     del Gc
     cols = [0] + [int(candidates[a]) for a in active]
     pos = gd.positions(cols)
-    R = _cholesky_prefix(G[np.ix_(pos, pos)])
+    R = cholesky_prefix(G[np.ix_(pos, pos)])
     s = R.shape[0]
     cols, pos = cols[:s], pos[:s]
     z = sla.solve_triangular(R, b[pos], trans="T")
@@ -308,9 +276,50 @@ def _compress_flag(compress, m):
     return compress
 
 
-def _fit_sparse(
-    model, inputs, order, index_set, data, ev, q_norm, early_stop, solver, compress, tol
+def fit_sparse(
+    inputs, order, index_set, data, ev, q_norm, early_stop, solver, compress, tol, basis_type
 ):
+    """The sparse fit of ``fit_pce(method="lars" | "omp")``: basis, coefficients, diagnostics.
+
+    Parameters
+    ----------
+    inputs : Inputs
+        The inputs (``dim`` and ``germs``).
+    order : int or None
+        Largest candidate degree (``None``: adaptive, or :func:`candidate_degree`).
+    index_set : None or "total"
+        The candidate sets are graded: only ``"total"`` is accepted.
+    data : callable
+        ``data(None) -> (omega, x, y, name)``: germ points, input points, evaluations
+        (``None`` when the model is still to run) and the argument that gave them;
+        ``data.design`` names the generated design.
+    ev : callable
+        ``ev(x, label, check) -> y``: the model runs (``check(n, out_shape)`` is called
+        after the first, before the others).
+    q_norm : float or None
+        Fixed hyperbolic q-norm, or ``None`` for the adaptive candidate sets
+        (:mod:`.adaptive`).
+    early_stop : int
+        Degrees without improvement before a chain stops.
+    solver : {"lars", "omp"}
+    compress : None, bool, "exact" or "randomized"
+    tol : float
+        Largest share of a component's variance the compression may discard.
+    basis_type : type
+        The chaos basis class, called as ``basis_type(order, dim, index_set=..., germ=...)``
+        (:class:`~ecfm_uq.chaos.ChaosBasis`; passed in, so this package sits below
+        :mod:`ecfm_uq.chaos`).
+
+    Returns
+    -------
+    basis : basis_type
+        The expansion's basis (the selected terms only when adaptive).
+    coefficients : (P, *output_shape) ndarray
+    diagnostics : dict
+        What the selection chose (degree, terms, corrected LOO error, ...).
+    n : int
+        Regression runs.
+    """
     dim = inputs.dim
     if index_set not in (None, "total"):
         raise ValueError(
@@ -326,7 +335,7 @@ def _fit_sparse(
         # of the next degree is affordable (_select_adaptive_column)
         order, limit = _MAX_DEGREE, "adaptive"
     elif order is None:
-        # candidate degrees while the candidate set stays below _CANDIDATES_PER_RUN * n,
+        # candidate degrees while the candidate set stays below CANDIDATES_PER_RUN * n,
         # the selection within the memory budget and its work within _WORK_LIMIT
         order, limit = candidate_degree(n, dim)
     else:
@@ -334,9 +343,9 @@ def _fit_sparse(
     order = check_int("order", order, minimum=1)
     if adaptive:
         # the largest candidate set an affordable selection holds (checked per set)
-        P, gram = _CANDIDATES_PER_RUN * n, False
+        P, gram = CANDIDATES_PER_RUN * n, False
     else:
-        basis = ChaosBasis(order, dim, germ=inputs.germs)
+        basis = basis_type(order, dim, germ=inputs.germs)
         P = basis.size
         alpha = np.asarray(basis.indices, dtype=float)
         qn = (np.sum(alpha**q_norm, axis=1)) ** (1.0 / q_norm)
@@ -364,10 +373,10 @@ def _fit_sparse(
                 "return fewer output values"
             )
         elif compress == "exact":
-            need, what = _exact_pca_bytes(n_runs, m_out), "and their exact principal components"
+            need, what = exact_pca_bytes(n_runs, m_out), "and their exact principal components"
             cheaper = "pass compress='randomized' (holds the evaluations once)"
         else:
-            need = _randomized_pca_bytes(n_runs, m_out, min(32, n_runs, m_out))
+            need = randomized_pca_bytes(n_runs, m_out, min(32, n_runs, m_out))
             what = "and their randomized principal components"
             cheaper = (
                 "pass fewer `n_samples`, or let the model return fewer output values (e.g. "
@@ -380,7 +389,7 @@ def _fit_sparse(
                 # the largest sketch that fits
                 for k in _STREAM_COLUMNS:
                     k = min(k, n_runs, m_out)
-                    if _streaming_bytes(n_runs, m_out, k) <= memory_budget():
+                    if streaming_bytes(n_runs, m_out, k) <= memory_budget():
                         stream[:] = [StreamingSketch(n_runs, m_out, k), out_shape]
                         return stream[0]
         check_allocation(
@@ -408,7 +417,7 @@ def _fit_sparse(
             gd = _GramDesign(basis, omega, Y)
             return lambda j, candidates: _sparse_select_gram(gd, j, candidates, solver)
         Psi = basis.evaluate(omega)
-        return lambda j, candidates: _sparse_select(Psi, Y[:, j], candidates, n, solver)
+        return lambda j, candidates: sparse_select(Psi, Y[:, j], candidates, n, solver)
 
     if compress:
         if streamed:
@@ -420,13 +429,13 @@ def _fit_sparse(
                 yf, tol, "auto" if compress is True else compress, return_info=True
             )
         if adaptive:
-            union, cz, ainfo = _select_adaptive(inputs.germs, omega, Z, early_stop, order, solver)
+            union, cz, ainfo = select_adaptive(inputs.germs, omega, Z, early_stop, order, solver)
             deg, err, nt = ainfo["degree"], ainfo["errors"], ainfo["n_terms"]
             P_top = len(union)
         else:
             cz, deg, err, nt = _select_columns(selector(Z), P, Z, qn, order, early_stop)
             # only the terms up to the highest selected degree are nonzero (graded order)
-            P_top = ChaosBasis(max(int(deg.max()), 1), dim).size
+            P_top = basis_type(max(int(deg.max()), 1), dim).size
         check_allocation(
             8.0 * 2 * P_top * m,
             f"the expansion's coefficients ({P_top} terms by {m} output values)",
@@ -453,7 +462,7 @@ def _fit_sparse(
         )
         n_terms = np.count_nonzero(coeffs, axis=0)
     elif adaptive:
-        union, coeffs, ainfo = _select_adaptive(inputs.germs, omega, yf, early_stop, order, solver)
+        union, coeffs, ainfo = select_adaptive(inputs.germs, omega, yf, early_stop, order, solver)
         chosen_deg, errors, n_terms = ainfo["degree"], ainfo["errors"], ainfo["n_terms"]
     else:
         coeffs, chosen_deg, errors, n_terms = _select_columns(
@@ -462,17 +471,16 @@ def _fit_sparse(
     top = max(max(chosen_deg), 1)
     if adaptive:
         # the selected terms only (a custom index set), not the total-degree basis
-        basis_out = ChaosBasis(top, dim, index_set=union, germ=inputs.germs)
+        basis_out = basis_type(top, dim, index_set=union, germ=inputs.germs)
     else:
-        basis_out = ChaosBasis(top, dim, germ=inputs.germs)
+        basis_out = basis_type(top, dim, germ=inputs.germs)
     c = coeffs[: basis_out.size].reshape((basis_out.size, *shape))
-    pce = PolynomialChaosExpansion(basis_out, c, inputs)
     if compress:
         # each component uses the union of the scores' terms
         degree = np.full(m, int(top))
     else:
         degree = np.array(chosen_deg)
-    pce.diagnostics.update(
+    diagnostics = dict(
         design=None if name == "samples" else data.design,
         degree=degree.reshape(shape),
         n_terms=np.array(n_terms).reshape(shape),
@@ -488,13 +496,13 @@ def _fit_sparse(
         # what the adaptive truncation chose (per output component, or per principal
         # component when compressed) and the first one's path of (degree, q, P, LOO)
         key = "component_" if compress else ""
-        pce.diagnostics.update(
+        diagnostics.update(
             selection="adaptive",
             q_norm=ainfo["q_norm"] if compress else ainfo["q_norm"].reshape(shape),
             candidate_degree=int(max(t[0] for t in ainfo["trace"]) if ainfo["trace"] else 1),
             adaptive_trace=ainfo["trace"],
         )
-        pce.diagnostics[f"{key}n_candidates"] = (
+        diagnostics[f"{key}n_candidates"] = (
             ainfo["n_candidates"] if compress else ainfo["n_candidates"].reshape(shape)
         )
-    return pce, n
+    return basis_out, c, diagnostics, n

@@ -1,0 +1,167 @@
+"""Leave-one-out errors of least-squares fits, nested along a regression path.
+
+The corrected leave-one-out error (Blatman & Sudret 2011) of every nested OLS refit
+along a LAR/OMP path (:mod:`.paths`), all at once from one QR or one Cholesky factor:
+in design form (:func:`loo_nested`), or in Gram form a block of rows at a time
+(:func:`loo_nested_rows`, :class:`NestedLooRows`), so no (n, s) array is held.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+from scipy.linalg.lapack import dpotrf
+
+from .compression import row_blocks
+
+__all__ = ["CHOLESKY_RTOL", "NestedLooRows", "cholesky_prefix", "loo_nested", "loo_nested_rows"]
+
+# Gram path: a selected column whose Cholesky pivot falls below this share of its norm is
+# numerically dependent on the earlier ones (the Gram squares the conditioning).
+CHOLESKY_RTOL = 1e-6
+
+
+def loo_nested(Q, R, y):
+    """Corrected LOO errors of the OLS fits on the first k = 1..s columns, all at once.
+
+    With :math:`X = QR` (economic), the fit on the first k columns uses :math:`Q_k`, so the
+    hat diagonals and residuals of all nested fits are cumulative sums:
+    :math:`h^{(k)}_i = \\sum_{j<k} Q_{ij}^2`, :math:`r^{(k)} = y - \\sum_{j<k} Q_j (Q_j^T y)`.
+    The LOO residual is :math:`r_i / (1 - h_i)` (no refits), normalised by the sample
+    variance, and multiplied by Chapelle's correction (Blatman & Sudret 2011)
+
+    .. math:: T(k, n) = \\frac{n}{n - k}\\Bigl(1 + \\operatorname{tr}(C^{-1})/n\\Bigr),
+              \\qquad C = X_k^T X_k / n,\\quad \\operatorname{tr}(C^{-1})/n = \\|R_k^{-1}\\|_F^2.
+
+    Returns
+    -------
+    loo, corrected : (s,) ndarray
+    """
+    n, s = Q.shape
+    z = Q.T @ y
+    fitted = np.cumsum(Q * z[None, :], axis=1)
+    h = np.cumsum(Q**2, axis=1)
+    resid = y[:, None] - fitted
+    one_h = 1.0 - h
+    with np.errstate(divide="ignore", invalid="ignore"):
+        e = np.where(one_h > 1e-10, resid / one_h, np.inf)
+    var = np.var(y) if np.var(y) > 0 else 1.0
+    loo = np.mean(e**2, axis=0) / var
+    Rinv = sla.solve_triangular(R, np.eye(s))
+    trace = np.cumsum(np.sum(np.triu(Rinv) ** 2, axis=0))
+    k = np.arange(1, s + 1)
+    with np.errstate(divide="ignore"):
+        T = np.where(k < n, n / np.maximum(n - k, 1) * (1.0 + trace), np.inf)
+    return loo, loo * T
+
+
+def cholesky_prefix(G):
+    """Upper Cholesky factor of the longest leading block of G that is well conditioned.
+
+    Returns R (s, s) with :math:`R^T R = G_{:s,:s}`, stopping before the first column whose
+    pivot is below ``CHOLESKY_RTOL`` of its norm (dependent on the earlier columns).
+    """
+    s = G.shape[0]
+    while s > 0:
+        R, info = dpotrf(G[:s, :s], lower=0, clean=1)
+        if info > 0:
+            s = info - 1
+            continue
+        d = np.abs(np.diag(R))
+        bad = np.flatnonzero(d < CHOLESKY_RTOL * np.sqrt(np.abs(np.diag(G)[:s])))
+        if bad.size:
+            s = int(bad[0])
+            continue
+        return R
+    raise ValueError("the constant regression column is zero; check the samples")
+
+
+def loo_nested_rows(rows, y, R, z):
+    """Corrected LOO errors of :func:`loo_nested` from :math:`R^T R = X^T X`, in row blocks.
+
+    ``rows(a, b)`` returns the rows a..b-1 of the selected columns X (n, s) and
+    :math:`z = R^{-T} X^T y`; :math:`Q = X R^{-1}` is formed a block of rows at a time, so
+    only (block, s) arrays are held. Returns the corrected errors (s,).
+    """
+    n, s = len(y), R.shape[0]
+    sum_e2 = np.zeros(s)
+    for a, b in row_blocks(n, 4 * s):
+        Q = sla.solve_triangular(R, rows(a, b).T, trans="T", check_finite=False).T
+        fitted = np.cumsum(Q * z[None, :], axis=1)
+        h = np.cumsum(Q**2, axis=1)
+        one_h = 1.0 - h
+        with np.errstate(divide="ignore", invalid="ignore"):
+            e = np.where(one_h > 1e-10, (y[a:b, None] - fitted) / one_h, np.inf)
+        sum_e2 += np.sum(e**2, axis=0)
+    var = np.var(y) if np.var(y) > 0 else 1.0
+    loo = sum_e2 / n / var
+    Rinv = sla.solve_triangular(R, np.eye(s))
+    trace = np.cumsum(np.sum(np.triu(Rinv) ** 2, axis=0))
+    k = np.arange(1, s + 1)
+    with np.errstate(divide="ignore"):
+        T = np.where(k < n, n / np.maximum(n - k, 1) * (1.0 + trace), np.inf)
+    return loo * T
+
+
+class NestedLooRows:
+    """Corrected LOO errors of nested fits in Gram form, extended as a path grows.
+
+    For the columns ``cols`` of ``design`` (column 0 the constant) with Gram matrix
+    :math:`G` and :math:`b = \\Psi^T y`: :math:`R^T R = G_{cols, cols}` (Cholesky, up to the
+    first dependent column), :math:`z = R^{-T} b_{cols}`, and the errors of
+    :func:`loo_nested` with :math:`Q = X R^{-1}`. A later call with a longer ``cols``
+    (the same prefix: a path run further) evaluates the new columns only,
+    :math:`Q_{:, k_0:s} = X_{:, :s} (R^{-1})_{:s, k_0:s}`, continuing each run's hat
+    diagonal and fitted value from the ones kept after the last call (two n-vectors), in
+    blocks of rows: no (n, s) array is held.
+    """
+
+    def __init__(self, design, y, G, b):
+        self.design, self.y, self.G, self.b = design, y, G, b
+        n = len(y)
+        self.h = np.zeros(n)
+        self.fitted = np.zeros(n)
+        self.sum_e2 = np.zeros(0)
+
+    def errors(self, cols):
+        """(R, z, corrected) of the nested fits on the leading columns of ``cols``."""
+        y, n = self.y, len(self.y)
+        R = cholesky_prefix(self.G[np.ix_(cols, cols)])
+        s = R.shape[0]
+        z = sla.solve_triangular(R, self.b[cols[:s]], trans="T")
+        Rinv = sla.solve_triangular(R, np.eye(s))
+        k0 = len(self.sum_e2)
+        if s > k0:
+            sel = cols[:s]
+            W = Rinv[:, k0:]
+            new = np.zeros(s - k0)
+            for a, b in row_blocks(n, 4 * s):
+                X = self.design[a:b][:, sel]
+                if k0:
+                    Q = X @ W
+                else:  # all columns: the triangular solve, half the products
+                    Q = sla.solve_triangular(R, X.T, trans="T", check_finite=False).T
+                # in place: r = y - fitted and 1 - h of the nested fits, then (r / (1 - h))^2
+                r = Q * z[None, k0:]
+                np.cumsum(r, axis=1, out=r)
+                r += self.fitted[a:b, None]
+                self.fitted[a:b] = r[:, -1]
+                np.subtract(y[a:b, None], r, out=r)
+                np.multiply(Q, Q, out=Q)
+                np.cumsum(Q, axis=1, out=Q)
+                Q += self.h[a:b, None]
+                self.h[a:b] = Q[:, -1]
+                np.subtract(1.0, Q, out=Q)
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    np.divide(r, Q, out=r)
+                r[Q <= 1e-10] = np.inf
+                np.multiply(r, r, out=r)
+                new += np.sum(r, axis=0)
+            self.sum_e2 = np.concatenate([self.sum_e2, new])
+        var = np.var(y) if np.var(y) > 0 else 1.0
+        loo = self.sum_e2[:s] / n / var
+        trace = np.cumsum(np.sum(np.triu(Rinv) ** 2, axis=0))
+        k = np.arange(1, s + 1)
+        with np.errstate(divide="ignore"):
+            T = np.where(k < n, n / np.maximum(n - k, 1) * (1.0 + trace), np.inf)
+        return R, z, loo * T
