@@ -14,17 +14,20 @@ def as_finite_array(name, value, *, ndim=None, shape=None, dtype=float):
 
     ``shape`` may contain ``None`` for free axes.
     """
-    if isinstance(value, str | bytes):
-        raise TypeError(f"`{name}` must be array-like of numbers, got {describe(value)}")
-    try:
-        arr = np.asarray(value, dtype=dtype)
-    except (TypeError, ValueError) as e:
-        raise TypeError(f"`{name}` must be array-like of numbers, got {describe(value)}") from e
-    if arr.dtype == object:
-        raise TypeError(f"`{name}` must be array-like of numbers, got {describe(value)}")
+    if type(value) is np.ndarray and value.dtype is _FLOAT64 and dtype is float:
+        arr = value  # what np.asarray(value, dtype=float) returns: the array itself
+    else:
+        if isinstance(value, str | bytes):
+            raise TypeError(f"`{name}` must be array-like of numbers, got {describe(value)}")
+        try:
+            arr = np.asarray(value, dtype=dtype)
+        except (TypeError, ValueError) as e:
+            raise TypeError(f"`{name}` must be array-like of numbers, got {describe(value)}") from e
+        if arr.dtype == object:
+            raise TypeError(f"`{name}` must be array-like of numbers, got {describe(value)}")
     if ndim is not None and arr.ndim != ndim:
         raise ValueError(f"`{name}` must be {ndim}-D, got shape {arr.shape}")
-    if shape is not None:
+    if shape is not None and arr.shape != shape:
         if arr.ndim != len(shape) or any(
             s is not None and s != a for s, a in zip(shape, arr.shape, strict=True)
         ):
@@ -37,11 +40,17 @@ def as_finite_array(name, value, *, ndim=None, shape=None, dtype=float):
 
 def all_finite(arr):
     """Whether every value of the float array ``arr`` is finite: a finite sum says so (NaN
-    and inf propagate through it) in one reduction -- for a 1-D float64 array the inner
-    product with ones (one BLAS call, a third of ``arr.sum()``'s cost, the same overflow
-    only when the sum overflows); the elementwise test runs only when the sum is not
-    finite (a bad value, or finite values whose sum overflows)."""
-    if type(arr) is np.ndarray and arr.ndim == 1 and arr.dtype is _FLOAT64:
+    and inf propagate through it) in one reduction -- for a float64 array that is 1-D or
+    contiguous the inner product with ones (one BLAS call, a third of ``arr.sum()``'s
+    cost, the same overflow only when the sum overflows); the elementwise test runs only
+    when the sum is not finite (a bad value, or finite values whose sum overflows)."""
+    if (
+        type(arr) is np.ndarray
+        and arr.dtype is _FLOAT64
+        and (arr.ndim == 1 or arr.flags.c_contiguous)
+    ):
+        if arr.ndim != 1:  # a contiguous array's flat view: the same values
+            arr = arr.reshape(-1)
         n = arr.shape[0]
         if n <= _ONES_MAX:
             ones = _ones[0]

@@ -41,7 +41,8 @@ def fd_steps(x, method="2-point", typical=None):
     size = np.array(np.abs(np.asarray(x, dtype=float)))  # an array also for a scalar x
     if typical is not None:
         np.maximum(size, np.abs(np.asarray(typical, dtype=float)), out=size)
-    size[size == 0] = 1.0
+    if not size.all():
+        size[size == 0] = 1.0
     size *= _ETA[method]
     return size
 
@@ -105,6 +106,23 @@ def fd_jacobian(fun, x, *, method="2-point", steps=None, typical=None, f0=None, 
             np.subtract(np.asarray(fun(e), dtype=float).reshape(-1), base, out=J[:, c])
             J[:, c] /= float(e[j]) - xj
         return J
+    if method == "3-point" and map_points is None:
+        # the status test's Jacobian: the stencil's points in the general path's order,
+        # each difference computed as it does (the same bits), without the (2p, m) stack
+        # (Python floats: IEEE doubles, the same sums and quotients as numpy's scalars)
+        J = None
+        xs, hs = x.tolist(), h.tolist()
+        for c, j in enumerate(cols.tolist()):
+            e = x.copy()
+            e[j] = xs[j] + 1.0 * hs[j]
+            up = np.asarray(fun(e), dtype=float).ravel()
+            e = x.copy()
+            e[j] = xs[j] + -1.0 * hs[j]
+            down = np.asarray(fun(e), dtype=float).ravel()
+            if J is None:
+                J = np.empty((up.size, cols.size))
+            J[:, c] = (up - down) / (2 * hs[j])
+        return np.empty((0, 0)) if J is None else J
     offsets = _offsets(method)
     points = []
     for j in cols:

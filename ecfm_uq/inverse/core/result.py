@@ -36,6 +36,8 @@ from .status import FitStatus
 
 __all__ = ["InverseResult", "Uncertainty", "Verdict"]
 
+_FLOAT64 = np.dtype(np.float64)
+
 
 def interval_quantile(level, dof=None):
     """The two-sided ``level`` quantile of every delta-method interval: normal, or
@@ -413,17 +415,26 @@ class InverseResult:
         def put(name, value):
             object.__setattr__(self, name, value)
 
-        put("eps", np.asarray(self.eps, dtype=float))
-        put("loss", float(self.loss))
-        put("status", FitStatus(self.status))
-        put("message", str(self.message))
-        put("nit", int(self.nit))
-        put("nfev", int(self.nfev))
-        put("njev", int(self.njev))
-        if self.optimality is not None:
+        # each conversion only where the value is not already what it makes (a fitter's
+        # result is built of float64 arrays, floats, ints and a FitStatus: the same
+        # objects come out, without a call per field)
+        if type(self.eps) is not np.ndarray or self.eps.dtype is not _FLOAT64:
+            put("eps", np.asarray(self.eps, dtype=float))
+        if type(self.loss) is not float:
+            put("loss", float(self.loss))
+        if type(self.status) is not FitStatus:
+            put("status", FitStatus(self.status))
+        if type(self.message) is not str:
+            put("message", str(self.message))
+        for name in ("nit", "nfev", "njev"):
+            if type(getattr(self, name)) is not int:
+                put(name, int(getattr(self, name)))
+        if self.optimality is not None and type(self.optimality) is not float:
             put("optimality", float(self.optimality))
-        put("eps_history", np.asarray(self.eps_history))
-        put("loss_history", np.asarray(self.loss_history))
+        if type(self.eps_history) is not np.ndarray:
+            put("eps_history", np.asarray(self.eps_history))
+        if type(self.loss_history) is not np.ndarray:
+            put("loss_history", np.asarray(self.loss_history))
         if not isinstance(self.uncertainty, Uncertainty):
             raise TypeError(
                 f"`uncertainty` must be an Uncertainty, got {type(self.uncertainty).__name__}"

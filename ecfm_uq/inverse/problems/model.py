@@ -23,6 +23,7 @@ point reached).
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -39,6 +40,8 @@ from ..statistics.uncertainty import estimate_uncertainty, least_squares_jacobia
 from ..statistics.verdict import check_bounds, model_verdict
 from .interface import InverseProblem
 from .noise_model import noise_model
+
+_FLOAT64 = np.dtype(np.float64)
 
 __all__ = ["ModelProblem"]
 
@@ -126,14 +129,28 @@ class ModelProblem(InverseProblem):
         try:
             y = self.model(eps)
         except Exception as e:  # a user callback: report any failure with its call
-            msg = f"{_describe_call('model', eps)} raised {type(e).__name__}: {e}"
-            if first or isinstance(e, TypeError | IndexError):
-                raise type(e)(
-                    f"{msg}; `model` must take one argument, the 1-D array of the "
-                    f"{np.size(eps)} parameters, and return the predictions of the data "
-                    f"(shape {self.shape})"
-                ) from e
-            raise ModelEvaluationError(msg) from e
+            raise self._model_error(e, eps, first) from e
+        if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == self.shape:
+            # the common output: one copy, one inner product (finite: so is every value)
+            y = y.copy().ravel()
+            if math.isfinite(y.dot(y)):
+                return y
+        return self._checked(y, eps, first)
+
+    def _model_error(self, e, eps, first):
+        """The error to raise for ``model(eps)`` raising ``e`` (see :meth:`predict`)."""
+        msg = f"{_describe_call('model', eps)} raised {type(e).__name__}: {e}"
+        if first or isinstance(e, TypeError | IndexError):
+            return type(e)(
+                f"{msg}; `model` must take one argument, the 1-D array of the "
+                f"{np.size(eps)} parameters, and return the predictions of the data "
+                f"(shape {self.shape})"
+            )
+        return ModelEvaluationError(msg)
+
+    def _checked(self, y, eps, first):
+        """``model(eps)``'s return ``y`` as a fresh flat float array, checked (see
+        :meth:`predict`)."""
         cs = self.jac == "cs"  # a model for complex steps may hand back a complex array
         y = as_model_output(
             y, name="model", at=lambda: _at(eps), shape=self.shape, complex_ok=cs
@@ -259,14 +276,31 @@ class ModelProblem(InverseProblem):
         method = "3-point" if accurate and self.jac == "2-point" else None
 
         whiten = noise.whiten if noise.known else None  # unknown sigma: W = I
-        predict = self.predict
+        model, shape, checked = self.model, self.shape, self._checked
 
         def residual(eps):
             nonlocal first
             # the first call (at eps0) raises the user's errors: nothing was computed yet
             at_start, first = first, False
-            y = predict(eps, first=at_start)
-            r = y - v if whiten is None else whiten(y - v)
+            # predict(eps) inlined: per call, one copy and one inner product for the common
+            # output (a float64 array of the data's shape), predict's checks otherwise
+            try:
+                y = model(eps)
+            except Exception as e:  # a user callback: report any failure with its call
+                raise self._model_error(e, eps, at_start) from e
+            if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == shape:
+                y = y.copy().ravel()
+                r = y - v
+                # r finite iff y is (v is): the sum of squares says so, else predict's
+                # test decides (a bad value raises; finite values whose square overflows
+                # pass)
+                if not math.isfinite(r.dot(r)):
+                    checked(y, eps, at_start)
+            else:
+                y = checked(y, eps, at_start)
+                r = y - v
+            if whiten is not None:
+                r = whiten(r)
 
             def J():
                 return noise.whiten(self.jacobian(eps, y, typical=typical, method=method))
