@@ -226,7 +226,8 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
         delta = np.full(p, np.inf)
         norm_orth = norm_proj = 0.0  # no offset: the step test decides
     if n > p and norm_orth > 0:
-        offset = (norm_proj / np.sqrt(p)) / (norm_orth / np.sqrt(n - p))
+        # math.sqrt: the correctly rounded root, as np.sqrt's
+        offset = (norm_proj / math.sqrt(p)) / (norm_orth / math.sqrt(n - p))
     elif np.linalg.norm(r) == 0:
         offset = 0.0
     else:
@@ -234,7 +235,8 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
     offset = float(offset)
     # relative to each parameter (a parameter at exactly 0: to the largest, else 1)
     ref = np.abs(eps[free])
-    ref[ref == 0] = np.abs(eps).max() or 1.0
+    if not ref.all():
+        ref[ref == 0] = np.abs(eps).max() or 1.0
     step = float(np.max(np.abs(delta) / ref))
     if offset <= tol and rank_ok:
         return Optimality(True, offset, "relative offset", tol,

@@ -477,27 +477,34 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     p = eps0.size
     fd_base, fd_bytes, fd_j, fd_next, fd_njev = None, b"", 0, None, 0
 
-    def expect_next():
-        nonlocal fd_next
-        if fd_j < p:
-            bj = fd_base[fd_j]
-            e = _pack_double(bj + (root_eps * abs(bj) or root_eps))
-            fd_next = fd_bytes[: 8 * fd_j] + e + fd_bytes[8 * fd_j + 8 :]
-        else:
-            fd_next = None
-
     def fun(x):
-        nonlocal best_loss, fd_base, fd_bytes, fd_j, fd_njev
+        nonlocal best_loss, fd_base, fd_bytes, fd_j, fd_njev, fd_next, last_key, last_ev
         key = x.tobytes()
-        ev = evaluate(x, key) if key != last_key else last_ev
+        if key == last_key:
+            ev = last_ev
+        else:  # evaluate(x, key) inlined: fun runs once per MINPACK call
+            counts["nfev"] += 1
+            try:
+                ev = list(residual(x.copy()))
+            except ConvergenceError as e:
+                failures.append(str(e))
+                ev = None
+            last_key, last_ev = key, ev
         if differences:
-            if key == fd_next:  # a column of MINPACK's Jacobian
+            column = key == fd_next  # a column of MINPACK's Jacobian
+            if column:
                 fd_j += 1
                 fd_njev += fd_j == p
-                expect_next()
+            else:
+                fd_base, fd_bytes, fd_j = x.tolist(), key, 0
+            if fd_j < p:  # the point of the next column
+                bj = fd_base[fd_j]
+                e = _pack_double(bj + (root_eps * abs(bj) or root_eps))
+                fd_next = fd_bytes[: 8 * fd_j] + e + fd_bytes[8 * fd_j + 8 :]
+            else:
+                fd_next = None
+            if column:
                 return rejected if ev is None else ev[0]
-            fd_base, fd_bytes, fd_j = x.tolist(), key, 0
-            expect_next()
         if ev is None:
             return rejected
         r = ev[0]

@@ -28,6 +28,7 @@ parameters, which side) and in the message, and never changes ``consistent``.
 
 from __future__ import annotations
 
+import math
 import numbers
 
 import numpy as np
@@ -280,12 +281,11 @@ def residual_verdict(e, v, sigma=None, alpha=DEFAULT_ALPHA, n_fitted=0, *, rtol=
     -------
     Verdict
     """
-    from scipy.stats import chi2
-
     e = np.ravel(np.asarray(e, dtype=float))
     v = np.ravel(np.asarray(v, dtype=float))
     out = dict(details or {})
-    out["force_to_data"] = float(np.linalg.norm(e) / max(np.linalg.norm(v), 1e-300))
+    # np.linalg.norm of a real vector is sqrt(x.x): the same bits without its wrapper
+    out["force_to_data"] = float(math.sqrt(e.dot(e)) / max(math.sqrt(v.dot(v)), 1e-300))
     out["peak_sensor_index"] = int(np.argmax(np.abs(e)))
     force = out.get("peak_force_index")
     where = "" if force is None else f"; largest force {force}"
@@ -302,6 +302,8 @@ def residual_verdict(e, v, sigma=None, alpha=DEFAULT_ALPHA, n_fitted=0, *, rtol=
             FORCE_RULE, None, alpha, parts, explained=explained,
             at_bound=at_bound, extreme=extreme, details=out,
         )  # fmt: skip
+    from scipy.stats import chi2
+
     sigma = check_positive("sigma", sigma)
     r = e / sigma  # not (e @ e) / sigma**2: sigma**2 may overflow
     dof = max(e.size - int(n_fitted), 1)
