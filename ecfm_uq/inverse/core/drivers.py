@@ -40,6 +40,8 @@ __all__ = [
 
 #: a float as the 8 bytes of a native float64 array element (``x.tobytes()``'s slots)
 _pack_double = struct.Struct("=d").pack
+#: MINPACK's relative difference step, sqrt(machine epsilon)
+_ROOT_EPS = float(np.sqrt(np.finfo(float).eps))
 
 #: gradient methods of scipy.optimize.minimize the reduced fits accept by name
 MINIMIZE_METHODS = ("BFGS", "CG", "L-BFGS-B", "TNC", "SLSQP", "Newton-CG", "trust-constr")
@@ -464,16 +466,19 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     if first is None:
         raise ConvergenceError(f"the model cannot be solved at eps0={eps0}: {failures[0]}")
     m = np.size(first[0])
+
     # a rejected trial point: a residual far above any other (MINPACK then shrinks the
-    # step; inf would turn its norms into nan)
-    rejected = np.full(m, 1e150)
+    # step; inf would turn its norms into nan), made when one is
+    def rejected():
+        return np.full(m, 1e150)
+
     best_loss = np.inf
     # MINPACK's differencing (lmdif's fdjac2): column j at base + h_j e_j, h_j =
     # sqrt(machine eps) |base_j| (sqrt(eps) at 0), right after each iterate; recognized
     # bit for bit, they count as one Jacobian per iterate and stay out of the path. The
     # expected point's bytes are spliced from the base's (Python floats are IEEE doubles:
     # the same sum as MINPACK's), one 8-byte slot per column, without an array copy.
-    root_eps = float(np.sqrt(np.finfo(float).eps))
+    root_eps = _ROOT_EPS
     p = eps0.size
     fd_base, fd_bytes, fd_j, fd_next, fd_njev = None, b"", 0, None, 0
 
@@ -504,9 +509,9 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
             else:
                 fd_next = None
             if column:
-                return rejected if ev is None else ev[0]
+                return rejected() if ev is None else ev[0]
         if ev is None:
-            return rejected
+            return rejected()
         r = ev[0]
         z = 0.5 * float(r.dot(r))
         if z < best_loss:

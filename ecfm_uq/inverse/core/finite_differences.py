@@ -38,7 +38,9 @@ _ETA = {
 
 def fd_steps(x, method="2-point", typical=None):
     """The step :math:`h_j` of each parameter (see the module's table)."""
-    size = np.array(np.abs(np.asarray(x, dtype=float)))  # an array also for a scalar x
+    size = np.abs(np.asarray(x, dtype=float))  # a fresh array; a scalar for a scalar x:
+    if type(size) is not np.ndarray:
+        size = np.array(size)
     if typical is not None:
         np.maximum(size, np.abs(np.asarray(typical, dtype=float)), out=size)
     if not size.all():

@@ -28,6 +28,7 @@ one yet.
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 
@@ -201,6 +202,10 @@ def delta_method_covariance(deps_dv, Sigma_v):
     """
     D = as_finite_array("deps_dv", deps_dv, ndim=2)
     C = D.shape[1]
+    if type(Sigma_v) is float and Sigma_v > 0 and math.isfinite(Sigma_v):
+        # one variance, as a fit passes it: the branch below without the array round trip
+        cov = Sigma_v * D @ D.T
+        return 0.5 * (cov + cov.T)
     S = np.asarray(Sigma_v, dtype=float)
     if not all_finite(S):
         raise ValueError("`Sigma_v` has non-finite entries")
@@ -415,7 +420,9 @@ def estimate_uncertainty(
         noise_model=noise_model,
         dof=dof,
         jacobian=D,
-        sigma=float(np.sqrt(Sigma)) if one_sigma else None,
+        sigma=(math.sqrt(Sigma) if type(Sigma) is float else float(np.sqrt(Sigma)))
+        if one_sigma
+        else None,
         eps=eps.copy(),
     )
 
