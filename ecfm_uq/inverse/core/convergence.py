@@ -237,7 +237,7 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
     ref = np.abs(eps[free])
     if not ref.all():
         ref[ref == 0] = np.abs(eps).max() or 1.0
-    step = float(np.max(np.abs(delta) / ref))
+    step = float((np.abs(delta) / ref).max())  # the method: np.max without its wrapper
     if offset <= tol and rank_ok:
         return Optimality(True, offset, "relative offset", tol,
                           f"relative offset {offset:.1e} <= {tol:.0e}")  # fmt: skip
