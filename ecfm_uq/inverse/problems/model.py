@@ -131,9 +131,9 @@ class ModelProblem(InverseProblem):
         except Exception as e:  # a user callback: report any failure with its call
             raise self._model_error(e, eps, first) from e
         if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == self.shape:
-            # the common output: one copy, one inner product (finite: so is every value)
+            # the common output: one copy, one finiteness test
             y = y.copy().ravel()
-            if math.isfinite(y.dot(y)):
+            if all_finite(y):
                 return y
         return self._checked(y, eps, first)
 
@@ -291,9 +291,9 @@ class ModelProblem(InverseProblem):
             if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == shape:
                 y = y.copy().ravel()
                 r = y - v
-                # r finite iff y is (v is): the sum of squares says so, else predict's
-                # test decides (a bad value raises; finite values whose square overflows
-                # pass)
+                # r finite iff y is (v is): the sum of squares says so (the driver's
+                # loss, the same inner product), else predict's test decides (a bad
+                # value raises; finite values whose squares overflow pass)
                 if not math.isfinite(r.dot(r)):
                     checked(y, eps, at_start)
             else:
