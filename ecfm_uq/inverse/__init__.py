@@ -42,7 +42,7 @@ imports :mod:`.fitting`:
 ``problems/``       a model and its data behind one interface (``interface``): ``model``
                     (a Python function), ``ode`` (a user's ODE, forward sensitivities),
                     ``galerkin`` (steady, replicated), ``dynamic`` (``dynamic_sparse``:
-                    data at some steps, one force per data interval);
+                    data at some times, forces in a basis in time, ``force_bases``);
                     ``noise_model`` and ``whitening`` (``sigma`` as given);
                     ``pseudo_likelihood`` and ``moments`` (the replicated data's
                     likelihood)
