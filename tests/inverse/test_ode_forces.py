@@ -212,3 +212,73 @@ def test_random_forces_tau_zero_on_exact_data_and_detected_harvest():
     assert bad.forces.values.shape == (10, 2) and np.all(bad.forces.stderr >= 0)
     with pytest.raises(ValueError, match="sigma"):
         fit(problem(times, data), TRUTH, formulation="ecfm-random")
+
+
+def test_newton_starts_from_the_linear_prediction_of_the_last_solve(monkeypatch):
+    """A second solve at a nearby eps starts each interval's Newton from the last forces
+    moved by their derivatives: one integration per interval, the same forces as a
+    solve from zero forces (to the Newton tolerance)."""
+    from ecfm_uq.inverse.formulations import ode_forces
+
+    data = simulate(ANNUAL) * (1 + 0.03 * np.random.default_rng(2).standard_normal((13, 2)))
+    pb = problem(ANNUAL, data, rtol=1e-9)
+    e1 = pb.check(TRUTH * 1.02)
+    e2 = e1 * (1 + 1e-5 * np.arange(1, 7))  # last forces alone miss by ~1e-5 |f|
+    calls = []
+    real = ode_forces.solve_with_sensitivities
+
+    def counted(*a, **kw):
+        calls.append(1)
+        return real(*a, **kw)
+
+    monkeypatch.setattr(ode_forces, "solve_with_sensitivities", counted)
+    fresh = ExactForces(pb, forced_components(pb))
+    cold = fresh.solve(e2)["forces"]
+    n_cold = len(calls)
+    warm = ExactForces(pb, forced_components(pb))
+    warm.solve(e1)
+    calls.clear()
+    hot = warm.solve(e2)["forces"]
+    assert len(calls) == warm.K and n_cold >= 2 * warm.K
+    np.testing.assert_allclose(hot, cold, rtol=0, atol=1e-6 * np.max(np.abs(cold)))
+
+
+def test_random_force_tau_search_meets_the_trust_region_reml_profile():
+    """The random-force ECFM's likelihood ratio and tau, whose search takes its GLS
+    estimates by Gauss-Newton, against the REML criterion recomputed here with
+    scipy's least_squares at each tau: the same statistic, and tau its minimum."""
+    import scipy.linalg
+    from scipy.optimize import least_squares
+
+    from ecfm_uq.inverse.formulations.ode_random import force_response
+
+    times = ANNUAL[:11]
+    data = simulate(times, harvest=0.3)
+    sigma = 0.03 * np.abs(data)
+    data = data + sigma * np.random.default_rng(8).standard_normal(data.shape)
+    pb = problem(times, data, rtol=1e-9)
+    res = fit(pb, TRUTH, formulation="ecfm-random", sigma=sigma)
+    tau, lrt = res.extra["tau"], res.verdict.details["lrt"]
+    assert tau > 0 and lrt > 1
+    ef = ExactForces(pb, forced_components(pb))
+    A = force_response(pb, ef, res.extra["standard"].eps)
+    AWA = (A * np.repeat(1.0 / ef.dt, ef.m)) @ A.T
+    Sigma = np.diag(sigma.ravel() ** 2)
+    d = pb.readings
+
+    def crit(t):
+        L = np.linalg.cholesky(Sigma + t**2 * AWA)
+
+        def white(e):
+            return scipy.linalg.solve_triangular(L, pb.predict(e) - d, lower=True)
+
+        def jac(e):
+            return scipy.linalg.solve_triangular(L, pb.predict_jacobian(e), lower=True)
+
+        e = least_squares(white, res.eps, jac=jac, xtol=1e-14, ftol=1e-14, gtol=1e-14).x
+        X, r = jac(e), white(e)
+        return 2 * np.sum(np.log(np.diag(L))) + np.linalg.slogdet(X.T @ X)[1] + r @ r
+
+    c_hat = crit(tau)
+    assert abs((crit(0.0) - c_hat) - lrt) < 1e-6 * lrt
+    assert crit(tau * 1.1) > c_hat and crit(tau / 1.1) > c_hat

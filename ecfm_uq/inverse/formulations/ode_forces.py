@@ -104,6 +104,11 @@ class ExactForces:
         self.where = np.full(mask.shape, -1)
         self.where[mask] = np.arange(mask.sum())
         self.warm = np.zeros((self.K, self.m))
+        # the last solve's eps and forces' derivatives in eps: the next solve's first
+        # Newton guess is their linear prediction (one solve per interval where the
+        # prediction already meets the data)
+        self.warm_eps = None
+        self.warm_slope = None
         self.jump_weight = 1.0 / np.sqrt(self.dt[0]) if self.jump and self.K else 1.0
 
     @property
@@ -142,6 +147,10 @@ class ExactForces:
         J = np.zeros((self.n_residual, p))
         R_d = np.zeros((self.n_residual, nd)) if with_data else None
         forces = np.zeros((self.K, m))
+        guess = self.warm.copy()
+        if self.warm_eps is not None and self.warm_eps.shape == eps.shape:
+            guess += (self.warm_slope @ (eps - self.warm_eps)).reshape(self.K, m)
+        slope = np.zeros((self.K * m, p))
         jump = None
         row = 0
         if self.jump:
@@ -175,7 +184,7 @@ class ExactForces:
             S0 = np.hstack((np.eye(n), np.zeros((n, p + q))))
             T_eps = np.hstack((np.zeros((p, n)), np.eye(p), np.zeros((p, q))))
             G = np.hstack((np.zeros((n, n + p)), EF))
-            f = self.warm[k, cols].copy()
+            f = guess[k, cols].copy()
             target = d_at(pb, i, cols)
             scale = max(1.0, np.max(np.abs(target))) if q else 1.0
             # the last Newton update is applied linearly (exact to O(|c|^2)) once the
@@ -222,7 +231,7 @@ class ExactForces:
                 J[row + cols] = w * df_eps
                 r[row + cols] = w * f
                 forces[k, cols] = f
-                self.warm[k, cols] = f
+                slope[k * m + cols] = df_eps
             else:
                 Y_eps = W_eps
             if with_data:
@@ -235,6 +244,8 @@ class ExactForces:
                     Y_d = W_d
             y = yb
             row += m
+        # kept only from a complete solve (a failed one leaves the last good guess)
+        self.warm, self.warm_eps, self.warm_slope = forces.copy(), eps.copy(), slope
         return {"forces": forces, "jump": jump, "r": r, "J": J, "R_d": R_d,
                 "segments": segments}  # fmt: skip
 
