@@ -282,3 +282,17 @@ def test_random_force_tau_search_meets_the_trust_region_reml_profile():
     c_hat = crit(tau)
     assert abs((crit(0.0) - c_hat) - lrt) < 1e-6 * lrt
     assert crit(tau * 1.1) > c_hat and crit(tau / 1.1) > c_hat
+
+
+def test_force_basis_option_by_name():
+    """ "constant" is the ODE ECFM's basis (the same fit); "linear"/RBF are refused by
+    name (built for the Galerkin DynamicInverseProblem only)."""
+    data = simulate(ANNUAL)
+    pb = problem(ANNUAL, data)
+    res = fit(pb, TRUTH * 1.05, formulation="ecfm", options={"force_basis": "constant"})
+    np.testing.assert_allclose(res.eps, fit(pb, TRUTH * 1.05, formulation="ecfm").eps)
+    for basis in ("linear", {"rbf": 0.5}):
+        with pytest.raises(ValueError, match=r"options\['force_basis'\]"):
+            fit(pb, TRUTH * 1.05, formulation="ecfm", options={"force_basis": basis})
+    with pytest.raises(ValueError, match="`force_basis` must be"):
+        fit(pb, TRUTH * 1.05, formulation="ecfm", options={"force_basis": "cubic"})

@@ -65,6 +65,7 @@ from ...errors import ConvergenceError
 from ..core.drivers import least_squares_scaled
 from ..core.result import InverseResult, Uncertainty
 from ..core.series import ForceSeries, OdeTrajectory
+from ..problems.force_bases import check_force_basis
 from ..problems.noise_model import NoiseModel
 from ..problems.ode import solve_with_sensitivities
 from ..statistics.loglik import no_likelihood, remember_last_point
@@ -307,7 +308,14 @@ def fit_ode_ecfm(problem, eps0, s):
             "'least-squares' (trust-region reflective, the default)"
         )
     options = s.take({"polish": True, "x_scale": "jac", "ftol": 1e-15, "xtol": 1e-15,
-                      "gtol": 1e-15})  # fmt: skip
+                      "gtol": 1e-15, "force_basis": "constant"})  # fmt: skip
+    basis = options.pop("force_basis")
+    if check_force_basis(basis)[0] != "constant":
+        raise ValueError(
+            f"options['force_basis']={basis!r}: the ECFM of an OdeProblem holds its forces "
+            "piecewise constant between data times only (a linear or RBF basis is built for "
+            "the Galerkin DynamicInverseProblem); use 'constant' (the default)"
+        )
     eps0 = problem.check(as_finite_array("eps0", eps0, ndim=1))
     forces = ExactForces(problem, forced_components(problem))
     p = eps0.size

@@ -45,7 +45,7 @@ import scipy.sparse as sp
 from ..._validation import as_finite_array
 from ...errors import ConvergenceError
 from ...system import Coefficient, GalerkinSystem, LoadTerm, NonlinearTerm, march
-from .force_bases import basis_matrix, check_force_basis, gram, right_inverse
+from .force_bases import basis_matrix, check_force_basis, checked_gram, right_inverse
 
 __all__ = [
     "IntervalForces",
@@ -192,7 +192,7 @@ class IntervalForces:
                 "data intervals: the exact match has more conditions than forces; use "
                 "'constant', 'linear' or an RBF basis centred at the data times"
             )
-        self.W = np.kron(gram(self.kind, width, knots), np.eye(self.C))
+        self.W = np.kron(checked_gram(self.kind, width, knots), np.eye(self.C))
         self.root = np.linalg.cholesky(self.W).T
         Gamma = system.Gamma.toarray() if sp.issparse(system.Gamma) else np.asarray(system.Gamma)
         load = _BasisLoad(self, Gamma)

@@ -27,7 +27,15 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.special import erf
 
-__all__ = ["FORCE_BASES", "basis_matrix", "check_force_basis", "gram", "n_basis", "right_inverse"]
+__all__ = [
+    "FORCE_BASES",
+    "basis_matrix",
+    "check_force_basis",
+    "checked_gram",
+    "gram",
+    "n_basis",
+    "right_inverse",
+]
 
 #: the force bases by name (and ``{"rbf": width}``)
 FORCE_BASES = ("constant", "linear")
@@ -108,6 +116,31 @@ def gram(kind, width, knots):
     return np.exp(-((c[:, None] - c[None, :]) ** 2) / (4 * width**2)) * (
         0.5 * width * np.sqrt(np.pi) * part
     )
+
+
+#: largest condition number of a Gram matrix accepted (wider Gaussians are refused)
+MAX_GRAM_CONDITION = 1e10
+
+
+def checked_gram(kind, width, knots):
+    """:func:`gram`, refused when its functions are numerically dependent.
+
+    Raises
+    ------
+    ValueError
+        Naming ``force_basis``: Gaussians too wide for the data spacing (the condition
+        number of the Gram matrix above :data:`MAX_GRAM_CONDITION`).
+    """
+    G = gram(kind, width, knots)
+    cond = np.linalg.cond(G)
+    if not np.isfinite(cond) or cond > MAX_GRAM_CONDITION:
+        raise ValueError(
+            f"`force_basis` {{'rbf': {width:g}}}: Gaussians this wide on data times "
+            f"{float(np.min(np.diff(knots))):g} apart are numerically dependent (Gram "
+            f"matrix condition number {cond:.2g}); choose a width of the order of the data "
+            "spacing"
+        )
+    return G
 
 
 def right_inverse(A, W):
