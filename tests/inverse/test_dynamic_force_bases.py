@@ -11,6 +11,7 @@ from scipy.integrate import quad
 from ecfm_uq.inverse import fit
 from ecfm_uq.inverse.problems.dynamic import DynamicInverseProblem
 from ecfm_uq.inverse.problems.force_bases import basis_matrix, gram
+from ecfm_uq.problems.burgers import BurgersModel
 from ecfm_uq.system import Coefficient, GalerkinSystem, LinearTerm, LoadTerm, march
 
 RATES = np.array([1.0, 2.5])  # theta_i' = -a k_i theta_i (+ a source)
@@ -205,3 +206,26 @@ def test_too_wide_gaussians_are_refused_by_name():
     )
     with pytest.raises(ValueError, match=r"`force_basis` \{'rbf': 5\}.*numerically dependent"):
         prob.ecfm_objective([0.7])
+
+
+@pytest.mark.parametrize("basis", ["linear", {"rbf": 0.25}])
+def test_burgers_minimum_norm_forces_match_and_their_gradient_is_exact(basis):
+    """A nonlinear model (Burgers, 12 modes), data every 5th step, more basis functions
+    than intervals: the match holds and the objective's gradient (the multipliers'
+    envelope derivative) agrees with central differences."""
+    model = BurgersModel(n_modes=12, n_steps=20, T=1.0, newton_tol=1e-12)
+    steps = np.arange(5, 21, 5)
+    V = model.true_data(np.array([1.75, 1.0]))[steps]
+    V = V + 0.01 * np.cos(np.arange(V.size)).reshape(V.shape)
+    prob = DynamicInverseProblem(
+        model.system, model.Theta0, model.dt, model.n_steps, model.M_obs, V,
+        t=model.dt * steps, solve_tol=1e-12, force_basis=basis,
+    )  # fmt: skip
+    x = np.array([1.6, 0.8])
+    _, g, traj = prob.ecfm_objective(x)
+    np.testing.assert_allclose(traj.Theta[steps, :, 0] @ model.M_obs.T, V, atol=1e-10)
+    h = 1e-5
+    fd = [
+        (prob.loss(x + h * e, "ecfm") - prob.loss(x - h * e, "ecfm")) / (2 * h) for e in np.eye(2)
+    ]
+    np.testing.assert_allclose(g, fd, rtol=1e-6)

@@ -89,7 +89,8 @@ class DynamicInverseProblem(InverseProblem):
     t : (n_t,) array_like, optional
         The data times, when the data are not at every step: strictly increasing times
         on the step grid ``t0 + k * dt`` within the march (``dt`` dividing the data's
-        spacing; the integrator takes ``dt``'s steps between them). The standard fit fits
+        spacing; the integrator takes ``dt``'s steps between them; with
+        ``scheme="adaptive"`` any times in the march, the chosen grid holding them). The standard fit fits
         these readings only; the ECFM holds one force vector over each data interval
         :math:`(t_{j-1}, t_j]` and matches the data at the data times, its objective the
         force function's :math:`L^2`, :math:`\\tfrac12\\sum_j\\Delta t_j|\\lambda_j|^2`
