@@ -71,6 +71,7 @@ from ..problems.ode import solve_with_sensitivities
 from ..statistics.loglik import no_likelihood, remember_last_point
 from ..statistics.uncertainty import estimate_uncertainty, least_squares_jacobian
 from ..statistics.verdict import check_bounds, decide, no_test
+from .ode_basis import fit_ode_basis
 
 __all__ = ["ExactForces", "fit_ode_ecfm"]
 
@@ -301,7 +302,10 @@ def _covariance(sigma, n):
 
 
 def fit_ode_ecfm(problem, eps0, s):
-    """:func:`~ecfm_uq.inverse.fit` of an :class:`OdeProblem`, ``formulation="ecfm"``."""
+    """:func:`~ecfm_uq.inverse.fit` of an :class:`OdeProblem`, ``formulation="ecfm"``.
+
+    ``options["force_basis"]``: ``"constant"`` (the default, this module's forces) or
+    ``"linear"`` / ``{"rbf": width}`` (:func:`.ode_basis.fit_ode_basis`)."""
     if s.method not in ("auto", "least-squares", "trf"):
         raise ValueError(
             f"unknown `method` {s.method!r} for the ECFM of an OdeProblem; choose "
@@ -310,13 +314,15 @@ def fit_ode_ecfm(problem, eps0, s):
     options = s.take({"polish": True, "x_scale": "jac", "ftol": 1e-15, "xtol": 1e-15,
                       "gtol": 1e-15, "force_basis": "constant"})  # fmt: skip
     basis = options.pop("force_basis")
-    if check_force_basis(basis)[0] != "constant":
-        raise ValueError(
-            f"options['force_basis']={basis!r}: the ECFM of an OdeProblem holds its forces "
-            "piecewise constant between data times only (a linear or RBF basis is built for "
-            "the Galerkin DynamicInverseProblem); use 'constant' (the default)"
-        )
+    kind = check_force_basis(basis)[0]
     eps0 = problem.check(as_finite_array("eps0", eps0, ndim=1))
+    if kind != "constant":  # a basis coupling the intervals: all forces in one solve
+        if problem.n_data < eps0.size:
+            raise ValueError(
+                f"`data` has {problem.n_data} readings for {eps0.size} parameters: fewer "
+                "data than parameters cannot determine eps"
+            )
+        return fit_ode_basis(problem, eps0, forced_components(problem), basis, s, options)
     forces = ExactForces(problem, forced_components(problem))
     p = eps0.size
     bounds = check_bounds(s.bounds, p)

@@ -33,6 +33,7 @@ __all__ = [
     "check_force_basis",
     "checked_gram",
     "gram",
+    "interval_means",
     "n_basis",
     "right_inverse",
 ]
@@ -116,6 +117,24 @@ def gram(kind, width, knots):
     return np.exp(-((c[:, None] - c[None, :]) ** 2) / (4 * width**2)) * (
         0.5 * width * np.sqrt(np.pi) * part
     )
+
+
+def interval_means(kind, width, knots):
+    """``(J, n_basis)``: the mean of each basis function over each data interval
+    :math:`(t_{k-1}, t_k]`, so that ``interval_means(...) @ lam`` are the forces'
+    interval means (their integrals over :math:`\\Delta t_k`), exact."""
+    knots = np.asarray(knots, dtype=float)
+    J = knots.size - 1
+    if kind == "constant":
+        return np.eye(J)
+    if kind == "linear":
+        M = np.zeros((J, J + 1))
+        M[np.arange(J), np.arange(J)] = M[np.arange(J), np.arange(J) + 1] = 0.5
+        return M
+    a, b, c = knots[:-1, None], knots[1:, None], knots[None, :]
+    r = np.sqrt(2.0) * width
+    integral = 0.5 * np.sqrt(np.pi) * r * (erf((b - c) / r) - erf((a - c) / r))
+    return integral / (b - a)
 
 
 #: largest condition number of a Gram matrix accepted (wider Gaussians are refused)
