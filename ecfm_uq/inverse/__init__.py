@@ -37,12 +37,12 @@ imports :mod:`.fitting`:
                     (standard and exact ECFM, reduced), ``noisy`` and ``noise`` (all at
                     once, the paper's noise bounds), ``discrepancy`` and ``sparse_forces``
                     (random-force ECFM), ``dynamic_fit``, ``replicated``, ``replicated_status`` and ``forces``
-                    (pseudo-likelihood), ``ode_forces`` and ``ode_random`` (exact-match and
+                    (pseudo-likelihood), ``ode_forces``, ``ode_basis`` and ``ode_random`` (exact-match and
                     random-force ECFM of an ODE)
 ``problems/``       a model and its data behind one interface (``interface``): ``model``
                     (a Python function), ``ode`` (a user's ODE, forward sensitivities),
                     ``galerkin`` (steady, replicated), ``dynamic`` (``dynamic_sparse``:
-                    data at some steps, one force per data interval);
+                    data at some times, forces in a basis in time, ``force_bases``);
                     ``noise_model`` and ``whitening`` (``sigma`` as given);
                     ``pseudo_likelihood`` and ``moments`` (the replicated data's
                     likelihood)

@@ -5,6 +5,7 @@ verdict, and for ``scheme="adaptive"`` the frozen time grid checked at the estim
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 
 import numpy as np
@@ -23,6 +24,7 @@ from ..core.optimizers import adam
 from ..core.result import InverseResult, Uncertainty, Verdict
 from ..core.status import FitStatus
 from ..problems.dynamic import FORMULATIONS, DynamicInverseProblem
+from ..problems.force_bases import check_force_basis
 
 __all__ = ["fit_dynamic_problem"]
 
@@ -48,7 +50,17 @@ def fit_dynamic_problem(problem, eps0, s):
     reports the grid: ``n_steps``, ``n_data``, ``rtol``, ``atol``, ``max_error`` (the
     largest step error norm at the estimate, ``<= 1`` when met), ``met``, ``refrozen``
     and ``times``. The fit itself is :func:`_fit_dynamic`.
+
+    ``options["force_basis"]`` (``formulation="ecfm"``): the basis in time of the forces,
+    ``"constant"``, ``"linear"`` or ``{"rbf": width}`` (the problem's ``force_basis``,
+    :mod:`~ecfm_uq.inverse.problems.force_bases`), for this fit: a copy of the problem
+    with that basis is fitted.
     """
+    if "force_basis" in s.options:
+        problem = _with_force_basis(problem, s.formulation, s.options["force_basis"])
+        s = dataclasses.replace(
+            s, options={k: w for k, w in s.options.items() if k != "force_basis"}
+        )
     if not problem.adaptive:
         return _fit_dynamic(problem, eps0, s)
     if problem.steps is None:
@@ -73,6 +85,22 @@ def fit_dynamic_problem(problem, eps0, s):
         message=check.message,
     )  # fmt: skip
     return dataclasses.replace(res, extra={**res.extra, "steps": steps})
+
+
+def _with_force_basis(problem, formulation, force_basis):
+    """The problem with the ECFM forces in ``force_basis`` (a copy when it differs)."""
+    if formulation != "ecfm":
+        raise ValueError(
+            f"options['force_basis'] is the basis in time of the ECFM forces; "
+            f"formulation={formulation!r} has no forces (drop the option, or use 'ecfm')"
+        )
+    check_force_basis(force_basis)
+    if force_basis == problem.force_basis:
+        return problem
+    other = copy.copy(problem)
+    other.force_basis, other._forces = force_basis, None
+    other._last = {k: w for k, w in problem._last.items() if not k.startswith("ecfm")}
+    return other
 
 
 def _failed_at_start(problem, eps0, s, error):
