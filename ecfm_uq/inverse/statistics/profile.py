@@ -47,7 +47,7 @@ from ..._validation import check_int, check_level, describe
 from ...plotting import pyplot
 from ...threads import library_threads
 from ..core.convergence import at_bound, bounds_arrays
-from .profiler import MODEL_FAILURES, Profiler, beyond, walk
+from .profile_walk import MODEL_FAILURES, Profiler, beyond, walk
 from .uncertainty import interval_quantile
 
 __all__ = [
@@ -401,7 +401,7 @@ def profile_concerns(i, values, delta, eps, main, reasons, regions, threshold, b
     threshold : float
     bounds : sequence of (lo, hi)
     unconverged : sequence of (fixed, values)
-        Inner fits that did not converge (:class:`~.profiler.Profiler`).
+        Inner fits that did not converge (:class:`~.profile_walk.Profiler`).
     """
     concerns = [
         f"{side} end open" for side, r in zip(("lower", "upper"), reasons, strict=True)
