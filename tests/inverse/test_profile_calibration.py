@@ -28,7 +28,7 @@ def test_calibrated_threshold_of_a_linear_model_is_the_simulated_closed_form():
     vector of column i orthogonal to the others (whitened), with the same z at every t.
     The threshold is that sample's quantile, and the interval est -/+ se sqrt(2 c)."""
     res = _line_fit()
-    n_sim, seed = 60, 7
+    n_sim, seed = 40, 7
     prof = profile_likelihood(res, threshold="calibrated", n_simulations=n_sim, seed=seed)
     A = np.column_stack([np.ones_like(X), X]) / SIGMA
     cov = np.linalg.inv(A.T @ A)
@@ -46,6 +46,11 @@ def test_calibrated_threshold_of_a_linear_model_is_the_simulated_closed_form():
                                    rtol=1e-6, atol=1e-6 * half)  # fmt: skip
         assert prof.trusted[i]
     assert "calibrated thresholds" in prof.message
+    axes = prof.plot()
+    (marks,) = [ln for ln in axes[0].lines if ln.get_label() == "calibrated threshold"]
+    np.testing.assert_allclose(marks.get_ydata(), [2 * q[1] for q in prof.profiles[0]
+                               .calibration.points])  # fmt: skip
+    assert len(marks.get_ydata()) >= 2  # at least one threshold simulated per end
     chi2 = profile_likelihood(res)
     assert [p.threshold_used for p in chi2.profiles.values()] == ["chi2", "chi2"]
 

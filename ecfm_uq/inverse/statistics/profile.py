@@ -166,6 +166,10 @@ class Profile:
         ax.plot(t, y, "-", color="C0", label="profile likelihood")
         ax.plot(self.values, 2 * self.delta, "o", ms=3, color="C0", label="computed points")
         ax.axhline(2 * self.threshold, color="k", lw=0.8, ls=":")
+        if self.calibration is not None:
+            t_c = [q[0] for q in self.calibration.points]
+            ax.plot(t_c, [2 * q[1] for q in self.calibration.points], "x", color="k", ms=5,
+                    label="calibrated threshold")  # fmt: skip
         for x in self.interval:
             if np.isfinite(x):
                 ax.axvline(x, color="C0", lw=0.8)
@@ -417,7 +421,10 @@ def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci, n_scan, simu
         if simulate is not None:
             ends, reasons, calibration = calibrate_ends(prof, i, ends, reasons, pts, step, bnds[i],
                                                     max_steps, simulate(i))  # fmt: skip
-            far = [r for r in far if r[1] < ends[0] or r[0] > ends[1]]
+            # the chi-squared scan's far regions: one that meets the calibrated one joins it
+            for r in [r for r in far if r[0] <= ends[1] and r[1] >= ends[0]]:
+                far.remove(r)
+                ends = [min(ends[0], r[0]), max(ends[1], r[1])]
         regions = sorted([(ends[0], ends[1]), *far])
         hull = (min(r[0] for r in regions), max(r[1] for r in regions))
         pts.sort(key=lambda q: q[0])

@@ -47,6 +47,9 @@ __all__ = [
 MAX_ITERATIONS = 6
 #: an end has converged when its threshold changes by less than this fraction
 THRESHOLD_RTOL = 0.02
+#: the simulated fits' convergence (the Gauss-Newton decrease left, relative to the sum
+#: of squares): 1e-9 of it is far below the simulated quantile's own Monte Carlo error
+SIM_RTOL = 1e-9
 
 
 @dataclass(frozen=True)
@@ -115,28 +118,45 @@ def _fit(like, shift, start, free, scale, bounds):
     def jac(x):
         return like.residual_jacobian(point(x), free) * s
 
-    x, rss, _ = _levenberg_marquardt(fun, jac, np.zeros(free.size), lb, ub)
+    x, rss, _ = _levenberg_marquardt(fun, jac, np.zeros(free.size), lb, ub, rtol=SIM_RTOL)
     return rss, point(x)
 
 
-def simulated_threshold(like, i, eps_t, Z, level, scale, bounds):
+def simulated_threshold(like, i, eps_t, Z, level, scale, bounds, memory=None):
     """The ``level`` quantile of :math:`\\ell^*_p(t) - \\hat\\ell^*` over data simulated
     from ``eps_t`` (:math:`t` = ``eps_t[i]``), one data set per row of ``Z`` (whitened
-    noise, already scaled)."""
+    noise, already scaled).
+
+    ``memory`` (a dict, updated) holds each simulated data set's full optimum at the
+    previous ``t``: with the same noise the optimum moves little between nearby ``t``, and
+    a full fit along a ridge is the costly one, so it also starts there when better.
+    """
+    memory = {} if memory is None else memory
     n = like.n_eps
     r0 = like.residual(eps_t)
-    fixed_free = np.setdiff1d(np.arange(n), [i])
+    others = np.setdiff1d(np.arange(n), [i])
     everything = np.arange(n)
     stat = np.empty(len(Z))
     for k, z in enumerate(Z):
         shift = z - r0
-        if fixed_free.size:
-            s_con, e_con = _fit(like, shift, eps_t, fixed_free, scale, bounds)
+        if others.size:
+            s_con, e_con = _fit(like, shift, eps_t, others, scale, bounds)
         else:
-            r = like.residual(eps_t) + shift
+            r = r0 + shift
             s_con, e_con = float(r @ r), eps_t
-        # the full fit starts at the constrained optimum: it can only decrease from there
-        s_full, _ = _fit(like, shift, e_con, everything, scale, bounds)
+        # the full fit starts at the constrained optimum (it can only decrease from
+        # there) or at this data set's previous full optimum where that is lower
+        start = e_con
+        if k in memory:
+            try:
+                with np.errstate(over="ignore", invalid="ignore"):
+                    r = like.residual(memory[k]) + shift
+                if float(r @ r) < s_con:
+                    start = memory[k]
+            except MODEL_FAILURES:
+                pass
+        s_full, e_full = _fit(like, shift, start, everything, scale, bounds)
+        memory[k] = e_full
         s_full = min(s_full, s_con)
         stat[k] = like.of_rss(s_con) - like.of_rss(s_full) if s_full > 0 else np.inf
     return float(np.quantile(stat, level))
@@ -205,9 +225,11 @@ def simulator(like, i, level, scale, bounds, sigma, n_simulations, seed):
     """``simulate(t, eps_t)`` for parameter ``i`` with common random numbers."""
     Z = sigma * np.random.default_rng([seed, i]).standard_normal((n_simulations, like.n_data))
 
+    memory = {}
+
     def simulate(t, eps_t):
         c = simulated_threshold(like, i, np.asarray(eps_t, dtype=float), Z, level, scale,
-                                bounds)  # fmt: skip
+                                bounds, memory)  # fmt: skip
         if not np.isfinite(c):
             raise ConvergenceError(
                 f"the simulated likelihood-ratio statistics at eps[{i}]={t:.6g} are not finite"

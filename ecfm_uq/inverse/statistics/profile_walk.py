@@ -199,8 +199,12 @@ def _levenberg_marquardt(fun, jac, x0, lb, ub, maxiter=100, rtol=1e-12):
         d[d <= 0] = d.max() if d.max() > 0 else 1.0
         mu = 1e-3 if mu is None else mu  # Marquardt's damping, relative to diag(A)
         while True:
+            # the parameters held at a bound stay there: the step is on the others (a step
+            # clipped back onto the bound zig-zags along it, one short step at a time)
+            step = np.zeros(x.size)
             try:
-                step = np.linalg.solve(A + mu * np.diag(d), -g)
+                Af = A[np.ix_(free, free)] + mu * np.diag(d[free])
+                step[free] = np.linalg.solve(Af, -g[free])
             except np.linalg.LinAlgError:
                 step = np.full(x.size, np.nan)
             x1 = np.clip(x + step, lb, ub)
