@@ -3,12 +3,14 @@
 walk into overflow without a RuntimeWarning."""
 
 import warnings
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from ecfm_uq.inverse import ModelProblem, fit, profile_likelihood
 from ecfm_uq.inverse.coverage import binomial_band
+from ecfm_uq.inverse.statistics.profile_calibration import check_calibratable
 
 X = np.linspace(0.0, 1.0, 8)
 SIGMA = 0.1
@@ -28,7 +30,7 @@ def test_calibrated_threshold_of_a_linear_model_is_the_simulated_closed_form():
     vector of column i orthogonal to the others (whitened), with the same z at every t.
     The threshold is that sample's quantile, and the interval est -/+ se sqrt(2 c)."""
     res = _line_fit()
-    n_sim, seed = 40, 7
+    n_sim, seed = 30, 7
     prof = profile_likelihood(res, threshold="calibrated", n_simulations=n_sim, seed=seed)
     A = np.column_stack([np.ones_like(X), X]) / SIGMA
     cov = np.linalg.inv(A.T @ A)
@@ -51,8 +53,8 @@ def test_calibrated_threshold_of_a_linear_model_is_the_simulated_closed_form():
     np.testing.assert_allclose(marks.get_ydata(), [2 * q[1] for q in prof.profiles[0]
                                .calibration.points])  # fmt: skip
     assert len(marks.get_ydata()) >= 2  # at least one threshold simulated per end
-    chi2 = profile_likelihood(res)
-    assert [p.threshold_used for p in chi2.profiles.values()] == ["chi2", "chi2"]
+    assert prof.threshold_used == ("calibrated", "calibrated")
+    assert profile_likelihood(res, which=[1]).threshold_used == (None, "chi2")
 
 
 def test_calibrated_threshold_refuses_bad_arguments():
@@ -61,6 +63,10 @@ def test_calibrated_threshold_refuses_bad_arguments():
         profile_likelihood(res, threshold="wilks")
     with pytest.raises(ValueError, match="n_simulations"):
         profile_likelihood(res, threshold="calibrated", n_simulations=5)
+    # a likelihood without a Gaussian residual (pseudo-likelihood, random forces)
+    bare = replace(res.likelihood, residual=None)
+    with pytest.raises(ValueError, match="threshold='chi2'"):
+        check_calibratable(bare)
 
 
 MODES = np.arange(1, 40, 2)

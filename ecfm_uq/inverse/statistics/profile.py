@@ -238,6 +238,14 @@ class ProfileSummary:
     names: tuple = ()
     estimate: np.ndarray = None
 
+    @property
+    def threshold_used(self):
+        """Per parameter, the threshold its interval used (``"chi2"``, ``"calibrated"``;
+        None where not profiled)."""
+        n = len(self.intervals)
+        return tuple(self.profiles[i].threshold_used if i in self.profiles else None
+                     for i in range(n))  # fmt: skip
+
     def plot(self, ax=None, names=None):
         """One panel per profiled parameter (:meth:`Profile.plot`).
 

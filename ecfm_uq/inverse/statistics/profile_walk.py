@@ -80,6 +80,8 @@ class Profiler:
             except MODEL_FAILURES:
                 # where the model cannot be solved: a wall the line search backs off from
                 return self.ell_hat + WALL, np.zeros(free.size)
+            if np.isnan(val) or val == np.inf:  # overflowed: a failed point too
+                return self.ell_hat + WALL, np.zeros(free.size)
             return val, g[free] * s
 
         bnds = [
