@@ -57,6 +57,25 @@ def test_calibrated_threshold_of_a_linear_model_is_the_simulated_closed_form():
     assert profile_likelihood(res, which=[1]).threshold_used == (None, "chi2")
 
 
+def test_calibrated_threshold_with_sigma_estimated_is_the_simulated_closed_form():
+    """Sigma profiled out: the statistic is (n/2) log(1 + (w.z)^2 / |P z|^2), P the
+    projection off the model's range (the noise scale cancels)."""
+    y = line([1.0, 2.0]) + SIGMA * np.random.default_rng(4).standard_normal(X.size)
+    res = fit(ModelProblem(line, y), [0.0, 0.0])
+    n_sim, seed = 30, 3
+    prof = profile_likelihood(res, which=[1], threshold="calibrated", n_simulations=n_sim,
+                              seed=seed)  # fmt: skip
+    A = np.column_stack([np.ones_like(X), X])
+    Q = np.linalg.qr(A)[0]
+    w = A[:, 1] - A[:, 0] * (A[:, 0] @ A[:, 1]) / (A[:, 0] @ A[:, 0])
+    w /= np.linalg.norm(w)
+    Z = np.random.default_rng([seed, 1]).standard_normal((n_sim, X.size))
+    off = Z - (Z @ Q) @ Q.T
+    stat = 0.5 * X.size * np.log1p((Z @ w) ** 2 / np.sum(off**2, axis=1))
+    np.testing.assert_allclose(prof.profiles[1].calibration.thresholds,
+                               [np.quantile(stat, 0.95)] * 2, rtol=1e-6)  # fmt: skip
+
+
 def test_calibrated_threshold_refuses_bad_arguments():
     res = _line_fit()
     with pytest.raises(ValueError, match="threshold"):
