@@ -52,6 +52,7 @@ from .profile_calibration import (
     calibrate_ends,
     check_calibratable,
     noise_scale,
+    order_statistic,
     simulator,
 )
 from .profile_walk import MODEL_FAILURES, Profiler, beyond, profile_concerns, walk
@@ -510,6 +511,12 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
     if threshold not in ("chi2", "calibrated"):
         raise ValueError(f'`threshold` must be "chi2" or "calibrated", got {threshold!r}')
     n_simulations = check_int("n_simulations", n_simulations, minimum=20)
+    if order_statistic(n_simulations, level) > n_simulations:
+        raise ValueError(
+            f"`n_simulations` = {n_simulations} cannot give a {level:g} quantile (the "
+            f"{order_statistic(n_simulations, level)}-th of them): pass at least "
+            f"{int(np.ceil(level / (1 - level)))}"
+        )
     seed = check_int("seed", seed, minimum=0)
     if threshold == "calibrated":
         check_calibratable(like)

@@ -37,6 +37,7 @@ from .profile_walk import MODEL_FAILURES, _levenberg_marquardt, walk
 
 __all__ = [
     "Calibration",
+    "bootstrap_quantile",
     "calibrate_ends",
     "calibrated_end",
     "check_calibratable",
@@ -159,7 +160,22 @@ def simulated_threshold(like, i, eps_t, Z, level, scale, bounds, memory=None):
         memory[k] = e_full
         s_full = min(s_full, s_con)
         stat[k] = like.of_rss(s_con) - like.of_rss(s_full) if s_full > 0 else np.inf
-    return float(np.quantile(stat, level))
+    return bootstrap_quantile(stat, level)
+
+
+def order_statistic(n, level):
+    """The rank k of the bootstrap quantile: ceil(level (n + 1)).
+
+    A new statistic falls at or below the k-th smallest of n exchangeable ones with
+    probability k / (n + 1) >= ``level`` (Davison & Hinkley 1997, Sec. 4.2.2); the linear
+    interpolation of ``np.quantile`` gives about ``level`` n / (n + 1), 0.941 at n = 100.
+    """
+    return int(np.ceil(level * (n + 1) - 1e-9))
+
+
+def bootstrap_quantile(stat, level):
+    """The :func:`order_statistic` of ``stat``."""
+    return float(np.sort(stat)[order_statistic(len(stat), level) - 1])
 
 
 def calibrated_end(prof, i, direction, chi2_end, step, bound, max_steps, simulate):
