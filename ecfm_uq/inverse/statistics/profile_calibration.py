@@ -5,13 +5,14 @@ estimate inside the parameter box and the likelihood close to quadratic in some
 parametrization. Along a ridge to a bound, or near a singular operator, it is not: the
 likelihood-ratio statistic at a value :math:`t` of :math:`\\epsilon_i` then has another
 distribution, and the interval does not cover at its level. The parametric bootstrap
-measures that distribution where it matters, at the interval's candidate ends (Efron &
-Tibshirani 1993, Ch. 12; the "simulation-calibrated" profile intervals of Raue et al.
-2009, Sec. 2.3): at :math:`t`, with the other parameters re-optimized
-(:math:`\\hat\\nu(t)`), data are simulated from :math:`(t, \\hat\\nu(t))` with the fit's
-noise, each simulated data set is fitted with and without :math:`\\epsilon_i = t`, and the
-``level`` quantile :math:`c(t)` of the statistics :math:`\\ell^*_p(t) - \\hat\\ell^*` is
-the threshold there. The interval's end is where the profile meets it,
+measures that distribution where it matters, at the interval's candidate ends (a
+parametric bootstrap test, Davison & Hinkley 1997, Ch. 4, inverted into an interval): at
+:math:`t`, with the other parameters re-optimized (:math:`\\hat\\nu(t)`), data are
+simulated from :math:`(t, \\hat\\nu(t))` with the fit's noise, each simulated data set is
+fitted with and without :math:`\\epsilon_i = t`, and the ``level`` quantile :math:`c(t)` of
+the statistics :math:`\\ell^*_p(t) - \\hat\\ell^*` (the :math:`\\lceil
+\\mathrm{level}\\,(n+1)\\rceil`-th smallest of the n, :func:`order_statistic`) is the
+threshold there. The interval's end is where the profile meets it,
 :math:`\\ell_p(t) - \\hat\\ell = c(t)`.
 
 Only a Gaussian least-squares likelihood is simulated (the whitened residual
@@ -41,6 +42,7 @@ __all__ = [
     "calibrate_ends",
     "calibrated_end",
     "check_calibratable",
+    "order_statistic",
     "simulated_threshold",
 ]
 
