@@ -428,8 +428,9 @@ def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci, n_scan, simu
             reasons.append(why)
         chi2_ends, calibration = tuple(ends), None
         if simulate is not None:
-            ends, reasons, calibration = calibrate_ends(prof, i, ends, reasons, pts, step, bnds[i],
-                                                    max_steps, simulate(i))  # fmt: skip
+            ends, reasons, calibration = calibrate_ends(
+                prof, i, ends, reasons, pts, step, bnds[i], max_steps, simulate(i)
+            )
             # the chi-squared scan's far regions: one that meets the calibrated one joins it
             for r in [r for r in far if r[0] <= ends[1] and r[1] >= ends[0]]:
                 far.remove(r)
@@ -480,13 +481,13 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
         without a bound is followed to its crossing only: give bounds to have the whole
         admissible range searched.
     threshold : {"chi2", "calibrated"}
-        ``"chi2"``: Wilks' :math:`\tfrac12\\chi^2_{1}` (the profile-t one with sigma
+        ``"chi2"``: Wilks' :math:`\\tfrac12\\chi^2_{1}` (the profile-t one with sigma
         profiled out, :func:`profile_threshold`). ``"calibrated"``: the likelihood-ratio
         threshold simulated at each end (parametric bootstrap from the profiled point,
         :mod:`~.profile_calibration`) where the chi-squared one does not hold: a
         re-optimized parameter at its bound along the profile (a ridge to a bound), a
-        near-singular model. Gaussian least-squares likelihoods only; about
-        ``4 * n_simulations`` small fits per end.
+        near-singular model. Gaussian least-squares likelihoods only; 2-3 simulated
+        thresholds per end, each ``2 * n_simulations`` small fits.
     n_simulations : int
         Simulated data sets per calibrated threshold (at least 20).
     seed : int
