@@ -47,7 +47,8 @@ imports :mod:`.fitting`:
                     ``pseudo_likelihood`` and ``moments`` (the replicated data's
                     likelihood)
 ``statistics/``     what a fit says: ``uncertainty``, ``verdict``, ``loglik``, ``profile``
-                    and ``profiler``, ``posterior``, ``diagnostics``, ``prediction``
+                    with ``profile_walk`` and ``profile_calibration``, ``posterior``,
+                    ``diagnostics``, ``prediction``
                     (bands; ``InverseResult.predict`` in ``core`` reaches it through a
                     function this package's import registers, not an upward import),
                     ``terms`` (the missing term named from an ODE fit's forces)
