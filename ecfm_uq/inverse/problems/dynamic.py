@@ -36,6 +36,7 @@ which is also what the ECFM data constraint acts on.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 
 import numpy as np
@@ -239,6 +240,16 @@ class DynamicInverseProblem(InverseProblem):
     def forget_solves(self):
         """A copy with other data starts cold (no warm start from the old data's fits)."""
         self._last = {}
+
+    @contextlib.contextmanager
+    def warm_starts_kept(self):
+        """A context in which solves leave the optimizer's warm starts as they were (a
+        check at one point, e.g. the status test or the verdict, must not move them)."""
+        saved = dict(self._last)
+        try:
+            yield self
+        finally:
+            self._last = saved
 
     # -- forward solves --------------------------------------------------------------------
     def solve(self, eps, formulation="standard", sensitivities=False, keep_factors=False):

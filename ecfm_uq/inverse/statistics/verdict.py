@@ -139,7 +139,7 @@ def moments_bounds_verdict(test, sigma, alpha=DEFAULT_ALPHA, at_bound=()):
     Parameters
     ----------
     test : ConsistencyTest
-        From :func:`~ecfm_uq.inverse.formulations.noise.consistency_test`.
+        From :func:`~ecfm_uq.inverse.formulations.noise_bounds.consistency_test`.
     sigma : float
     alpha : float
     at_bound : sequence of int

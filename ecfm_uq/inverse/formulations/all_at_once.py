@@ -22,7 +22,7 @@ independent, as the paper remarks after Eq. ecfm_noise):
       \\ell_1 \\le \\bar e \\le \\ell_2,\\quad p_1 \\le s^2_e \\le p_2,
 
   with :math:`e = \\mathcal M\\theta - v`, :math:`\\bar e` its sample mean, :math:`s^2_e`
-  its sample variance and the bounds of :func:`ecfm_uq.inverse.formulations.noise.noise_bounds`.
+  its sample variance and the bounds of :func:`ecfm_uq.inverse.formulations.noise_bounds.noise_bounds`.
 
 Derivatives: :math:`\\partial R/\\partial(\\theta, \\epsilon, \\lambda) =
 [J_\\theta, J_\\epsilon, -\\Gamma]` from the system, :math:`\\nabla_\\theta\\bar e =
@@ -47,7 +47,7 @@ from ..._validation import as_dense_rows, as_finite_array, check_positive
 from ...system import solve_steady
 from ..core.convergence import KKT_TOL, decide_status, kkt_optimality
 from ..core.result import InverseResult, Uncertainty
-from .noise import noise_bounds, sample_moments
+from .noise_bounds import noise_bounds, sample_moments
 
 _GRADIENTS = ("analytic", "fd")
 
@@ -394,7 +394,7 @@ def _verdict(res, problem, sigma, alpha):
     if sigma is None:
         return None
     from ..statistics.verdict import moments_bounds_verdict
-    from .noise import consistency_test
+    from .noise_bounds import consistency_test
 
     test = consistency_test(res.extra["discrepancy"], sigma, alpha)
     return moments_bounds_verdict(test, sigma, alpha)
