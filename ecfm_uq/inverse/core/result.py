@@ -33,6 +33,7 @@ from scipy import special, stats
 from ...chaos.inputs import Inputs
 from ...chaos.student import StudentInputs
 from .status import FitStatus
+from .summary_table import summary_table
 
 __all__ = ["InverseResult", "Uncertainty", "Verdict"]
 
@@ -475,6 +476,4 @@ class InverseResult:
         -------
         str
         """
-        from .summary_table import summary_table
-
         return summary_table(self, level, profile)

@@ -47,7 +47,10 @@ from ..._validation import as_dense_rows, as_finite_array, check_positive
 from ...system import solve_steady
 from ..core.convergence import KKT_TOL, decide_status, kkt_optimality
 from ..core.result import InverseResult, Uncertainty
-from .noise_bounds import noise_bounds, sample_moments
+from ..statistics.uncertainty import estimate_uncertainty
+from ..statistics.verdict import moments_bounds_verdict
+from .noise_bounds import consistency_test, noise_bounds, sample_moments
+from .steady import _uncertainty
 
 _GRADIENTS = ("analytic", "fd")
 
@@ -373,7 +376,6 @@ def fit_all_at_once(problem, eps0, s):
     elif s.formulation == "standard":
         # the all-at-once optimum is the reduced one: same optimality condition
         # grad z^INV(eps) = 0, hence the same covariance code path as the reduced fit
-        from .steady import _uncertainty
 
         unc = _uncertainty(
             system, inverse.M_obs, inverse.v, res.eps, "standard",
@@ -393,8 +395,6 @@ def _verdict(res, problem, sigma, alpha):
     is modelled, as the fit's :class:`~ecfm_uq.inverse.core.result.Verdict` (``None`` without sigma)."""
     if sigma is None:
         return None
-    from ..statistics.verdict import moments_bounds_verdict
-    from .noise_bounds import consistency_test
 
     test = consistency_test(res.extra["discrepancy"], sigma, alpha)
     return moments_bounds_verdict(test, sigma, alpha)
@@ -409,8 +409,6 @@ def _kkt_uncertainty(problem, z, sigma):
     :math:`dx/dv = -(\\partial F/\\partial x)^{-1}\\partial F/\\partial v` and the eps
     block of the covariance is reported (Sigma_v = sigma^2 I).
     """
-    from ..statistics.uncertainty import estimate_uncertainty
-
     n = problem.size
     active = np.flatnonzero(problem.inequality(z) <= ACTIVE_TOL)
     A = np.vstack([problem.equality_jac(z), problem.inequality_jac(z)[active]])

@@ -71,6 +71,7 @@ from ..core.convergence import (
 )
 from ..core.result import InverseResult, Uncertainty
 from ..problems.moments import moment_verdict, replicate_statistics
+from ..statistics.uncertainty import estimate_uncertainty
 from .forces import optimal_forces
 from .replicated_status import (
     FAILURES,
@@ -568,8 +569,6 @@ def _likelihood_uncertainty(like, formulation, eps, lam):
     distribution. Student-t intervals with D - 1 degrees of freedom (the covariance is
     estimated from D replicates).
     """
-    from ..statistics.uncertainty import estimate_uncertainty
-
     if formulation == "penalty":
         return Uncertainty.failed(
             "uncertainty not computed: the penalty objective has no minimizer (it is "

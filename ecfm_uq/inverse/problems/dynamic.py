@@ -37,18 +37,22 @@ which is also what the ECFM data constraint acts on.
 from __future__ import annotations
 
 import contextlib
+import copy
 import dataclasses
 
 import numpy as np
 
 from ..._validation import as_dense_rows, as_finite_array, check_choice, check_int, check_positive
-from ...errors import ConvergenceError
+from ...errors import ConvergenceError, NonIdentifiableError
 from ...system import march
 from ...system.schemes import SCHEMES
 from ...system.step_control import check_steps, check_tolerances, choose_steps
 from ..core.gradients import choose_gradient
 from ..core.result import Uncertainty
+from ..statistics.loglik import least_squares_likelihood, no_likelihood
+from ..statistics.uncertainty import estimate_uncertainty, least_squares_jacobian, residual_variance
 from .interface import InverseProblem
+from .whitening import dynamic_noise_model, jacobian_in_data_units, whitened_problem
 
 FORMULATIONS = ("standard", "ecfm")
 #: the time schemes of a dynamic problem: the fixed-step ones and the frozen adaptive grid
@@ -446,15 +450,10 @@ class DynamicInverseProblem(InverseProblem):
         over the ``n = P C`` readings (sigma known, or profiled out), or why there is none.
         ``sigma`` an array (per sensor, a covariance over the sensors, or per reading;
         :mod:`ecfm_uq.inverse.problems.whitening`): that of the whitened readings."""
-        from ..statistics.loglik import least_squares_likelihood, no_likelihood
-        from .whitening import dynamic_noise_model
-
         if formulation != "standard":
             return no_likelihood(formulation)
         noise = dynamic_noise_model(sigma, self.n_steps, self.n_sensors)
         if noise.kind in ("diagonal", "covariance"):
-            from .whitening import whitened_problem
-
             like = whitened_problem(self, noise).log_likelihood(formulation, 1.0)
             what = f"trajectory least squares, Gaussian noise {noise.describe()}"
             return dataclasses.replace(like, description=what)
@@ -501,15 +500,9 @@ class DynamicInverseProblem(InverseProblem):
             ``cov``, ``stderr``, ``intervals``, ``noise_model``, ``jacobian`` (n_eps,
             n_steps C), ...; or ``success=False`` and the ``message`` why not.
         """
-        import copy
-
-        from ..statistics.uncertainty import estimate_uncertainty, residual_variance
-
         formulation = check_choice("formulation", formulation, FORMULATIONS)
         eps = self.system.check_eps(eps)
         if sigma is not None and np.ndim(sigma) > 0:  # whitened once, as fit does
-            from .whitening import dynamic_noise_model, jacobian_in_data_units, whitened_problem
-
             noise = dynamic_noise_model(sigma, self.n_steps, self.n_sensors)
             if noise.kind != "scalar":
                 unc = whitened_problem(self, noise).uncertainty(eps, formulation, 1.0, covariance)
@@ -541,8 +534,6 @@ class DynamicInverseProblem(InverseProblem):
         data = self.V[1:].ravel()
         if covariance == "implicit":
             return estimate_uncertainty(grad, eps, data, s2, model, dof=dof)
-        from ...errors import NonIdentifiableError
-        from ..statistics.uncertainty import least_squares_jacobian
 
         saved = dict(self._last)
         try:

@@ -28,9 +28,17 @@ import numpy as np
 
 from ..._validation import all_finite, as_finite_array, as_model_output
 from ...errors import ConvergenceError, ModelEvaluationError
+from ...executor import evaluate_samples
+from ..core.drivers import least_squares_lm, least_squares_scaled
 from ..core.finite_differences import fd_jacobian
+from ..core.result import InverseResult, Uncertainty
 from ..core.settings import check_least_squares_options
+from ..core.status import FitStatus
+from ..statistics.loglik import gaussian_likelihood, remember_last_point
+from ..statistics.uncertainty import estimate_uncertainty, least_squares_jacobian
+from ..statistics.verdict import check_bounds, model_verdict
 from .interface import InverseProblem
+from .noise_model import noise_model
 
 __all__ = ["ModelProblem"]
 
@@ -226,8 +234,6 @@ class ModelProblem(InverseProblem):
         return J
 
     def _map(self, points):
-        from ...executor import evaluate_samples
-
         return evaluate_samples(self.model, points, self.executor, name="model")
 
     def residual_function(self, noise, *, typical=None, accurate=False):
@@ -293,14 +299,6 @@ class ModelProblem(InverseProblem):
 
 def fit_model_problem(problem, eps0, s):
     """:func:`~ecfm_uq.inverse.fit` for a :class:`ModelProblem` (validated settings ``s``)."""
-    from ..core.drivers import least_squares_lm, least_squares_scaled
-    from ..core.result import InverseResult, Uncertainty
-    from ..core.status import FitStatus
-    from ..statistics.loglik import gaussian_likelihood, remember_last_point
-    from ..statistics.uncertainty import estimate_uncertainty, least_squares_jacobian
-    from ..statistics.verdict import check_bounds, model_verdict
-    from .noise_model import noise_model
-
     if s.formulation not in problem.formulations:
         raise ValueError(
             f"formulation={s.formulation!r} needs the model's equations (constraint forces "
