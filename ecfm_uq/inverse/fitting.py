@@ -2,7 +2,10 @@
 
 In the manner of :func:`scipy.optimize.minimize`: one call shape whatever the problem
 (steady, dynamic, replicated), the formulation (standard, ECFM, noisy, pseudo-likelihood)
-and the optimizer, dispatching to the module that owns each problem kind; one tolerance
+and the optimizer, running the :class:`~ecfm_uq.inverse.core.fitter.Fitter` of the pair
+(problem kind, formulation) in the table :data:`FITTERS` (a new formulation is one Fitter
+subclass and one row), which measures; ``fit`` decides the status from the measurement
+and builds the result once (:func:`_result`); one tolerance
 vocabulary (``tol``, ``maxiter``); method-specific settings in one ``options`` dict,
 checked by name; one result class (:class:`~ecfm_uq.inverse.InverseResult`), whose
 ``status`` is decided from the optimality conditions at the returned point

@@ -91,9 +91,9 @@ class SteadyFitter(FunctionFitter):
     fit_function = staticmethod(fit_steady_problem)
 
     def run(self, problem, eps0, settings):
-        stacked = settings.method == "all-at-once"
-        fit_function = fit_all_at_once if stacked else type(self).fit_function
-        return Outcome.from_result(fit_function(problem, eps0, settings))
+        if settings.method == "all-at-once":  # written as an Outcome already
+            return fit_all_at_once(problem, eps0, settings)
+        return Outcome.from_result(type(self).fit_function(problem, eps0, settings))
 
 
 class SteadyStandardFitter(SteadyFitter):
@@ -115,11 +115,14 @@ class RandomForceFitter(SteadyFitter):
     fit_function = staticmethod(fit_random_force)
 
 
-class AllAtOnceFitter(SteadyFitter):
-    """``SteadyProblem``, ``"noisy-ecfm"``: SLSQP on (theta, eps, lam), the paper's bounds."""
+class AllAtOnceFitter(Fitter):
+    """``SteadyProblem``, ``"noisy-ecfm"``: SLSQP on (theta, eps, lam), the paper's bounds
+    (:func:`~.all_at_once.fit_all_at_once` returns its :class:`Outcome`)."""
 
     kind, formulation, default_method = "steady", "noisy-ecfm", "all-at-once"
-    fit_function = staticmethod(fit_all_at_once)
+
+    def run(self, problem, eps0, settings):
+        return fit_all_at_once(problem, eps0, settings)
 
 
 class ReplicatedFitter(FunctionFitter):
