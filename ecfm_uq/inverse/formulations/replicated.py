@@ -247,7 +247,7 @@ def _fit_inner_outer(
 ):
     sysm = like.system
     tr = _Tracker()
-    state = {"lam": like._lam(lam0), "inner_nit": 0}
+    state = {"lam": like.forces(lam0), "inner_nit": 0}
 
     def inner(eps):
         # Lambda(eps, .) is not convex and has spurious local minima at large forces
@@ -306,7 +306,7 @@ def _fit_penalty(like, eps0, bounds, maxiter, ftol=1e-8, lam0=None, penalty=100.
     alpha = check_positive("penalty", penalty)
     if lam0 is None:
         lam0 = np.full(C, 1e-3)
-    lam0 = like._lam(lam0)
+    lam0 = like.forces(lam0)
     if not np.any(lam0):
         raise ValueError(
             "`lam0` must be nonzero for the penalty form: log(0.5 ||lam||^2) is -inf at lam = 0"
