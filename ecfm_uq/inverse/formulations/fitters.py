@@ -125,12 +125,15 @@ class AllAtOnceFitter(Fitter):
         return fit_all_at_once(problem, eps0, settings)
 
 
-class ReplicatedFitter(FunctionFitter):
+class ReplicatedFitter(Fitter):
     """``ReplicatedProblem``: the pseudo-likelihood fits (one class for every
-    formulation: :func:`~.replicated.fit_replicated_problem` reads its name)."""
+    formulation: :func:`~.replicated.fit_replicated_problem` reads its name and returns
+    its :class:`Outcome`)."""
 
     kind, default_method = "replicated", "trust-region"
-    fit_function = staticmethod(fit_replicated_problem)
 
     def __init__(self, formulation):
         self.formulation = formulation
+
+    def run(self, problem, eps0, settings):
+        return fit_replicated_problem(problem, eps0, settings)

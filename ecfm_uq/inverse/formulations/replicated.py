@@ -67,9 +67,9 @@ from ..core.convergence import (
     Optimality,
     at_bound,
     bounds_arrays,
-    decide_status,
 )
-from ..core.result import InverseResult, Uncertainty
+from ..core.fitter import Outcome
+from ..core.result import Uncertainty
 from ..problems.moments import moment_verdict, replicate_statistics
 from ..statistics.uncertainty import estimate_uncertainty
 from .forces import optimal_forces
@@ -405,7 +405,9 @@ _OPTIONS = {
 
 
 def fit_replicated_problem(problem, eps0, s):
-    """:func:`~ecfm_uq.inverse.fit` for a :class:`~ecfm_uq.inverse.problems.galerkin.ReplicatedProblem`.
+    """:func:`~ecfm_uq.inverse.fit` for a :class:`~ecfm_uq.inverse.problems.galerkin.ReplicatedProblem`:
+    an :class:`~ecfm_uq.inverse.core.fitter.Outcome` (the Newton decrement in eps measured
+    at the returned point; the entry point decides the status and builds the result).
 
     Formulations: ``"inner-outer"`` (or ``"ecfm"``): :math:`\\min_\\epsilon
     \\tfrac12\\|\\lambda^*(\\epsilon)\\|^2` with :math:`\\lambda^* = \\arg\\min_\\lambda
@@ -517,18 +519,19 @@ def fit_replicated_problem(problem, eps0, s):
     else:
         unc = _likelihood_uncertainty(like, formulation, eps_hat, lam)
     nfev = int(getattr(res, "nfev", 0) or 0)
-    return InverseResult(
+    return Outcome(
         uncertainty=unc,
         eps=eps_hat,
         loss=float(loss),
+        opt=opt,
+        exhausted=int(res.nit) >= maxiter,
         # a model that cannot be solved at the returned point is a measured failure
-        status=decide_status(opt, int(res.nit) >= maxiter, failure=None if final_ok else msg),
-        optimality=None if opt is None else opt.value,
+        failure=None if final_ok else msg,
         message=msg,
         nit=int(res.nit),
         nfev=nfev,
         njev=int(getattr(res, "njev", 0) or nfev),
-        formulation=f"likelihood-{formulation}",
+        label=f"likelihood-{formulation}",
         method=method,
         eps_history=np.array(tr.eps).reshape(-1, system.n_eps),
         loss_history=np.array(tr.loss),
