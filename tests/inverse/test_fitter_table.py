@@ -141,3 +141,26 @@ def test_the_table_is_what_fit_dispatches_on():
         "dynamic": ("standard", "ecfm"),
         "replicated": ("standard", "inner-outer", "penalty", "ecfm"),
     }
+
+
+def test_a_check_inside_warm_starts_kept_leaves_the_warm_starts_as_they_were():
+    from ecfm_uq.inverse import DynamicInverseProblem
+    from ecfm_uq.problems.burgers import BurgersModel
+
+    m = BurgersModel(n_modes=8, n_steps=6, T=0.3)
+    V = m.true_data([1.75, 1.0])
+    kept, moved, clean = (
+        DynamicInverseProblem(m.system, m.Theta0, m.dt, m.n_steps, m.M_obs, V) for _ in range(3)
+    )
+    for problem in (kept, moved, clean):
+        problem.solve([1.7, 0.9], "standard")
+    with kept.warm_starts_kept():
+        kept.solve([1.0, 2.0], "standard")  # a check far away
+    moved.solve([1.0, 2.0], "standard")  # the same check, outside the context
+    after_kept, after_moved, after_clean = (
+        p.solve([1.72, 0.95], "standard").Theta for p in (kept, moved, clean)
+    )
+    # the next solve starts from the first trajectory, as if the check had not run
+    np.testing.assert_array_equal(after_kept, after_clean)
+    # the control: a check outside the context moves the warm start (round-off apart)
+    assert not np.array_equal(after_moved, after_clean)
