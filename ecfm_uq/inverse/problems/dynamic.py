@@ -40,20 +40,25 @@ times: :mod:`~ecfm_uq.inverse.problems.dynamic_sparse`.
 
 from __future__ import annotations
 
+import contextlib
+import copy
 import dataclasses
 
 import numpy as np
 
 from ..._validation import as_dense_rows, as_finite_array, check_choice, check_int, check_positive
-from ...errors import ConvergenceError
+from ...errors import ConvergenceError, NonIdentifiableError
 from ...system import march
 from ...system.schemes import SCHEMES
 from ...system.step_control import check_steps, check_tolerances, choose_steps
 from ..core.gradients import choose_gradient
 from ..core.result import Uncertainty
+from ..statistics.loglik import least_squares_likelihood, no_likelihood
+from ..statistics.uncertainty import estimate_uncertainty, least_squares_jacobian, residual_variance
 from .dynamic_sparse import check_data_times, data_derivatives, data_steps, interval_forces
 from .force_bases import check_force_basis
 from .interface import InverseProblem
+from .whitening import dynamic_noise_model, jacobian_in_data_units, whitened_problem
 
 FORMULATIONS = ("standard", "ecfm")
 #: the time schemes of a dynamic problem: the fixed-step ones and the frozen adaptive grid
@@ -332,6 +337,28 @@ class DynamicInverseProblem(InverseProblem):
         """A copy with other data starts cold (no warm start from the old data's fits)."""
         self._last = {}
 
+    @contextlib.contextmanager
+    def warm_starts_kept(self):
+        """A context in which solves leave the optimizer's warm starts as they were (a
+        check at one point, e.g. the status test or the verdict, must not move them)."""
+        saved = dict(self._last)
+        try:
+            yield self
+        finally:
+            self._last = saved
+
+    def with_force_basis(self, force_basis):
+        """This problem with the ECFM forces in ``force_basis``
+        (:mod:`~ecfm_uq.inverse.problems.force_bases`): itself when it has that basis, else a
+        copy with its own forces and ECFM warm starts (the rest shared)."""
+        check_force_basis(force_basis)
+        if force_basis == self.force_basis:
+            return self
+        other = copy.copy(self)
+        other.force_basis, other._forces = force_basis, None
+        other._last = {k: w for k, w in self._last.items() if not k.startswith("ecfm")}
+        return other
+
     # -- forward solves --------------------------------------------------------------------
     def solve(self, eps, formulation="standard", sensitivities=False, keep_factors=False):
         """March the model at ``eps``; ``"ecfm"`` adds the data constraint at every step.
@@ -546,15 +573,10 @@ class DynamicInverseProblem(InverseProblem):
         over the ``n = P C`` readings (sigma known, or profiled out), or why there is none.
         ``sigma`` an array (per sensor, a covariance over the sensors, or per reading;
         :mod:`ecfm_uq.inverse.problems.whitening`): that of the whitened readings."""
-        from ..statistics.loglik import least_squares_likelihood, no_likelihood
-        from .whitening import dynamic_noise_model
-
         if formulation != "standard":
             return no_likelihood(formulation)
         noise = dynamic_noise_model(sigma, self.n_readings, self.n_sensors)
         if noise.kind in ("diagonal", "covariance"):
-            from .whitening import whitened_problem
-
             like = whitened_problem(self, noise).log_likelihood(formulation, 1.0)
             what = f"trajectory least squares, Gaussian noise {noise.describe()}"
             return dataclasses.replace(like, description=what)
@@ -604,15 +626,9 @@ class DynamicInverseProblem(InverseProblem):
             ``cov``, ``stderr``, ``intervals``, ``noise_model``, ``jacobian`` (n_eps,
             n_steps C), ...; or ``success=False`` and the ``message`` why not.
         """
-        import copy
-
-        from ..statistics.uncertainty import estimate_uncertainty, residual_variance
-
         formulation = check_choice("formulation", formulation, FORMULATIONS)
         eps = self.system.check_eps(eps)
         if sigma is not None and np.ndim(sigma) > 0:  # whitened once, as fit does
-            from .whitening import dynamic_noise_model, jacobian_in_data_units, whitened_problem
-
             noise = dynamic_noise_model(sigma, self.n_readings, self.n_sensors)
             if noise.kind != "scalar":
                 unc = whitened_problem(self, noise).uncertainty(eps, formulation, 1.0, covariance)
@@ -644,8 +660,6 @@ class DynamicInverseProblem(InverseProblem):
         data = self.V[1:].ravel()
         if covariance == "implicit":
             return estimate_uncertainty(grad, eps, data, s2, model, dof=dof)
-        from ...errors import NonIdentifiableError
-        from ..statistics.uncertainty import least_squares_jacobian
 
         saved = dict(self._last)
         try:
