@@ -4,6 +4,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
 
@@ -148,3 +149,19 @@ def test_time_page_sparse_data_example_prints_what_it_says():
     assert abs(yearly[3] - 0.2) < 1e-3 and np.all(np.abs(np.delete(yearly, 3)) < 2e-3)
     np.testing.assert_allclose(yearly[:4], [-1.4086e-03, -6.9948e-04, -3.4735e-04, 2.0023e-01],
                                rtol=1e-4)  # fmt: skip
+
+
+@pytest.mark.slow
+def test_time_page_force_basis_example_prints_what_it_says():
+    """docs/time.md, the adaptive ECFM and the force bases: the estimate nears 0.7 as rtol
+    shrinks; a smooth source is met with a smaller L2 error by hats and Gaussians."""
+    text = (DOCS / "time.md").read_text()
+    code = next(b for b in re.findall(r"```python\n(.*?)```", text, re.S) if "force_basis=" in b)
+    ns = {}
+    exec(compile(code, "time.md", "exec"), ns)
+    est, l2 = ns["adaptive"], ns["l2"]
+    assert abs(est[1e-6] - 0.7) < abs(est[1e-4] - 0.7) / 5
+    np.testing.assert_allclose([est[1e-4], est[1e-6]], [0.699263, 0.699935], atol=2e-6)
+    np.testing.assert_allclose(
+        [l2["constant"], l2["linear"], l2["{'rbf': 1.0}"]], [0.0569, 0.0148, 0.0161], atol=1e-4
+    )

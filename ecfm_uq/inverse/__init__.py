@@ -34,24 +34,29 @@ imports :mod:`.fitting`:
 ``fitting``,        ``fit`` (validate, whiten, dispatch: the only entry);
 ``coverage``        fits over synthetic data sets
 ``formulations/``   how each formulation turns a problem into an estimate: ``steady``
-                    (standard and exact ECFM, reduced), ``noisy`` and ``noise`` (all at
-                    once, the paper's noise bounds), ``discrepancy`` and ``sparse_forces``
-                    (random-force ECFM), ``dynamic_fit``, ``replicated``, ``replicated_status`` and ``forces``
-                    (pseudo-likelihood), ``ode_forces`` and ``ode_random`` (exact-match and
-                    random-force ECFM of an ODE)
+                    (standard and exact ECFM, reduced), ``all_at_once`` and
+                    ``noise_bounds`` (all at once, the paper's noise bounds),
+                    ``discrepancy`` and ``sparse_forces`` (random-force ECFM),
+                    ``dynamic_fit``, ``replicated``, ``replicated_status`` and
+                    ``forces`` (pseudo-likelihood), ``ode_forces``, ``ode_basis`` and
+                    ``ode_random`` (exact-match and random-force ECFM of an ODE);
+                    ``fitters`` (the Fitter of each formulation whose fit is a function)
 ``problems/``       a model and its data behind one interface (``interface``): ``model``
                     (a Python function), ``ode`` (a user's ODE, forward sensitivities),
                     ``galerkin`` (steady, replicated), ``dynamic`` (``dynamic_sparse``:
-                    data at some steps, one force per data interval);
+                    data at some times, forces in a basis in time, ``force_bases``);
                     ``noise_model`` and ``whitening`` (``sigma`` as given);
                     ``pseudo_likelihood`` and ``moments`` (the replicated data's
                     likelihood)
 ``statistics/``     what a fit says: ``uncertainty``, ``verdict``, ``loglik``, ``profile``
-                    and ``profiler``, ``posterior``, ``diagnostics``, ``prediction``
+                    with ``profile_walk`` and ``profile_calibration``, ``posterior``,
+                    ``diagnostics``, ``prediction``
                     (bands; ``InverseResult.predict`` in ``core`` reaches it through a
                     function this package's import registers, not an upward import),
                     ``terms`` (the missing term named from an ODE fit's forces)
-``core/``           shared machinery: ``convergence`` (the one status decision),
+``core/``           shared machinery: ``fitter`` (the shape of every fit: a
+                    ``Fitter``'s steps and the ``Outcome`` it measures),
+                    ``convergence`` (the one status decision),
                     ``drivers`` and ``optimizers`` (the optimizer calls), ``gradients``,
                     ``finite_differences``; the types handed around: ``settings`` (the
                     validated arguments), ``result`` (the one frozen result), ``series``
@@ -66,9 +71,14 @@ from .core.series import ForceSeries, OdeTrajectory
 from .core.status import FitStatus
 from .coverage import likelihood_coverage, steady_coverage
 from .fitting import fit
+from .formulations.all_at_once import ConstrainedInverse
 from .formulations.forces import optimal_forces
-from .formulations.noise import ConsistencyTest, consistency_test, noise_bounds, sample_moments
-from .formulations.noisy import ConstrainedInverse
+from .formulations.noise_bounds import (
+    ConsistencyTest,
+    consistency_test,
+    noise_bounds,
+    sample_moments,
+)
 from .formulations.steady import ecfm_objective, standard_objective
 from .problems.dynamic import DynamicInverseProblem
 from .problems.galerkin import ReplicatedProblem, SteadyProblem

@@ -21,6 +21,7 @@ from ..errors import ConvergenceError
 from ..system import solve_steady
 from .fitting import fit
 from .problems.galerkin import ReplicatedProblem, SteadyProblem
+from .statistics.profile import profile_likelihood
 
 __all__ = [
     "binomial_band",
@@ -239,8 +240,6 @@ def interval_coverage(
         ends; ``n_failed`` fits that did not converge;
         ``n_at_bound``; ``n_not_consistent`` (the verdict at 0.05); ``eps`` (R', n_eps).
     """
-    from .statistics.profile import profile_likelihood
-
     n, seed = _check_common(n_datasets, seed)
     sigma = check_positive("sigma", sigma)
     system = problem.system
@@ -290,8 +289,6 @@ def model_coverage(problem, clean, true_eps, sigma, n_datasets=200, seed=0, *, e
         ``n_at_bound`` estimates at a bound; ``n_not_consistent`` and ``n_no_test`` of
         the verdicts at 0.05 (``consistent`` False / None).
     """
-    from .statistics.profile import profile_likelihood
-
     n, seed = _check_common(n_datasets, seed)
     sigma = check_positive("sigma", sigma)
     true_eps = np.asarray(true_eps, dtype=float)

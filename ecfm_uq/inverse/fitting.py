@@ -2,7 +2,10 @@
 
 In the manner of :func:`scipy.optimize.minimize`: one call shape whatever the problem
 (steady, dynamic, replicated), the formulation (standard, ECFM, noisy, pseudo-likelihood)
-and the optimizer, dispatching to the module that owns each problem kind; one tolerance
+and the optimizer, running the :class:`~ecfm_uq.inverse.core.fitter.Fitter` of the pair
+(problem kind, formulation) in the table :data:`FITTERS` (a new formulation is one Fitter
+subclass and one row), which measures; ``fit`` decides the status from the measurement
+and builds the result once (:func:`_result`); one tolerance
 vocabulary (``tol``, ``maxiter``); method-specific settings in one ``options`` dict,
 checked by name; one result class (:class:`~ecfm_uq.inverse.InverseResult`), whose
 ``status`` is decided from the optimality conditions at the returned point
@@ -57,19 +60,34 @@ import numpy as np
 from .._validation import check_int, check_positive
 from ..system.solve.plan import dense_unknowns
 from ..threads import library_threads
+from .core.convergence import decide_status
+from .core.result import InverseResult
 from .core.settings import FitSettings
+from .formulations.dynamic_fit import DynamicFitter
+from .formulations.fitters import (
+    AllAtOnceFitter,
+    ModelFitter,
+    OdeEcfmFitter,
+    OdeRandomFitter,
+    OdeStandardFitter,
+    RandomForceFitter,
+    ReplicatedFitter,
+    SteadyEcfmFitter,
+    SteadyStandardFitter,
+)
+from .problems.dynamic import DynamicInverseProblem
+from .problems.galerkin import ReplicatedProblem, SteadyProblem
+from .problems.model import ModelProblem
 from .problems.noise_model import NoiseModel, noise_model
+from .problems.ode import OdeProblem
+from .problems.whitening import dynamic_noise_model, jacobian_in_data_units, whitened_problem
+from .statistics.loglik import LogLikelihood
 from .statistics.verdict import DEFAULT_ALPHA, check_alpha, check_bounds
 
-__all__ = ["fit"]
+__all__ = ["FITTERS", "FORMULATIONS", "fit"]
 
 
 def _problem_kind(problem):
-    from .problems.dynamic import DynamicInverseProblem
-    from .problems.galerkin import ReplicatedProblem, SteadyProblem
-    from .problems.model import ModelProblem
-    from .problems.ode import OdeProblem
-
     for cls, kind in (
         (ModelProblem, "model"),
         (OdeProblem, "ode"),
@@ -127,20 +145,44 @@ def _check_sigma(sigma, kind, formulation, problem):
             f"{np.shape(sigma)}: {_SCALAR_SIGMA_ONLY[kind, formulation]}"
         )
     if kind == "dynamic":  # per sensor, a covariance over them, or per reading
-        from .problems.whitening import dynamic_noise_model
-
         return dynamic_noise_model(sigma, problem.n_readings, problem.n_sensors)
     return noise_model(sigma, problem.n_sensors)
 
 
-#: the formulations of each problem kind, by name (what each one is: the table above)
-FORMULATIONS = {
-    "model": ("standard",),
-    "ode": ("standard", "ecfm", "ecfm-random"),
-    "steady": ("standard", "ecfm", "ecfm-random", "noisy-ecfm"),
-    "dynamic": ("standard", "ecfm"),
-    "replicated": ("standard", "inner-outer", "penalty", "ecfm"),
+#: the fitter of each (problem kind, formulation): a new formulation is one Fitter
+#: subclass (:class:`~ecfm_uq.inverse.core.fitter.Fitter`) and one row here
+FITTERS = {
+    ("model", "standard"): ModelFitter(),
+    ("ode", "standard"): OdeStandardFitter(),
+    ("ode", "ecfm"): OdeEcfmFitter(),
+    ("ode", "ecfm-random"): OdeRandomFitter(),
+    ("steady", "standard"): SteadyStandardFitter(),
+    ("steady", "ecfm"): SteadyEcfmFitter(),
+    ("steady", "ecfm-random"): RandomForceFitter(),
+    ("steady", "noisy-ecfm"): AllAtOnceFitter(),
+    ("dynamic", "standard"): DynamicFitter("standard"),
+    ("dynamic", "ecfm"): DynamicFitter("ecfm"),
+    ("replicated", "standard"): ReplicatedFitter("standard"),
+    ("replicated", "inner-outer"): ReplicatedFitter("inner-outer"),
+    ("replicated", "penalty"): ReplicatedFitter("penalty"),
+    ("replicated", "ecfm"): ReplicatedFitter("ecfm"),
 }
+
+
+def _formulations():
+    """The formulations of each problem kind, by name, in :data:`FITTERS`' order."""
+    names = {}
+    for kind, formulation in FITTERS:
+        names.setdefault(kind, []).append(formulation)
+    return {kind: tuple(forms) for kind, forms in names.items()}
+
+
+#: the formulations of each problem kind, by name (what each one is: the table above)
+FORMULATIONS = _formulations()
+
+#: the problem kinds whose fitters see an array ``sigma`` as whitened sensors and data
+#: (a ModelProblem and an OdeProblem take their noise model themselves)
+_WHITENED_KINDS = ("steady", "dynamic", "replicated")
 
 
 def _check_formulation(kind, settings):
@@ -156,7 +198,7 @@ def _check_formulation(kind, settings):
             "formulation='ecfm' (the paper's exact-match forces) or formulation="
             "'ecfm-random' (random forces, with sigma)"
         )
-    names = FORMULATIONS[kind]
+    names = tuple(f for k, f in FITTERS if k == kind)  # FITTERS may gain a row (tests)
     if settings.formulation not in names:
         hint = ""
         if settings.formulation == "ecfm-random":
@@ -301,71 +343,72 @@ def fit(
         alpha=check_alpha(alpha),
     )
     _check_formulation(kind, settings)
-    if kind == "model":
-        from .problems.model import fit_model_problem
-
-        return _with_estimate(fit_model_problem(problem, eps0, settings))
-    if kind == "ode":
-        if formulation == "standard":
-            from .problems.ode import fit_ode_standard as fitter
-        elif formulation == "ecfm":
-            from .formulations.ode_forces import fit_ode_ecfm as fitter
-        else:
-            from .formulations.ode_random import fit_ode_random as fitter
-        return _with_estimate(fitter(problem, eps0, settings))
-    if kind == "steady" and (formulation == "noisy-ecfm" or method == "all-at-once"):
-        from .formulations.noisy import fit_all_at_once as fitter
-    elif formulation == "ecfm-random":
-        from .formulations.discrepancy import fit_random_force as fitter
-    elif kind == "steady":
-        from .formulations.steady import fit_steady_problem as fitter
-    elif kind == "dynamic":
-        from .formulations.dynamic_fit import fit_dynamic_problem as fitter
-    else:
-        from .formulations.replicated import fit_replicated_problem as fitter
+    fitter = FITTERS[kind, settings.formulation]
+    fitter.check_options(problem, settings)  # by name, before any model call
     noise = settings.sigma if isinstance(settings.sigma, NoiseModel) else None
-    if noise is None:
-        result = fitter(problem, eps0, settings)
-    else:  # an array sigma: the same fit of whitened sensors and data, sigma = 1
-        from .problems.whitening import whitened_problem
-
-        result = fitter(
-            whitened_problem(problem, noise), eps0, dataclasses.replace(settings, sigma=1.0)
-        )
-        result = _in_data_units(result, noise)
-    # what the profile likelihood needs: the likelihood (or why there is none), the bounds
-    likelihood = result.likelihood
-    if likelihood is None:
-        likelihood = problem.log_likelihood(settings.formulation, settings.sigma)
-    result = dataclasses.replace(result, likelihood=likelihood, bounds=settings.bounds)
-    return _with_estimate(result)
+    if noise is None or kind not in _WHITENED_KINDS:
+        return _result(fitter.run(problem, eps0, settings), problem, settings, None)
+    # an array sigma: the same fit of whitened sensors and data, sigma = 1
+    whitened = whitened_problem(problem, noise)
+    outcome = fitter.run(whitened, eps0, dataclasses.replace(settings, sigma=1.0))
+    return _result(outcome, problem, settings, noise)
 
 
-def _with_estimate(result):
+def _result(outcome, problem, settings, noise):
+    """The one :class:`~ecfm_uq.inverse.InverseResult` of a fit, built once from the
+    fitter's :class:`~ecfm_uq.inverse.core.fitter.Outcome`: the status decided from what
+    was measured (:func:`~ecfm_uq.inverse.core.convergence.decide_status`), the messages
+    and the estimate's derivative in the data given (``noise``: an array ``sigma``
+    whitened), the likelihood (or why there is none) and the bounds the profiles need,
+    the uncertainty told the estimate and its parameter names."""
+    parts = {
+        "message": outcome.message,
+        "uncertainty": outcome.uncertainty,
+        "verdict": outcome.verdict,
+        "likelihood": outcome.likelihood,
+        "interval_likelihood": outcome.interval_likelihood,
+    }
+    if noise is not None:
+        parts = _in_data_units(parts, noise)
+    if parts["likelihood"] is None:
+        parts["likelihood"] = problem.log_likelihood(settings.formulation, settings.sigma)
+    names = outcome.names
+    parts["uncertainty"] = _with_estimate(parts["uncertainty"], outcome.eps, names)
+    histories = {
+        name: value
+        for name in ("eps_history", "loss_history")
+        if (value := getattr(outcome, name)) is not None
+    }
+    return InverseResult(
+        eps=outcome.eps, loss=outcome.loss,
+        status=decide_status(outcome.opt, outcome.exhausted, outcome.failure),
+        nit=outcome.nit, nfev=outcome.nfev, njev=outcome.njev,
+        optimality=outcome.optimality, formulation=outcome.label, method=outcome.method,
+        state=outcome.state, forces=outcome.forces, bounds=settings.bounds, names=names,
+        extra=outcome.extra, problem=outcome.problem, **histories, **parts,
+    )  # fmt: skip
+
+
+def _with_estimate(unc, eps, names):
     """The uncertainty told the estimate and the parameter names it belongs to (for
     :meth:`~ecfm_uq.inverse.Uncertainty.to_inputs`)."""
-    unc = result.uncertainty
     if not unc.success:
-        return result
-    names = None if result.names is None else list(result.names)
-    unc = dataclasses.replace(unc, eps=np.array(result.eps, dtype=float), names=names)
-    return dataclasses.replace(result, uncertainty=unc)
+        return unc
+    names = None if names is None else list(names)
+    return dataclasses.replace(unc, eps=np.array(eps, dtype=float), names=names)
 
 
-def _in_data_units(result, noise):
-    """A fit of whitened data reported for the data given: the estimate's derivative in
-    ``v`` (not ``W v``), and messages that name the noise as given where the fitter saw
-    ``sigma = 1``."""
-    from .problems.whitening import jacobian_in_data_units
-    from .statistics.loglik import LogLikelihood
-
+def _in_data_units(parts, noise):
+    """The parts of a fit of whitened data reported for the data given: the estimate's
+    derivative in ``v`` (not ``W v``), and messages that name the noise as given where
+    the fitter saw ``sigma = 1``."""
     unit = re.compile(r"sigma ?= ?1(?![\d.e])")
     said = f"sigma=1 (whitened: {noise.describe()})"
 
     def restate(text):
         return unit.sub(said, text)
 
-    unc = result.uncertainty
+    unc = parts["uncertainty"]
     changes = {
         "uncertainty": dataclasses.replace(
             unc,
@@ -373,14 +416,14 @@ def _in_data_units(result, noise):
             message=restate(unc.message),
             sigma=noise.std() if unc.success and unc.noise_model == "known" else unc.sigma,
         ),  # fmt: skip
-        "message": restate(result.message),
+        "message": restate(parts["message"]),
     }
     for name in ("likelihood", "interval_likelihood"):
-        like = getattr(result, name)
+        like = parts[name]
         if isinstance(like, LogLikelihood):
             changes[name] = dataclasses.replace(like, description=restate(like.description))
-    if result.verdict is not None:
+    if parts["verdict"] is not None:
         changes["verdict"] = dataclasses.replace(
-            result.verdict, message=restate(result.verdict.message)
+            parts["verdict"], message=restate(parts["verdict"].message)
         )
-    return dataclasses.replace(result, **changes)
+    return {**parts, **changes}

@@ -34,7 +34,7 @@ few tens of MB (the dense tensor would need 33 GB).
 
 This module only builds systems and data from the paper's equations (the data generator
 uses the engine's Newton continuation, not an optimizer) and evaluates fields and errors
-on fine quadrature grids; the inverse solvers live in :mod:`ecfm_uq.inverse.formulations.noisy`.
+on fine quadrature grids; the inverse solvers live in :mod:`ecfm_uq.inverse.formulations.all_at_once`.
 """
 
 from __future__ import annotations

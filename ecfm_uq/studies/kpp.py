@@ -10,8 +10,8 @@ difference (paper: 3.2e-2) and how well :math:`b` and :math:`b + \\sum\\lambda_i
 approximate the true source.
 
 Numerics live in :mod:`ecfm_uq.problems.fisher_kpp` (model, data, error norms),
-:mod:`ecfm_uq.inverse.formulations.noisy` (the two SLSQP problems) and
-:mod:`ecfm_uq.inverse.formulations.noise` (bounds and tests); this module reads settings,
+:mod:`ecfm_uq.inverse.formulations.all_at_once` (the two SLSQP problems) and
+:mod:`ecfm_uq.inverse.formulations.noise_bounds` (bounds and tests); this module reads settings,
 calls them, draws figures and assembles the result.
 """
 
@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..inverse import SteadyProblem, fit
-from ..inverse.formulations.noise import consistency_test, noise_bounds
+from ..inverse.formulations.noise_bounds import consistency_test, noise_bounds
 from ..plotting import pyplot, save_figure
 from ..problems.fisher_kpp import (
     DEFAULT_OMEGA,

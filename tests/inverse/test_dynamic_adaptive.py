@@ -123,5 +123,7 @@ def test_bad_arguments_name_themselves():
     adaptive = DynamicInverseProblem(*args, scheme="adaptive")
     with pytest.raises(ValueError, match="no frozen steps"):
         adaptive.check_steps(TRUE)
-    with pytest.raises(ValueError, match="formulation='standard'"):
-        adaptive.ecfm_objective(TRUE)
+    with pytest.raises(ValueError, match="`force_basis` must be 'constant'"):
+        DynamicInverseProblem(*args, scheme="adaptive", force_basis="cubic")
+    with pytest.raises(ValueError, match="positive width"):
+        DynamicInverseProblem(*args, scheme="adaptive", force_basis={"rbf": -1.0})

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from ecfm_uq.inverse import SteadyProblem, fit
-from ecfm_uq.inverse.formulations.noise import consistency_test
-from ecfm_uq.inverse.formulations.noisy import ConstrainedInverse
+from ecfm_uq.inverse.formulations.all_at_once import ConstrainedInverse
+from ecfm_uq.inverse.formulations.noise_bounds import consistency_test
 from ecfm_uq.problems.fisher_kpp import build_kpp, make_data, sensor_grid
 from ecfm_uq.spectral import SineBasis, gaussian_forces, gram, sensor_matrix, stiffness
 from ecfm_uq.system import GalerkinSystem, LinearTerm, LoadTerm

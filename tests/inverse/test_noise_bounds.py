@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ecfm_uq.inverse.formulations.noise import consistency_test, noise_bounds, sample_moments
+from ecfm_uq.inverse.formulations.noise_bounds import consistency_test, noise_bounds, sample_moments
 
 
 def test_paper_quantiles_for_225_sensors():

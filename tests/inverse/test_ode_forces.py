@@ -7,8 +7,10 @@ import matplotlib
 import numpy as np
 import pytest
 
-from ecfm_uq.inverse import ForceSeries, OdeTrajectory, fit
+from ecfm_uq.inverse import ForceSeries, OdeProblem, OdeTrajectory, fit
+from ecfm_uq.inverse.formulations.ode_basis import BasisForces
 from ecfm_uq.inverse.formulations.ode_forces import ExactForces, forced_components
+from ecfm_uq.inverse.problems.force_bases import basis_matrix
 from ecfm_uq.studies.ode import TRUTH as STUDY_TRUTH
 from ecfm_uq.studies.ode import lv_problem as problem  # LV with its Jacobians
 from ecfm_uq.studies.ode import simulate  # the data of `ecfm-uq reproduce ode`
@@ -212,3 +214,146 @@ def test_random_forces_tau_zero_on_exact_data_and_detected_harvest():
     assert bad.forces.values.shape == (10, 2) and np.all(bad.forces.stderr >= 0)
     with pytest.raises(ValueError, match="sigma"):
         fit(problem(times, data), TRUTH, formulation="ecfm-random")
+
+
+def test_newton_starts_from_the_linear_prediction_of_the_last_solve(monkeypatch):
+    """A second solve at a nearby eps starts each interval's Newton from the last forces
+    moved by their derivatives: one integration per interval, the same forces as a
+    solve from zero forces (to the Newton tolerance)."""
+    from ecfm_uq.inverse.formulations import ode_forces
+
+    data = simulate(ANNUAL) * (1 + 0.03 * np.random.default_rng(2).standard_normal((13, 2)))
+    pb = problem(ANNUAL, data, rtol=1e-9)
+    e1 = pb.check(TRUTH * 1.02)
+    e2 = e1 * (1 + 1e-5 * np.arange(1, 7))  # last forces alone miss by ~1e-5 |f|
+    calls = []
+    real = ode_forces.solve_with_sensitivities
+
+    def counted(*a, **kw):
+        calls.append(1)
+        return real(*a, **kw)
+
+    monkeypatch.setattr(ode_forces, "solve_with_sensitivities", counted)
+    fresh = ExactForces(pb, forced_components(pb))
+    cold = fresh.solve(e2)["forces"]
+    n_cold = len(calls)
+    warm = ExactForces(pb, forced_components(pb))
+    warm.solve(e1)
+    calls.clear()
+    hot = warm.solve(e2)["forces"]
+    assert len(calls) == warm.K and n_cold >= 2 * warm.K
+    np.testing.assert_allclose(hot, cold, rtol=0, atol=1e-6 * np.max(np.abs(cold)))
+
+
+def test_random_force_tau_search_meets_the_trust_region_reml_profile():
+    """The random-force ECFM's likelihood ratio and tau, whose search takes its GLS
+    estimates by Gauss-Newton, against the REML criterion recomputed here with
+    scipy's least_squares at each tau: the same statistic, and tau its minimum."""
+    import scipy.linalg
+    from scipy.optimize import least_squares
+
+    from ecfm_uq.inverse.formulations.ode_random import force_response
+
+    times = ANNUAL[:11]
+    data = simulate(times, harvest=0.3)
+    sigma = 0.03 * np.abs(data)
+    data = data + sigma * np.random.default_rng(8).standard_normal(data.shape)
+    pb = problem(times, data, rtol=1e-9)
+    res = fit(pb, TRUTH, formulation="ecfm-random", sigma=sigma)
+    tau, lrt = res.extra["tau"], res.verdict.details["lrt"]
+    assert tau > 0 and lrt > 1
+    ef = ExactForces(pb, forced_components(pb))
+    A = force_response(pb, ef, res.extra["standard"].eps)
+    AWA = (A * np.repeat(1.0 / ef.dt, ef.m)) @ A.T
+    Sigma = np.diag(sigma.ravel() ** 2)
+    d = pb.readings
+
+    def crit(t):
+        L = np.linalg.cholesky(Sigma + t**2 * AWA)
+
+        def white(e):
+            return scipy.linalg.solve_triangular(L, pb.predict(e) - d, lower=True)
+
+        def jac(e):
+            return scipy.linalg.solve_triangular(L, pb.predict_jacobian(e), lower=True)
+
+        e = least_squares(white, res.eps, jac=jac, xtol=1e-14, ftol=1e-14, gtol=1e-14).x
+        X, r = jac(e), white(e)
+        return 2 * np.sum(np.log(np.diag(L))) + np.linalg.slogdet(X.T @ X)[1] + r @ r
+
+    c_hat = crit(tau)
+    assert abs((crit(0.0) - c_hat) - lrt) < 1e-6 * lrt
+    assert crit(tau * 1.1) > c_hat and crit(tau / 1.1) > c_hat
+
+
+def _sin_source_problem(a=0.7, years=8):
+    """y' = -a y + 0.1 sin t, y(0) = 1, read once a year (the closed form), the model
+    without the source; eps = (a,)."""
+    t = np.arange(1.0, years + 1.0)
+    c = 0.1 / (a**2 + 1)
+    data = ((1 + c) * np.exp(-a * t) + c * (a * np.sin(t) - np.cos(t)))[:, None]
+    return OdeProblem(
+        lambda t, y, e: -e[0] * y,
+        [1.0],
+        t,
+        data,
+        t0=0.0,
+        rtol=1e-10,
+        atol=1e-12,
+        jac=(lambda t, y, e: -e[0] * np.eye(1), lambda t, y, e: -y.reshape(1, 1)),
+    )
+
+
+def test_force_basis_exact_data_give_zero_forces():
+    times = np.arange(0.0, 9.0)
+    pb = problem(times[1:], simulate(times)[1:], t0=0.0)
+    e = pb.check(TRUTH)
+    for basis in ("linear", {"rbf": 1.0}):
+        out = BasisForces(pb, forced_components(pb), basis).solve(e)
+        assert np.abs(out["lam"]).max() < 1e-6
+
+
+def test_a_smooth_source_is_recovered_better_by_a_linear_basis():
+    """The force function at the true a against the source 0.1 sin t (L2 over [0, 8];
+    measured: constant 0.057, linear 0.015, of the source's 0.20)."""
+    pb = _sin_source_problem()
+    e = pb.check(np.array([0.7]))
+    s = np.linspace(0.0, 8.0, 1601)[1:]
+    err = {}
+    for basis in ("constant", "linear"):
+        forces = BasisForces(pb, forced_components(pb), basis)
+        lam = forces.solve(e)["lam"]
+        f = basis_matrix(forces.kind, forces.width, forces.knots, s) @ lam[:, 0]
+        err[basis] = np.sqrt(np.mean((f - 0.1 * np.sin(s)) ** 2) * 8.0)
+    assert err["linear"] < 0.4 * err["constant"]
+    # the constant basis is the interval-by-interval ECFM's (no datum at t0: no jump)
+    ref = ExactForces(pb, forced_components(pb)).solve(e)["forces"]
+    lam = BasisForces(pb, forced_components(pb), "constant").solve(e)["lam"]
+    np.testing.assert_allclose(lam, ref, atol=1e-8)
+
+
+@pytest.mark.parametrize("basis", ["linear", {"rbf": 1.0}])
+def test_force_basis_gradient_against_finite_differences_and_fit(basis):
+    pb = _sin_source_problem()
+    e = pb.check(np.array([0.5]))
+    forces = BasisForces(pb, forced_components(pb), basis)
+    out = forces.solve(e)
+    g = out["J"].T @ out["r"]  # the objective's gradient (exact: the envelope derivative)
+    fd = _fd_of(lambda x: np.atleast_1d(0.5 * np.sum(forces.solve(x)["r"] ** 2)), e, 1e-5)
+    np.testing.assert_allclose(g, fd[0], rtol=1e-5)
+    res = fit(pb, [0.5], formulation="ecfm", options={"force_basis": basis})
+    assert res.success and res.forces.values.shape == (8, 1)
+    assert not res.uncertainty.success and "force_basis" in res.uncertainty.message
+
+
+def test_force_basis_option_by_name():
+    """ "constant" is the default (the same fit); a datum at t0 and unknown names are
+    refused by name."""
+    data = simulate(ANNUAL)
+    pb = problem(ANNUAL, data)
+    res = fit(pb, TRUTH * 1.05, formulation="ecfm", options={"force_basis": "constant"})
+    np.testing.assert_allclose(res.eps, fit(pb, TRUTH * 1.05, formulation="ecfm").eps)
+    with pytest.raises(ValueError, match=r"options\['force_basis'\].*datum at t0"):
+        fit(pb, TRUTH * 1.05, formulation="ecfm", options={"force_basis": "linear"})
+    with pytest.raises(ValueError, match="`force_basis` must be"):
+        fit(pb, TRUTH * 1.05, formulation="ecfm", options={"force_basis": "cubic"})

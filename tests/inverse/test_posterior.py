@@ -26,17 +26,18 @@ def _case():
 def runs():
     system, M_obs, v = _case()
     lap = fit(SteadyProblem(system, M_obs, v), [1.0, 1.0], sigma=0.01)
-    post = sample_posterior(
-        system,
-        M_obs,
-        v,
-        0.01,
-        lap.eps,
-        bounds=[(-50, 50), (-50, 50)],
-        n_walkers=16,
-        n_steps=2500,
-        seed=1,
-    )
+    with pytest.warns(DeprecationWarning, match=r"sample_posterior\(fit\(SteadyProblem"):
+        post = sample_posterior(
+            system,
+            M_obs,
+            v,
+            0.01,
+            lap.eps,
+            bounds=[(-50, 50), (-50, 50)],
+            n_walkers=16,
+            n_steps=2500,
+            seed=1,
+        )
     return lap, post
 
 
@@ -57,12 +58,14 @@ def test_diagnostics_and_refused_convergence(runs):
     assert 0.1 < post.acceptance < 0.9
     assert post.chain.shape == (2500, 16, 2)
     system, M_obs, v = _case()
-    short = sample_posterior(
-        system, M_obs, v, 0.01, runs[0].eps, bounds=[(-50, 50)] * 2, n_walkers=8, n_steps=60
-    )
+    with pytest.warns(DeprecationWarning, match="deprecated"):
+        short = sample_posterior(
+            system, M_obs, v, 0.01, runs[0].eps, bounds=[(-50, 50)] * 2, n_walkers=8, n_steps=60
+        )
     assert not short.converged and "NOT converged" in short.message
 
 
+@pytest.mark.filterwarnings("ignore:sample_posterior\\(system:DeprecationWarning")
 def test_bad_input_is_refused():
     system, M_obs, v = _case()
     with pytest.raises(ValueError, match="prior"):

@@ -72,6 +72,7 @@ import numpy as np
 import scipy.optimize
 
 from ..._validation import all_finite
+from ...errors import ConvergenceError
 from .status import FitStatus
 
 __all__ = [
@@ -533,8 +534,6 @@ def polish_least_squares(residual, eps, *, bounds=None, maxiter=20, tol=OFFSET_T
     nfev : int
         Residual evaluations made.
     """
-    from ...errors import ConvergenceError
-
     x = np.asarray(eps, dtype=float).copy()
     lo, hi = bounds_arrays(bounds, x.size)
     ev = residual(x)

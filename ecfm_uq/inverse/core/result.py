@@ -17,8 +17,8 @@ standard, ECFM, noisy, pseudo-likelihood, steady or dynamic — returns an
 * ``verdict``: a :class:`Verdict`, the answer to "can this model explain these data?"
   as a test of stated size.
 
-A result is frozen: a fitter builds it once, with :func:`dataclasses.replace` where a
-later step (the uncertainty, the verdict, the likelihood) adds to it.
+A result is frozen: :func:`~ecfm_uq.inverse.fit` builds it once, from the
+:class:`~ecfm_uq.inverse.core.fitter.Outcome` its fitter returns.
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ from scipy import special, stats
 from ...chaos.inputs import Inputs
 from ...chaos.student import StudentInputs
 from .status import FitStatus
+from .summary_table import summary_table
 
 __all__ = ["InverseResult", "Uncertainty", "Verdict"]
 
@@ -250,8 +251,8 @@ def _empty_history():
 class InverseResult:
     """Outcome of an inverse fit (every formulation, every optimizer).
 
-    Frozen: built once by the fitter; a step that adds to a result (the uncertainty, the
-    verdict, the likelihood) builds a new one with :func:`dataclasses.replace`.
+    Frozen: built once by :func:`~ecfm_uq.inverse.fit` from its fitter's
+    :class:`~ecfm_uq.inverse.core.fitter.Outcome` (the status decided there).
 
     Attributes
     ----------
@@ -486,6 +487,4 @@ class InverseResult:
         -------
         str
         """
-        from .summary_table import summary_table
-
         return summary_table(self, level, profile)

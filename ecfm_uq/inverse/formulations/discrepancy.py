@@ -87,11 +87,13 @@ from ..core.convergence import (
 )
 from ..core.finite_differences import fd_gradient
 from ..core.result import InverseResult, Uncertainty
+from ..core.settings import FitSettings
 from ..core.status import FitStatus
 from ..statistics.diagnostics import fd_hessian
 from ..statistics.loglik import LogLikelihood
 from ..statistics.verdict import decide
 from .sparse_forces import sparse_force_variances
+from .steady import fit_steady_problem
 
 __all__ = ["RandomForceModel", "fit_random_force"]
 
@@ -480,9 +482,6 @@ def fit_random_force(problem, eps0, s):
     Starts from the standard estimate (``tau = 0``) and minimizes the marginal likelihood
     with ``tau`` profiled out.
     """
-    from ..core.settings import FitSettings
-    from .steady import fit_steady_problem
-
     system = problem.system
     opts = s.take({"tau_in_intervals": "profiled", "force_prior": "shared"})  # refuses unknown
     if opts["tau_in_intervals"] not in ("profiled", "held"):

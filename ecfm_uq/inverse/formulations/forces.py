@@ -129,7 +129,7 @@ def optimal_forces(like, eps, lam0=None, *, tol=1e-15, maxiter=100):
     if like.system.Gamma is None:
         raise ValueError("optimal_forces needs a system with constraint forces (Gamma)")
     eps = like.system.check_eps(eps)
-    lam0 = like._lam(lam0)
+    lam0 = like.forces(lam0)
     tol = check_positive("tol", tol)
     maxiter = check_int("maxiter", maxiter, minimum=1)
     point, nit, converged, msg = _newton_forces(like, eps, lam0, tol, maxiter)

@@ -65,11 +65,13 @@ from ...errors import ConvergenceError
 from ..core.drivers import least_squares_scaled
 from ..core.result import InverseResult, Uncertainty
 from ..core.series import ForceSeries, OdeTrajectory
+from ..problems.force_bases import check_force_basis
 from ..problems.noise_model import NoiseModel
 from ..problems.ode import solve_with_sensitivities
 from ..statistics.loglik import no_likelihood, remember_last_point
 from ..statistics.uncertainty import estimate_uncertainty, least_squares_jacobian
 from ..statistics.verdict import check_bounds, decide, no_test
+from .ode_basis import fit_ode_basis
 
 __all__ = ["ExactForces", "fit_ode_ecfm"]
 
@@ -104,6 +106,11 @@ class ExactForces:
         self.where = np.full(mask.shape, -1)
         self.where[mask] = np.arange(mask.sum())
         self.warm = np.zeros((self.K, self.m))
+        # the last solve's eps and forces' derivatives in eps: the next solve's first
+        # Newton guess is their linear prediction (one solve per interval where the
+        # prediction already meets the data)
+        self.warm_eps = None
+        self.warm_slope = None
         self.jump_weight = 1.0 / np.sqrt(self.dt[0]) if self.jump and self.K else 1.0
 
     @property
@@ -142,6 +149,10 @@ class ExactForces:
         J = np.zeros((self.n_residual, p))
         R_d = np.zeros((self.n_residual, nd)) if with_data else None
         forces = np.zeros((self.K, m))
+        guess = self.warm.copy()
+        if self.warm_eps is not None and self.warm_eps.shape == eps.shape:
+            guess += (self.warm_slope @ (eps - self.warm_eps)).reshape(self.K, m)
+        slope = np.zeros((self.K * m, p))
         jump = None
         row = 0
         if self.jump:
@@ -175,7 +186,7 @@ class ExactForces:
             S0 = np.hstack((np.eye(n), np.zeros((n, p + q))))
             T_eps = np.hstack((np.zeros((p, n)), np.eye(p), np.zeros((p, q))))
             G = np.hstack((np.zeros((n, n + p)), EF))
-            f = self.warm[k, cols].copy()
+            f = guess[k, cols].copy()
             target = d_at(pb, i, cols)
             scale = max(1.0, np.max(np.abs(target))) if q else 1.0
             # the last Newton update is applied linearly (exact to O(|c|^2)) once the
@@ -222,7 +233,7 @@ class ExactForces:
                 J[row + cols] = w * df_eps
                 r[row + cols] = w * f
                 forces[k, cols] = f
-                self.warm[k, cols] = f
+                slope[k * m + cols] = df_eps
             else:
                 Y_eps = W_eps
             if with_data:
@@ -235,6 +246,8 @@ class ExactForces:
                     Y_d = W_d
             y = yb
             row += m
+        # kept only from a complete solve (a failed one leaves the last good guess)
+        self.warm, self.warm_eps, self.warm_slope = forces.copy(), eps.copy(), slope
         return {"forces": forces, "jump": jump, "r": r, "J": J, "R_d": R_d,
                 "segments": segments}  # fmt: skip
 
@@ -289,15 +302,27 @@ def _covariance(sigma, n):
 
 
 def fit_ode_ecfm(problem, eps0, s):
-    """:func:`~ecfm_uq.inverse.fit` of an :class:`OdeProblem`, ``formulation="ecfm"``."""
+    """:func:`~ecfm_uq.inverse.fit` of an :class:`OdeProblem`, ``formulation="ecfm"``.
+
+    ``options["force_basis"]``: ``"constant"`` (the default, this module's forces) or
+    ``"linear"`` / ``{"rbf": width}`` (:func:`.ode_basis.fit_ode_basis`)."""
     if s.method not in ("auto", "least-squares", "trf"):
         raise ValueError(
             f"unknown `method` {s.method!r} for the ECFM of an OdeProblem; choose "
             "'least-squares' (trust-region reflective, the default)"
         )
     options = s.take({"polish": True, "x_scale": "jac", "ftol": 1e-15, "xtol": 1e-15,
-                      "gtol": 1e-15})  # fmt: skip
+                      "gtol": 1e-15, "force_basis": "constant"})  # fmt: skip
+    basis = options.pop("force_basis")
+    kind = check_force_basis(basis)[0]
     eps0 = problem.check(as_finite_array("eps0", eps0, ndim=1))
+    if kind != "constant":  # a basis coupling the intervals: all forces in one solve
+        if problem.n_data < eps0.size:
+            raise ValueError(
+                f"`data` has {problem.n_data} readings for {eps0.size} parameters: fewer "
+                "data than parameters cannot determine eps"
+            )
+        return fit_ode_basis(problem, eps0, forced_components(problem), basis, s, options)
     forces = ExactForces(problem, forced_components(problem))
     p = eps0.size
     bounds = check_bounds(s.bounds, p)

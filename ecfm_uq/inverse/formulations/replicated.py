@@ -67,10 +67,11 @@ from ..core.convergence import (
     Optimality,
     at_bound,
     bounds_arrays,
-    decide_status,
 )
-from ..core.result import InverseResult, Uncertainty
+from ..core.fitter import Outcome
+from ..core.result import Uncertainty
 from ..problems.moments import moment_verdict, replicate_statistics
+from ..statistics.uncertainty import estimate_uncertainty
 from .forces import optimal_forces
 from .replicated_status import (
     FAILURES,
@@ -246,7 +247,7 @@ def _fit_inner_outer(
 ):
     sysm = like.system
     tr = _Tracker()
-    state = {"lam": like._lam(lam0), "inner_nit": 0}
+    state = {"lam": like.forces(lam0), "inner_nit": 0}
 
     def inner(eps):
         # Lambda(eps, .) is not convex and has spurious local minima at large forces
@@ -305,7 +306,7 @@ def _fit_penalty(like, eps0, bounds, maxiter, ftol=1e-8, lam0=None, penalty=100.
     alpha = check_positive("penalty", penalty)
     if lam0 is None:
         lam0 = np.full(C, 1e-3)
-    lam0 = like._lam(lam0)
+    lam0 = like.forces(lam0)
     if not np.any(lam0):
         raise ValueError(
             "`lam0` must be nonzero for the penalty form: log(0.5 ||lam||^2) is -inf at lam = 0"
@@ -404,7 +405,9 @@ _OPTIONS = {
 
 
 def fit_replicated_problem(problem, eps0, s):
-    """:func:`~ecfm_uq.inverse.fit` for a :class:`~ecfm_uq.inverse.problems.galerkin.ReplicatedProblem`.
+    """:func:`~ecfm_uq.inverse.fit` for a :class:`~ecfm_uq.inverse.problems.galerkin.ReplicatedProblem`:
+    an :class:`~ecfm_uq.inverse.core.fitter.Outcome` (the Newton decrement in eps measured
+    at the returned point; the entry point decides the status and builds the result).
 
     Formulations: ``"inner-outer"`` (or ``"ecfm"``): :math:`\\min_\\epsilon
     \\tfrac12\\|\\lambda^*(\\epsilon)\\|^2` with :math:`\\lambda^* = \\arg\\min_\\lambda
@@ -516,18 +519,19 @@ def fit_replicated_problem(problem, eps0, s):
     else:
         unc = _likelihood_uncertainty(like, formulation, eps_hat, lam)
     nfev = int(getattr(res, "nfev", 0) or 0)
-    return InverseResult(
+    return Outcome(
         uncertainty=unc,
         eps=eps_hat,
         loss=float(loss),
+        opt=opt,
+        exhausted=int(res.nit) >= maxiter,
         # a model that cannot be solved at the returned point is a measured failure
-        status=decide_status(opt, int(res.nit) >= maxiter, failure=None if final_ok else msg),
-        optimality=None if opt is None else opt.value,
+        failure=None if final_ok else msg,
         message=msg,
         nit=int(res.nit),
         nfev=nfev,
         njev=int(getattr(res, "njev", 0) or nfev),
-        formulation=f"likelihood-{formulation}",
+        label=f"likelihood-{formulation}",
         method=method,
         eps_history=np.array(tr.eps).reshape(-1, system.n_eps),
         loss_history=np.array(tr.loss),
@@ -568,8 +572,6 @@ def _likelihood_uncertainty(like, formulation, eps, lam):
     distribution. Student-t intervals with D - 1 degrees of freedom (the covariance is
     estimated from D replicates).
     """
-    from ..statistics.uncertainty import estimate_uncertainty
-
     if formulation == "penalty":
         return Uncertainty.failed(
             "uncertainty not computed: the penalty objective has no minimizer (it is "

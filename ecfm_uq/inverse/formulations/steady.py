@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..._validation import as_finite_array, as_operator
-from ...errors import ConvergenceError
+from ...errors import ConvergenceError, NonIdentifiableError
 from ...system import solve_steady
 from ..core.convergence import OFFSET_TOL
 from ..core.drivers import (
@@ -31,6 +31,7 @@ from ..core.drivers import (
 from ..core.gradients import choose_gradient
 from ..core.result import InverseResult, Uncertainty, Verdict
 from ..problems.galerkin import lazy_standard_residual
+from ..statistics.uncertainty import estimate_uncertainty, least_squares_jacobian, residual_variance
 from ..statistics.verdict import consistency_verdict
 
 
@@ -254,13 +255,6 @@ def _uncertainty(
     regression package. ``"sandwich"``: the full Hessian by finite differences of the
     gradient, :math:`H^{-1}J^TJH^{-1}s^2` (the v0.2 convention).
     """
-    from ...errors import NonIdentifiableError
-    from ..statistics.uncertainty import (
-        estimate_uncertainty,
-        least_squares_jacobian,
-        residual_variance,
-    )
-
     objective = _OBJECTIVES[formulation]
     try:
         if sigma is not None:

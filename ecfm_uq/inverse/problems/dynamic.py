@@ -40,19 +40,25 @@ times: :mod:`~ecfm_uq.inverse.problems.dynamic_sparse`.
 
 from __future__ import annotations
 
+import contextlib
+import copy
 import dataclasses
 
 import numpy as np
 
 from ..._validation import as_dense_rows, as_finite_array, check_choice, check_int, check_positive
-from ...errors import ConvergenceError
+from ...errors import ConvergenceError, NonIdentifiableError
 from ...system import march
 from ...system.schemes import SCHEMES
 from ...system.step_control import check_steps, check_tolerances, choose_steps
 from ..core.gradients import choose_gradient
 from ..core.result import Uncertainty
-from .dynamic_sparse import data_derivatives, data_steps, interval_forces
+from ..statistics.loglik import least_squares_likelihood, no_likelihood
+from ..statistics.uncertainty import estimate_uncertainty, least_squares_jacobian, residual_variance
+from .dynamic_sparse import check_data_times, data_derivatives, data_steps, interval_forces
+from .force_bases import check_force_basis
 from .interface import InverseProblem
+from .whitening import dynamic_noise_model, jacobian_in_data_units, whitened_problem
 
 FORMULATIONS = ("standard", "ecfm")
 #: the time schemes of a dynamic problem: the fixed-step ones and the frozen adaptive grid
@@ -88,7 +94,8 @@ class DynamicInverseProblem(InverseProblem):
     t : (n_t,) array_like, optional
         The data times, when the data are not at every step: strictly increasing times
         on the step grid ``t0 + k * dt`` within the march (``dt`` dividing the data's
-        spacing; the integrator takes ``dt``'s steps between them). The standard fit fits
+        spacing; the integrator takes ``dt``'s steps between them; with
+        ``scheme="adaptive"`` any times in the march, the chosen grid holding them). The standard fit fits
         these readings only; the ECFM holds one force vector over each data interval
         :math:`(t_{j-1}, t_j]` and matches the data at the data times, its objective the
         force function's :math:`L^2`, :math:`\\tfrac12\\sum_j\\Delta t_j|\\lambda_j|^2`
@@ -123,6 +130,16 @@ class DynamicInverseProblem(InverseProblem):
     rtol, atol : float, optional
         ``scheme="adaptive"`` only: the local error tolerances of every step (default
         ``rtol=1e-6``; ``atol`` ``rtol * max|Theta0|``, ``rtol`` when ``Theta0 = 0``).
+        With ``"adaptive"`` the data times ``t`` need not be on the ``dt`` grid (the
+        chosen grid holds them); the ECFM then holds its forces in the basis
+        ``force_basis`` between the data times, matched at them, on the frozen grid.
+    force_basis : {"constant", "linear"} or {"rbf": width}
+        The ECFM force in time with data times ``t`` or ``scheme="adaptive"``
+        (:mod:`~ecfm_uq.inverse.problems.force_bases`): one force per data interval
+        (the default), continuous piecewise linear (hat functions at the data times), or
+        Gaussians centred at the data times of the given width (time units); the
+        objective the force function's :math:`L^2`. With data at every step of a fixed
+        scheme and ``"constant"``: the paper's per-step forces.
 
     Raises
     ------
@@ -152,6 +169,7 @@ class DynamicInverseProblem(InverseProblem):
         scheme="euler",
         rtol=None,
         atol=None,
+        force_basis="constant",
     ):
         if getattr(system, "M", None) is None:
             raise ValueError("`system` needs a mass matrix M for time stepping (build it with M=)")
@@ -176,6 +194,8 @@ class DynamicInverseProblem(InverseProblem):
                 "the fixed step `dt` (pass scheme='adaptive', or drop rtol/atol)"
             )
         self.rtol, self.atol = check_tolerances(1e-6 if rtol is None else rtol, atol)
+        check_force_basis(force_basis)
+        self.force_basis = force_basis
         self.steps = None  # the frozen StepSequence of scheme="adaptive"
         self._last = {}  # formulation -> last trajectory (the warm start)
         N, P = system.shape
@@ -186,6 +206,8 @@ class DynamicInverseProblem(InverseProblem):
         C = self.M_obs.shape[0]
         self._forces = None  # the IntervalForces of data at some steps (built when needed)
         self._weight = self.dt  # z = weight/2 * sum of squared residuals (standard)
+        if t is not None and self.adaptive:  # any times: the chosen grid will hold them
+            return self._set_data_times(t, V, C)
         steps = None if t is None else data_steps(t, self.t0, self.dt, self.n_steps)
         if steps is not None and np.array_equal(steps, np.arange(self.n_steps + 1)):
             steps = None  # data at every step: the paper's problem
@@ -205,6 +227,29 @@ class DynamicInverseProblem(InverseProblem):
         self.sparse = steps is not None
         #: the data times, the rows of V
         self.t = self.t0 + self.dt * self._rows
+
+    def _set_data_times(self, t, V, C):
+        """Data times off any ``dt`` grid (``scheme="adaptive"``): ``t`` and ``V`` stored
+        with the initial time as row 0; the rows of a trajectory (``_rows``) are known
+        once a grid is frozen (:meth:`freeze_steps`; until then, placeholders)."""
+        t = check_data_times(t, self.t0, self.t0 + self.n_steps * self.dt)
+        V = as_finite_array("V", V, shape=(t.size, C))
+        if t[0] > self.t0 + 1e-12 * (t[-1] - self.t0):
+            V = np.vstack([self.Theta0 @ self.system.E1 @ self.M_obs.T, V])
+            t = np.r_[self.t0, t]
+        else:
+            t = np.r_[self.t0, t[1:]]
+        if t.size < 2:
+            raise ValueError("`t` has no data time after t0: nothing to fit")
+        self.V, self.t, self.sparse = V, t, True
+        self._rows = np.arange(t.size)
+        self._weight = (t[-1] - t[0]) / (t.size - 1)  # the mean data spacing
+
+    @property
+    def _by_interval(self):
+        """The ECFM forces are functions of time in a basis (data times ``t``, or an
+        adaptive grid, or a basis other than ``"constant"``), not the paper's per step."""
+        return self.sparse or self.adaptive or self.force_basis != "constant"
 
     @property
     def adaptive(self):
@@ -228,7 +273,7 @@ class DynamicInverseProblem(InverseProblem):
             raise ValueError(f"freeze_steps is for scheme='adaptive', not {self.scheme!r}")
         eps = self.system.check_eps(eps)
         at = f"choosing the steps at eps={np.array2string(eps)} failed"
-        t_data = self.t  # the rows of V
+        t_data = self.t  # the data times, the rows of V
         try:
             seq = choose_steps(
                 self.system, eps, self.Theta0, t_data, rtol=self.rtol, atol=self.atol,
@@ -240,6 +285,7 @@ class DynamicInverseProblem(InverseProblem):
         if not seq.met:
             raise ConvergenceError(f"{at}: {seq.message}")
         self.steps, self._rows, self._last = seq, seq.data_index, {}
+        self._forces = None  # the forces' basis lives on the grid
         return seq
 
     def check_steps(self, eps):
@@ -291,6 +337,28 @@ class DynamicInverseProblem(InverseProblem):
         """A copy with other data starts cold (no warm start from the old data's fits)."""
         self._last = {}
 
+    @contextlib.contextmanager
+    def warm_starts_kept(self):
+        """A context in which solves leave the optimizer's warm starts as they were (a
+        check at one point, e.g. the status test or the verdict, must not move them)."""
+        saved = dict(self._last)
+        try:
+            yield self
+        finally:
+            self._last = saved
+
+    def with_force_basis(self, force_basis):
+        """This problem with the ECFM forces in ``force_basis``
+        (:mod:`~ecfm_uq.inverse.problems.force_bases`): itself when it has that basis, else a
+        copy with its own forces and ECFM warm starts (the rest shared)."""
+        check_force_basis(force_basis)
+        if force_basis == self.force_basis:
+            return self
+        other = copy.copy(self)
+        other.force_basis, other._forces = force_basis, None
+        other._last = {k: w for k, w in self._last.items() if not k.startswith("ecfm")}
+        return other
+
     # -- forward solves --------------------------------------------------------------------
     def solve(self, eps, formulation="standard", sensitivities=False, keep_factors=False):
         """March the model at ``eps``; ``"ecfm"`` adds the data constraint at every step.
@@ -308,12 +376,6 @@ class DynamicInverseProblem(InverseProblem):
         formulation = check_choice("formulation", formulation, FORMULATIONS)
         constraint = None
         if formulation == "ecfm":  # M theta_i = v_i: in the data's units (same solutions)
-            if self.adaptive:
-                raise ValueError(
-                    "the ECFM formulation constrains the state to the data at every step, "
-                    "but the steps of scheme='adaptive' between data times have no data: "
-                    "use formulation='standard', or a fixed-step scheme ('euler', 'bdf2')"
-                )
             if self.system.n_forces != self.n_sensors:
                 raise ValueError(
                     f"the ECFM formulation needs one constraint force per sensor: the system "
@@ -321,7 +383,7 @@ class DynamicInverseProblem(InverseProblem):
                 )
             constraint = (self.M_obs, self._in_data_units(self.V))
         eps = self.system.check_eps(eps)
-        if constraint is not None and self.sparse:
+        if constraint is not None and self._by_interval:
             return self._interval_forces(eps, sensitivities)[0]
         if self.adaptive and self.steps is None:
             self.freeze_steps(eps)
@@ -439,13 +501,13 @@ class DynamicInverseProblem(InverseProblem):
             :math:`z = \\tfrac12\\sum_j\\Delta t_j|\\lambda_j|^2` over the intervals and its
             gradient by forward sensitivities).
         """
-        if self.sparse:
+        if self._by_interval:  # z = lam^T W lam / 2, W the basis' Gram matrix (x I_C)
             traj, lam, dlam, _ = self._interval_forces(self.system.check_eps(eps), gradient)
-            w = self._forces.widths
-            z = 0.5 * float(np.sum(w[:, None] * lam * lam))
+            Wl = self._forces.W @ lam.ravel()
+            z = 0.5 * float(lam.ravel() @ Wl)
             if not gradient:
                 return z, None, traj
-            return z, np.einsum("t,tc,tcm->m", w, lam, dlam), traj
+            return z, Wl @ dlam.reshape(lam.size, -1), traj
         adjoint = gradient and self.gradient == "adjoint"
         traj = self.solve(eps, "ecfm", sensitivities=gradient and not adjoint, keep_factors=adjoint)
         lam = traj.lam[1:]
@@ -476,13 +538,13 @@ class DynamicInverseProblem(InverseProblem):
         trajectory : Trajectory
         """
         formulation = check_choice("formulation", formulation, FORMULATIONS)
+        n_eps = self.system.n_eps
+        if formulation == "ecfm" and self._by_interval:  # R lam, R^T R = W (Gram x I_C)
+            traj, lam, dlam, _ = self._interval_forces(self.system.check_eps(eps), True)
+            R = self._forces.root
+            return R @ lam.ravel(), R @ dlam.reshape(lam.size, n_eps), traj
         traj = self.solve(eps, formulation, sensitivities=True)
         h = np.sqrt(self._weight)  # dt with data at every step
-        n_eps = self.system.n_eps
-        if formulation == "ecfm" and self.sparse:  # sqrt(dt_j) lam_j, one per interval
-            w = np.sqrt(self._forces.widths)[:, None]
-            lam, dlam = traj.lam[self._rows[1:]], traj.dlam[self._rows[1:]]
-            return (w * lam).ravel(), (w[:, :, None] * dlam).reshape(-1, n_eps), traj
         if formulation == "ecfm":
             return h * traj.lam[1:].ravel(), h * traj.dlam[1:].reshape(-1, n_eps), traj
         e = self.predictions(traj)[1:] - self.V[1:]
@@ -511,15 +573,10 @@ class DynamicInverseProblem(InverseProblem):
         over the ``n = P C`` readings (sigma known, or profiled out), or why there is none.
         ``sigma`` an array (per sensor, a covariance over the sensors, or per reading;
         :mod:`ecfm_uq.inverse.problems.whitening`): that of the whitened readings."""
-        from ..statistics.loglik import least_squares_likelihood, no_likelihood
-        from .whitening import dynamic_noise_model
-
         if formulation != "standard":
             return no_likelihood(formulation)
         noise = dynamic_noise_model(sigma, self.n_readings, self.n_sensors)
         if noise.kind in ("diagonal", "covariance"):
-            from .whitening import whitened_problem
-
             like = whitened_problem(self, noise).log_likelihood(formulation, 1.0)
             what = f"trajectory least squares, Gaussian noise {noise.describe()}"
             return dataclasses.replace(like, description=what)
@@ -569,15 +626,9 @@ class DynamicInverseProblem(InverseProblem):
             ``cov``, ``stderr``, ``intervals``, ``noise_model``, ``jacobian`` (n_eps,
             n_steps C), ...; or ``success=False`` and the ``message`` why not.
         """
-        import copy
-
-        from ..statistics.uncertainty import estimate_uncertainty, residual_variance
-
         formulation = check_choice("formulation", formulation, FORMULATIONS)
         eps = self.system.check_eps(eps)
         if sigma is not None and np.ndim(sigma) > 0:  # whitened once, as fit does
-            from .whitening import dynamic_noise_model, jacobian_in_data_units, whitened_problem
-
             noise = dynamic_noise_model(sigma, self.n_readings, self.n_sensors)
             if noise.kind != "scalar":
                 unc = whitened_problem(self, noise).uncertainty(eps, formulation, 1.0, covariance)
@@ -609,12 +660,10 @@ class DynamicInverseProblem(InverseProblem):
         data = self.V[1:].ravel()
         if covariance == "implicit":
             return estimate_uncertainty(grad, eps, data, s2, model, dof=dof)
-        from ...errors import NonIdentifiableError
-        from ..statistics.uncertainty import least_squares_jacobian
 
         saved = dict(self._last)
         try:
-            if formulation == "ecfm" and self.sparse:  # the forces' data derivative known
+            if formulation == "ecfm" and self._by_interval:  # the forces' data derivative
                 _, J, dr_dv = data_derivatives(self, eps)
             else:
                 _, J, _ = self.residual(eps, formulation)
@@ -622,8 +671,8 @@ class DynamicInverseProblem(InverseProblem):
             return Uncertainty.failed(f"uncertainty not computed: {e}")
         finally:
             self._last = saved
-        if formulation == "ecfm" and self.sparse:
-            # r = sqrt(dt_j) lam_j(eps, V): d eps_hat / dV = -J^+ dr/dV (Gauss-Newton)
+        if formulation == "ecfm" and self._by_interval:
+            # r = R lam(eps, V): d eps_hat / dV = -J^+ dr/dV (Gauss-Newton)
             try:
                 D = -least_squares_jacobian(J) @ dr_dv
             except NonIdentifiableError as e:

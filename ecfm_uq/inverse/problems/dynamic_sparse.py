@@ -3,7 +3,16 @@ readings at some steps of the time grid, the integrator stepping between them.
 
 The data times ``t`` are a subset of the step grid :math:`t_0 + k\\Delta t` (:func:`data_steps`
 checks it); the step ``dt`` is the integrator's (as fine as its accuracy needs), the data
-come when they come.
+come when they come. With ``scheme="adaptive"`` they are any times (:func:`check_data_times`):
+the grid between them is chosen to ``rtol``/``atol`` with every data time a node, then
+frozen, and the ECFM below runs on it (the gradients exact for that grid).
+
+The force may be held in another basis in time (``force_basis``,
+:mod:`~ecfm_uq.inverse.problems.force_bases`: hat functions or Gaussians at the data
+times): :math:`F = E\\lambda` with :math:`E` the basis at the step points, the objective
+:math:`\\tfrac12\\lambda^T(G\\otimes I)\\lambda` (:math:`G` the Gram matrix), and with
+more basis functions than data intervals the minimum-norm forces that match. What
+follows is the default, one force per interval.
 
 * The standard fit fits the readings at the data times only (the other steps have no
   datum: their sensitivities and adjoint sources are zero).
@@ -36,11 +45,49 @@ import scipy.sparse as sp
 from ..._validation import as_finite_array
 from ...errors import ConvergenceError
 from ...system import Coefficient, GalerkinSystem, LoadTerm, NonlinearTerm, march
+from .force_bases import basis_matrix, check_force_basis, checked_gram, right_inverse
 
-__all__ = ["IntervalForces", "data_derivatives", "data_steps", "interval_forces"]
+__all__ = [
+    "IntervalForces",
+    "check_data_times",
+    "data_derivatives",
+    "data_steps",
+    "interval_forces",
+]
 
 #: Newton iterations of the exact match before the forces are declared not found
 MAX_NEWTON = 25
+
+
+def check_data_times(t, t0, end):
+    """Data times ``t``: strictly increasing, within ``[t0, end]`` (to a relative
+    ``1e-9`` of the span).
+
+    Raises
+    ------
+    ValueError
+        Naming ``t``: empty, not increasing (unsorted, or a repeated time), or outside
+        the march.
+    """
+    t = as_finite_array("t", t, ndim=1)
+    if t.size == 0:
+        raise ValueError("`t` (the data times) is empty: pass the times of the rows of V")
+    d = np.diff(t)
+    if np.any(d <= 0):
+        i = int(np.flatnonzero(d <= 0)[0])
+        what = "repeated" if d[i] == 0 else "not increasing"
+        raise ValueError(
+            f"`t` must be strictly increasing: t[{i}]={t[i]:g} is followed by "
+            f"t[{i + 1}]={t[i + 1]:g} ({what}); sort the data by time and merge repeated times"
+        )
+    slack = 1e-9 * (end - t0)
+    if t[0] < t0 - slack or t[-1] > end + slack:
+        bad = t[0] if t[0] < t0 else t[-1]
+        raise ValueError(
+            f"`t` must lie in the march [t0, t0 + n_steps dt] = [{t0:g}, {end:g}]; "
+            f"t={bad:g} does not: raise n_steps, or drop the readings outside"
+        )
+    return t
 
 
 def data_steps(t, t0, dt, n_steps):
@@ -62,26 +109,10 @@ def data_steps(t, t0, dt, n_steps):
     ------
     ValueError
         Naming ``t``: empty, not increasing (unsorted, or a repeated time), outside the
-        march, or a time between two steps (choose ``dt`` dividing the data's spacing).
+        march, or a time between two steps (choose ``dt`` dividing the data's spacing,
+        or ``scheme="adaptive"``, whose grid holds any data times).
     """
-    t = as_finite_array("t", t, ndim=1)
-    if t.size == 0:
-        raise ValueError("`t` (the data times) is empty: pass the times of the rows of V")
-    d = np.diff(t)
-    if np.any(d <= 0):
-        i = int(np.flatnonzero(d <= 0)[0])
-        what = "repeated" if d[i] == 0 else "not increasing"
-        raise ValueError(
-            f"`t` must be strictly increasing: t[{i}]={t[i]:g} is followed by "
-            f"t[{i + 1}]={t[i + 1]:g} ({what}); sort the data by time and merge repeated times"
-        )
-    end = t0 + n_steps * dt
-    if t[0] < t0 - 1e-9 * dt or t[-1] > end + 1e-9 * dt:
-        bad = t[0] if t[0] < t0 else t[-1]
-        raise ValueError(
-            f"`t` must lie in the march [t0, t0 + n_steps dt] = [{t0:g}, {end:g}]; "
-            f"t={bad:g} does not: raise n_steps, or drop the readings outside"
-        )
+    t = check_data_times(t, t0, t0 + n_steps * dt)
     x = (t - t0) / dt
     k = np.rint(x).astype(int)
     off = np.abs(x - k) > 1e-9 * np.maximum(1.0, np.abs(x))
@@ -90,30 +121,47 @@ def data_steps(t, t0, dt, n_steps):
         raise ValueError(
             f"`t` must be on the step grid t0 + k dt (t0={t0:g}, dt={dt:g}): t[{i}]={t[i]:g} "
             f"is {x[i]:.6g} steps after t0; choose dt dividing the data's spacing (e.g. "
-            f"dt = {float(np.min(np.diff(np.r_[t0, t]))):g} / m for an integer m)"
+            f"dt = {float(np.min(np.diff(np.r_[t0, t]))):g} / m for an integer m), or "
+            "scheme='adaptive' (its grid holds any data times)"
         )
     return k
 
 
 class IntervalForces:
-    """The exact-match forces of a problem with data at some steps, one per data interval.
+    """The exact-match forces of a problem with data at some times, in a basis in time.
 
     Parameters
     ----------
     problem : DynamicInverseProblem
-        With ``t`` (data times), a fixed-step scheme, and ``C`` constraint forces
+        With ``t`` (data times) or ``scheme="adaptive"`` (its grid frozen) or a
+        ``force_basis`` other than ``"constant"``, and ``C`` constraint forces
         (``Gamma``) for its ``C`` sensors.
 
     Attributes
     ----------
     steps : (J,) int ndarray
         The step index of every fitted data time (``V[1:]``'s rows).
+    grid : (n_steps + 1,) ndarray
+        The step points (the fixed ``t0 + k dt``, or the frozen adaptive grid).
     widths : (J,) ndarray
         :math:`\\Delta t_j = t_j - t_{j-1}` (:math:`t_0` the initial time).
+    E : (n_steps + 1, B) ndarray
+        The basis at the step points (:func:`.force_bases.basis_matrix`; row 0, the
+        initial state, zero): the per-step forces are ``E @ lam``.
+    W : (B C, B C) ndarray
+        :math:`G\\otimes I_C`, ``G`` the basis' Gram matrix: the objective is
+        :math:`\\tfrac12\\lambda^TW\\lambda`; ``root`` its upper Cholesky factor ``R``
+        (:math:`W = R^TR`), the residual ``R lam``.
     system : GalerkinSystem
-        The problem's system with the forces as a load :math:`\\Gamma\\lambda_j` on the steps
-        of interval ``j`` and ``J C`` more parameters, :math:`(\\epsilon, \\lambda_1, \\dots,
-        \\lambda_J)`, so that one march gives the state and its derivatives in both.
+        The problem's system with the force as a load :math:`\\Gamma F(t_s)` and ``B C``
+        more parameters, :math:`(\\epsilon, \\lambda_1, \\dots, \\lambda_B)`, so that one
+        march gives the state and its derivatives in both.
+
+    Raises
+    ------
+    ValueError
+        Fewer basis functions than data intervals (the exact match over-determined),
+        naming ``force_basis``.
     """
 
     def __init__(self, problem):
@@ -121,35 +169,67 @@ class IntervalForces:
         self.n_eps = system.n_eps
         self.steps = np.asarray(problem._rows[1:], dtype=int)
         self.J, self.C = self.steps.size, system.n_forces
-        self.widths = problem.dt * np.diff(np.r_[0, self.steps])
-        # the interval of every step point k (step k - 1 -> k): j with steps[j-1] < k <= steps[j]
-        k = np.arange(problem.n_steps + 1)
-        self.interval = np.searchsorted(self.steps, k, side="left")
-        self.interval[0] = self.J  # the initial state: no force
+        if problem.adaptive:
+            self.grid = np.asarray(problem.steps.times, dtype=float)
+        else:
+            self.grid = problem.t0 + problem.dt * np.arange(problem.n_steps + 1)
+        knots = self.grid[problem._rows]
+        self.widths = np.diff(knots)
+        self.kind, width = check_force_basis(problem.force_basis)
+        if self.kind == "constant":  # by step index: exact on any grid
+            k = np.arange(self.grid.size)
+            interval = np.searchsorted(self.steps, k, side="left")
+            self.E = np.zeros((self.grid.size, self.J))
+            held = (interval < self.J) & (k > 0)
+            self.E[k[held], interval[held]] = 1.0
+        else:
+            self.E = basis_matrix(self.kind, width, knots, self.grid)
+            self.E[0] = 0.0  # the initial state: no step, no force
+        self.B = self.E.shape[1]
+        if self.B < self.J:
+            raise ValueError(
+                f"`force_basis` {problem.force_basis!r} has {self.B} functions for {self.J} "
+                "data intervals: the exact match has more conditions than forces; use "
+                "'constant', 'linear' or an RBF basis centred at the data times"
+            )
+        self.W = np.kron(checked_gram(self.kind, width, knots), np.eye(self.C))
+        self.root = np.linalg.cholesky(self.W).T
         Gamma = system.Gamma.toarray() if sp.issparse(system.Gamma) else np.asarray(system.Gamma)
-        load = _IntervalLoad(self, Gamma, problem.t0, problem.dt)
+        load = _BasisLoad(self, Gamma)
         terms = (*(_first_parameters(term, self.n_eps) for term in system.terms), load)
         self.system = GalerkinSystem(
-            terms, self.n_eps + self.J * self.C, basis=system.basis, Gamma=system.Gamma, M=system.M,
-            name=f"{system.name} + interval forces",
+            terms, self.n_eps + self.B * self.C, basis=system.basis, Gamma=system.Gamma,
+            M=system.M, name=f"{system.name} + interval forces",
         )  # fmt: skip
 
-    def at_times(self, times, t0, dt):
-        """The interval of the step point at each of ``times`` (``J``: no force)."""
-        k = np.rint((np.asarray(times, dtype=float) - t0) / dt).astype(int)
-        return self.interval[np.clip(k, 0, self.interval.size - 1)]
+    def points(self, times):
+        """The step point nearest each of ``times`` (the loads are read at step points)."""
+        times = np.atleast_1d(np.asarray(times, dtype=float))
+        i = np.clip(np.searchsorted(self.grid, times), 1, self.grid.size - 1)
+        left = np.abs(times - self.grid[i - 1]) <= np.abs(self.grid[i] - times)
+        return np.where(left, i - 1, i)
 
     def expand(self, lam):
-        """Per-step forces ``(n_steps + 1, ...)`` from the interval forces ``(J, ...)``:
-        :math:`E\\lambda` (row 0 and the steps after the last datum: zero)."""
+        """Per-step forces ``(n_steps + 1, ...)`` from the coefficients ``(B, ...)``:
+        :math:`E\\lambda` (row 0 zero)."""
         lam = np.asarray(lam)
-        out = np.zeros((self.interval.size,) + lam.shape[1:])
-        held = self.interval < self.J
-        out[held] = lam[self.interval[held]]
-        return out
+        return np.tensordot(self.E, lam, axes=(1, 0))
+
+    def _march(self, problem, params):
+        grid = dict(dt=problem.dt, n_steps=problem.n_steps, t0=problem.t0)
+        scheme = problem.scheme
+        if problem.adaptive:
+            grid, scheme = dict(times=self.grid), "bdf2"
+        return march(
+            self.system, params, problem.Theta0, **grid, sensitivities=True,
+            tol=problem.solve_tol, maxiter=problem.solve_maxiter, strict=True,
+            solver=problem.solver, scheme=scheme,
+        )  # fmt: skip
 
     def solve(self, problem, eps, sensitivities=False, lam0=None):
-        """The forces that match the data at ``eps``, by Newton's method on all intervals.
+        """The forces that match the data at ``eps``, by Newton's method on all intervals
+        (with more basis functions than intervals: minimum-norm Newton steps, converging
+        to the minimum-:math:`L^2` forces that match).
 
         Returns
         -------
@@ -157,13 +237,17 @@ class IntervalForces:
             The march with the forces: ``lam`` (n_steps + 1, C) the per-step forces
             :math:`E\\lambda`; with ``sensitivities``, ``dTheta`` and ``dlam`` the total
             derivatives in :math:`\\epsilon` (through the forces).
-        lam : (J, C) ndarray
-            The force of every data interval.
-        dlam : (J, C, n_eps) ndarray or None
-            :math:`d\\lambda/d\\epsilon` (with ``sensitivities``).
-        G_lam : (J C, J C) ndarray
-            The match's derivative in the forces, :math:`\\partial(\\mathcal M\\,\\mathbb
-            E[\\theta(t_i)])/\\partial\\lambda_j` (block lower triangular).
+        lam : (B, C) ndarray
+            The force coefficients.
+        dlam : (B, C, n_eps) ndarray or None
+            :math:`d\\lambda/d\\epsilon = -PG_\\epsilon` (with ``sensitivities``), ``P`` the
+            right inverse of the match's Jacobian (:func:`.force_bases.right_inverse`):
+            exact with one force per interval; with more, the derivative along the match
+            linearized (the constraint's curvature dropped) -- ``lam^T W dlam``, the
+            objective's gradient, is exact either way (it is :math:`-\\mu^TG_\\epsilon`,
+            the multipliers' envelope derivative).
+        P : (B C, J C) ndarray
+            That right inverse: :math:`d\\lambda/dv` for the data ``V[1:]``.
 
         Raises
         ------
@@ -171,26 +255,25 @@ class IntervalForces:
             A march fails, or the match is not met in :data:`MAX_NEWTON` iterations.
         """
         ne, J, C = self.n_eps, self.J, self.C
-        lam = np.zeros(J * C) if lam0 is None else np.array(lam0, dtype=float).ravel()
+        square = self.B == J
+        n_lam = self.B * C
+        lam = np.zeros(n_lam) if lam0 is None else np.array(lam0, dtype=float).ravel()
         target = problem._in_data_units(problem.V)[1:]  # (J, C)
         scale = max(1.0, float(np.max(np.abs(target))))
         E1 = problem.system.E1
         small = False  # the last Newton step was at round-off: this march is the answer
         last_size = np.inf
         for it in range(MAX_NEWTON + 1):
-            traj = march(
-                self.system, np.r_[eps, lam], problem.Theta0, problem.dt, problem.n_steps,
-                t0=problem.t0, sensitivities=True, tol=problem.solve_tol,
-                maxiter=problem.solve_maxiter, strict=True, solver=problem.solver,
-                scheme=problem.scheme,
-            )  # fmt: skip
+            traj = self._march(problem, np.r_[eps, lam])
             mean = traj.Theta[self.steps] @ E1  # (J, N)
             G = (mean @ problem.M_obs.T - target).ravel()
             dmean = np.einsum("tikm,k->tim", traj.dTheta[self.steps], E1)
             D = np.einsum("cj,tjm->tcm", problem.M_obs, dmean).reshape(J * C, -1)
             G_lam = D[:, ne:]
             size = float(np.max(np.abs(G)))
-            if small or size <= 1e-12 * scale:
+            # with more forces than conditions the match alone does not fix them: their
+            # Newton steps must have stopped too
+            if small or (size <= 1e-12 * scale and (square or it > 0)):
                 break
             if size <= 1e-8 * scale and size > 0.5 * last_size:
                 break  # no more progress: the match at the march's own precision
@@ -202,28 +285,36 @@ class IntervalForces:
                     f"{size:.3e}); a finer dt, or parameters nearer the data"
                 )
             try:
-                step = np.linalg.solve(G_lam, -G)
+                if square:
+                    new = lam + np.linalg.solve(G_lam, -G)
+                else:  # the minimum-norm forces of the linearized match
+                    new = right_inverse(G_lam, self.W) @ (G_lam @ lam - G)
             except np.linalg.LinAlgError as e:
                 raise ConvergenceError(
                     "the interval forces cannot move the readings (singular match "
                     f"Jacobian: {e}); each sensor needs a force that reaches it (Gamma)"
                 ) from e
-            if not np.all(np.isfinite(step)):
+            if not np.all(np.isfinite(new)):
                 raise ConvergenceError("the Newton step on the interval forces is not finite")
-            lam = lam + step
+            step = new - lam
+            lam = new
             small = np.max(np.abs(step)) <= 1e-12 * max(1.0, float(np.max(np.abs(lam))))
-        lam_j = lam.reshape(J, C)
+        lam_j = lam.reshape(self.B, C)
+        try:
+            P = right_inverse(G_lam, self.W)
+        except np.linalg.LinAlgError as e:
+            raise ConvergenceError(f"the match Jacobian in the forces is singular: {e}") from e
         dlam = None
         dTheta = None
         if sensitivities:
-            dl = -np.linalg.solve(G_lam, D[:, :ne])  # (J C, n_eps)
+            dl = -P @ D[:, :ne]  # (B C, n_eps)
             dTheta = traj.dTheta[..., :ne] + traj.dTheta[..., ne:] @ dl
-            dlam = dl.reshape(J, C, ne)
+            dlam = dl.reshape(self.B, C, ne)
         out = dataclasses.replace(
             traj, lam=self.expand(lam_j), dTheta=dTheta,
             dlam=None if dlam is None else self.expand(dlam),
         )  # fmt: skip
-        return out, lam_j, dlam, G_lam
+        return out, lam_j, dlam, P
 
 
 def _pad(D, n):
@@ -275,97 +366,97 @@ def _first_parameters(term, n_eps):
     return term
 
 
-class _IntervalLoad(LoadTerm):
-    """The load :math:`\\Gamma\\lambda_j` on the steps of data interval ``j``, its force
-    values the trailing ``J C`` parameters; :meth:`on_grid` tabulates a march's grid at
-    once (the compiled march's one call per march, not one per step)."""
+class _BasisLoad(LoadTerm):
+    """The load :math:`\\Gamma F(t_s)`, :math:`F(t_s) = \\sum_j E_{sj}\\lambda_j` at the
+    step point :math:`t_s`, its coefficients the trailing ``B C`` parameters;
+    :meth:`on_grid` tabulates a march's grid at once (the compiled march's one call per
+    march, not one per step)."""
 
-    def __init__(self, forces, Gamma, t0, dt):
-        self.forces, self.Gamma, self.t0, self.dt = forces, Gamma, t0, dt
+    def __init__(self, forces, Gamma):
+        self.forces, self.Gamma = forces, Gamma
         super().__init__(self._force, self._dforce, name="interval forces")
         self.size = Gamma.shape[0]
 
-    def _columns(self, j):
-        ne, C = self.forces.n_eps, self.forces.C
-        return slice(ne + j * C, ne + (j + 1) * C)
+    def _lam(self, eps):
+        f = self.forces
+        return np.asarray(eps[f.n_eps :], dtype=float).reshape(f.B, f.C)
 
     def _force(self, eps, t):
-        j = int(self.forces.at_times([t], self.t0, self.dt)[0])
-        if j >= self.forces.J:
-            return np.zeros(self.size)
-        return self.Gamma @ np.asarray(eps[self._columns(j)], dtype=float)
+        row = self.forces.E[self.forces.points([t])[0]]
+        return self.Gamma @ (row @ self._lam(eps))
 
     def _dforce(self, eps, t):
+        f = self.forces
         D = np.zeros((self.size, len(eps)))
-        j = int(self.forces.at_times([t], self.t0, self.dt)[0])
-        if j < self.forces.J:
-            D[:, self._columns(j)] = self.Gamma
+        row = f.E[f.points([t])[0]]
+        D[:, f.n_eps :] = np.kron(row[None, :], self.Gamma)
         return D
 
     def on_grid(self, eps, times, derivative=False):
         """``F`` (n_t, N, P) and ``dF`` (n_t, N, P, n_eps) or ``None``, as
-        :meth:`LoadTerm.on_grid`, by interval rather than by time."""
+        :meth:`LoadTerm.on_grid`, from the basis at the step points."""
+        f = self.forces
+        E = f.E[f.points(times)]  # (n_t, B)
         E1 = self._E1
-        J, C, ne = self.forces.J, self.forces.C, self.forces.n_eps
-        j = self.forces.at_times(times, self.t0, self.dt)
-        held = j < J
-        lam = np.asarray(eps[ne:], dtype=float).reshape(J, C)
-        per = np.zeros((j.size, C))
-        per[held] = lam[j[held]]
-        F = (per @ self.Gamma.T)[:, :, None] * E1
+        F = ((E @ self._lam(eps)) @ self.Gamma.T)[:, :, None] * E1
         if not derivative:
             return F, None
         dF = np.zeros(F.shape + (len(eps),))
-        block = self.Gamma[:, None, :] * E1[None, :, None]  # (N, P, C)
-        for i in np.unique(j[held]):
-            dF[np.flatnonzero(j == i), :, :, self._columns(i)] = block
+        block = np.einsum("tj,nc,p->tnpjc", E, self.Gamma, E1)
+        dF[..., f.n_eps :] = block.reshape(F.shape + (f.B * f.C,))
         return F, dF
 
 
 def interval_forces(problem, eps, sensitivities=False):
-    """The ECFM of a problem with data times: the march whose force, one per data
-    interval, matches the data (:meth:`IntervalForces.solve`, built on first use), warm
-    started from the problem's last forces (a cold retry if Newton fails from there).
+    """The ECFM of a problem with data times (or an adaptive grid, or a force basis): the
+    march whose force matches the data (:meth:`IntervalForces.solve`, built on first use
+    and after every new frozen grid), warm started from the problem's last forces (a cold
+    retry if Newton fails from there). With ``scheme="adaptive"`` and no frozen grid, the
+    grid is chosen at ``eps`` for the unforced model first (:meth:`freeze_steps`).
 
     Returns
     -------
-    ``(traj, lam (J, C), dlam (J, C, n_eps) or None, G_lam (J C, J C))``
+    ``(traj, lam (B, C), dlam (B, C, n_eps) or None, P (B C, J C))``
     """
+    if problem.adaptive and problem.steps is None:
+        problem.freeze_steps(eps)
     if problem._forces is None:
         problem._forces = IntervalForces(problem)
-    last = problem._last.get("ecfm") if problem.warm_start else None
-    lam0 = None if last is None else last.lam[problem._rows[1:]]
+    lam0 = problem._last.get("ecfm-coef") if problem.warm_start else None
     try:
         out = problem._forces.solve(problem, eps, sensitivities, lam0)
     except ConvergenceError as e:
         if lam0 is not None:  # forces far from this eps can mislead Newton: retry cold
-            del problem._last["ecfm"]
+            del problem._last["ecfm-coef"]
             return interval_forces(problem, eps, sensitivities)
         raise ConvergenceError(
             f"ecfm forward solve at eps={np.array2string(eps)} failed: {e}"
         ) from e
     if problem.warm_start:
         problem._last["ecfm"] = out[0]
+        problem._last["ecfm-coef"] = out[1]
     return out
 
 
 def data_derivatives(problem, eps):
-    """The ECFM residual :math:`r = (\\sqrt{\\Delta t_j}\\lambda_j)_j` of a problem with
-    data times, its Jacobian in :math:`\\epsilon` and its derivative in the fitted data
-    ``V[1:]`` (flattened time by time): the forces move with the data through the match,
-    :math:`d\\lambda/dv = G_\\lambda^{-1}` (times ``reading_sigma`` in a copy whitened per
-    reading, whose constraint is in the data's units).
+    """The ECFM residual :math:`r = R\\lambda` (:math:`R^TR = W`, the objective
+    :math:`\\tfrac12|r|^2`; one force per interval: :math:`(\\sqrt{\\Delta t_j}\\lambda_j)_j`)
+    of a problem with data times, its Jacobian in :math:`\\epsilon` and its derivative in
+    the fitted data ``V[1:]`` (flattened time by time): the forces move with the data
+    through the match, :math:`d\\lambda/dv = P` (:meth:`IntervalForces.solve`; times
+    ``reading_sigma`` in a copy whitened per reading, whose constraint is in the data's
+    units).
 
     Returns
     -------
-    r : (J C,) ndarray
-    J : (J C, n_eps) ndarray
-    dr_dv : (J C, J C) ndarray
+    r : (B C,) ndarray
+    J : (B C, n_eps) ndarray
+    dr_dv : (B C, J C) ndarray
     """
-    _, lam, dlam, G_lam = problem._interval_forces(eps, True)
-    w = np.repeat(np.sqrt(problem._forces.widths), lam.shape[1])
-    du = np.ones(w.size)
+    _, lam, dlam, P = problem._interval_forces(eps, True)
+    R = problem._forces.root
+    du = np.ones(P.shape[1])
     if problem.reading_sigma is not None:
         du = np.asarray(problem.reading_sigma[1:], dtype=float).ravel()
-    dr_dv = w[:, None] * np.linalg.solve(G_lam, np.diag(du))
-    return w * lam.ravel(), w[:, None] * dlam.reshape(w.size, -1), dr_dv
+    dr_dv = R @ (P * du[None, :])
+    return R @ lam.ravel(), R @ dlam.reshape(lam.size, -1), dr_dv

@@ -28,7 +28,10 @@ import numpy as np
 from ..._validation import as_finite_array, as_operator
 from ...system import solve_steady
 from ..core.gradients import choose_gradient
+from ..statistics.loglik import LogLikelihood, gaussian_likelihood, no_likelihood
 from .interface import InverseProblem
+from .noise_model import noise_model
+from .pseudo_likelihood import PseudoLikelihood
 
 __all__ = ["ReplicatedProblem", "SteadyProblem"]
 
@@ -93,9 +96,6 @@ class SteadyProblem(InverseProblem):
     def log_likelihood(self, formulation, sigma):
         """The :class:`~ecfm_uq.inverse.statistics.loglik.LogLikelihood` of a fit of ``formulation`` (the standard
         one: Gaussian least squares of the sensors' residual), or why there is none."""
-        from ..statistics.loglik import gaussian_likelihood, no_likelihood
-        from .noise_model import noise_model
-
         if formulation != "standard":
             return no_likelihood(formulation)
         noise = noise_model(sigma, self.v.size)
@@ -130,7 +130,6 @@ class ReplicatedProblem(InverseProblem):
 
     def __init__(self, system, M_obs, v, *, solve_tol=None, solve_maxiter=None, solver="auto",
                  var_rtol=1e-12, hessian="auto", fd_step=1e-5):  # fmt: skip
-        from .pseudo_likelihood import PseudoLikelihood
 
         opts = _solve_options(solve_tol, solve_maxiter, solver)
         if opts == {"solver": "auto"}:
@@ -156,8 +155,6 @@ class ReplicatedProblem(InverseProblem):
     def log_likelihood(self, formulation, sigma):
         """The pseudo-likelihood :math:`\\Lambda(\\epsilon, 0)` (Eq. Lam) for the standard
         formulation, or why the force formulations have none."""
-        from ..statistics.loglik import LogLikelihood
-
         if formulation != "standard":
             return (
                 f"formulation={formulation!r} of the pseudo-likelihood optimizes constraint "

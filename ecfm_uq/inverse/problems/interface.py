@@ -9,6 +9,33 @@
 likelihood of a formulation (``log_likelihood(formulation, sigma)``: a
 :class:`~ecfm_uq.inverse.statistics.loglik.LogLikelihood` or why there is none). How each
 problem computes residuals and Jacobians stays with it.
+
+What each problem kind offers its fitters (the :class:`~ecfm_uq.inverse.core.fitter.Fitter`
+rows of :data:`ecfm_uq.inverse.fitting.FITTERS`; public attributes and methods only, no
+fitter reads a private one):
+
+=====================  =====================================================================
+problem                used by its fitters
+=====================  =====================================================================
+every kind             ``data``, ``n_data``, ``with_data``, ``forget_solves``,
+                       ``log_likelihood(formulation, sigma)``
+ModelProblem           ``v``, ``shape``, ``names``, ``jac``, ``executor``, ``formulations``,
+                       ``predict``, ``jacobian``, ``residual_function(noise)``,
+                       ``check_derivatives``
+OdeProblem             ``check``, ``t``, ``v``, ``H``, ``mask``, ``n_state``, ``state_names``,
+                       ``names``, ``n_missing``, ``readings``, ``readings_model``,
+                       ``noise(sigma)``, ``solve``, ``trajectory``, ``predict``,
+                       ``predict_jacobian``, ``observe``, ``forced``
+SteadyProblem          ``system``, ``M_obs``, ``v``, ``n_sensors``, ``solve_options``,
+                       ``gradient``
+DynamicInverseProblem  ``system``, ``V``, ``n_steps``, ``n_sensors``, ``residual``,
+                       ``objective``, ``solve``, ``predictions``, ``uncertainty``,
+                       ``adaptive``, ``steps``, ``freeze_steps``, ``check_steps``,
+                       ``warm_starts_kept()`` (a check that leaves the warm starts alone)
+ReplicatedProblem      ``system``, ``likelihood`` (a
+                       :class:`~ecfm_uq.inverse.problems.pseudo_likelihood.PseudoLikelihood`:
+                       ``solve``, ``forces``, ...)
+=====================  =====================================================================
 """
 
 from __future__ import annotations

@@ -29,6 +29,7 @@ import numpy as np
 
 from ..._validation import all_finite, as_finite_array, as_model_output
 from ...errors import ConvergenceError, ModelEvaluationError
+from ...executor import evaluate_samples
 from ...threads import NO_DENSE
 from ..core.drivers import least_squares_lm, least_squares_scaled
 from ..core.finite_differences import fd_jacobian
@@ -255,8 +256,6 @@ class ModelProblem(InverseProblem):
         return J
 
     def _map(self, points):
-        from ...executor import evaluate_samples
-
         return evaluate_samples(self.model, points, self.executor, name="model")
 
     def residual_function(self, noise, *, typical=None, accurate=False):

@@ -41,6 +41,7 @@ from scipy.integrate import solve_ivp
 from ..._validation import as_finite_array
 from ...errors import ConvergenceError
 from ..core.series import OdeTrajectory
+from ..statistics.loglik import no_likelihood
 from .interface import InverseProblem
 from .model import ModelProblem, fit_model_problem
 from .noise_model import noise_model
@@ -418,8 +419,6 @@ class OdeProblem(InverseProblem):
         self._cache = None
 
     def log_likelihood(self, formulation, sigma):
-        from ..statistics.loglik import no_likelihood
-
         return no_likelihood(formulation)
 
     # -- checks before any integration ------------------------------------------------

@@ -137,7 +137,8 @@ class PseudoLikelihood:
         self.n_solves = 0
 
     # -- pieces -----------------------------------------------------------------------
-    def _lam(self, lam):
+    def forces(self, lam):
+        """``lam`` checked as the system's constraint forces, zeros for ``None``."""
         if lam is None:
             return np.zeros(self.system.n_forces)
         return self.system.check_lam(lam)
@@ -145,7 +146,7 @@ class PseudoLikelihood:
     def solve(self, eps, lam=None):
         """The steady PCE state at (eps, lam); raises ConvergenceError on failure."""
         self.n_solves += 1
-        return solve_steady(self.system, eps, self._lam(lam), strict=True, **self.solve_options)
+        return solve_steady(self.system, eps, self.forces(lam), strict=True, **self.solve_options)
 
     def moments(self, Theta):
         """Sensor mean and variance (Eq. stats), each (C,)."""
@@ -178,7 +179,7 @@ class PseudoLikelihood:
             raise ValueError(f"`order` must be 0, 1 or 2, got {order}")
         sysm = self.system
         eps = sysm.check_eps(eps)
-        lam = self._lam(lam)
+        lam = self.forces(lam)
         if order == 2 and sysm.Gamma is None:
             raise ValueError("second derivatives in lam need a system with Gamma")
         sol = self.solve(eps, lam)

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..._validation import as_finite_array, check_choice, check_int, check_positive
 from ...errors import ConvergenceError
+from ...spectral import composite_gauss
 
 
 def _as_point(x):
@@ -220,8 +221,6 @@ def expected_relative_error(spatial_basis, chaos_basis, Theta_ref, Theta, *, n_x
     -------
     float
     """
-    from ...spectral import composite_gauss
-
     Theta_ref = as_finite_array("Theta_ref", Theta_ref, ndim=2)
     Theta = as_finite_array("Theta", Theta, shape=Theta_ref.shape)
     if chaos_basis.dim != 1:

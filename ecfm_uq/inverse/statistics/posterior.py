@@ -37,6 +37,7 @@ scale :math:`s^2(X^TX)^{-1}`, and :math:`\\sigma^2 \\sim \\|r(\\hat\\epsilon)\\|
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,6 +50,8 @@ from ..._validation import (
     rng_from_seed,
 )
 from ...errors import ConvergenceError
+from ...system import solve_steady
+from ..core.result import InverseResult
 from ..core.status import FitStatus
 
 __all__ = ["PosteriorResult", "sample_posterior", "uniform_box_prior"]
@@ -167,7 +170,11 @@ def sample_posterior(
 
     Parameters
     ----------
-    system : GalerkinSystem or InverseResult
+    system : InverseResult or GalerkinSystem
+        The fit to sample from (the one entry: the first argument is a result). A
+        :class:`~ecfm_uq.system.GalerkinSystem` with ``M_obs``, ``v``, ``sigma`` and
+        ``eps0`` is deprecated (it warns): fit a
+        :class:`~ecfm_uq.inverse.SteadyProblem` and pass the result.
     M_obs : (C, N) array_like or scipy.sparse matrix
     v : (C,) array_like
     sigma : float
@@ -201,16 +208,22 @@ def sample_posterior(
         For ``sigma <= 0``, a prior with no mass at ``eps0``, or bad sizes.
     """
     try:
-        import emcee
+        import emcee  # optional: the bayes extra, only when sampling is asked for
     except ImportError as e:  # pragma: no cover - emcee is in the test extra
         raise ImportError("sample_posterior needs emcee: pip install 'ecfm-uq[bayes]'") from e
-    from ...system import solve_steady
-    from ..core.result import InverseResult
 
     n_data = None  # sigma sampled (Jeffreys) for a profiled likelihood of this many data
     if isinstance(system, InverseResult):
         log_like, eps0, n_data = _result_likelihood(system, M_obs, v, sigma, eps0)
     else:
+        warnings.warn(
+            "sample_posterior(system, M_obs, v, sigma, eps0) is deprecated: sample from a "
+            "fit, sample_posterior(fit(SteadyProblem(system, M_obs, v), eps0, sigma=sigma), "
+            "bounds=...) (the one entry: the likelihood the result carries, started at its "
+            "estimate)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
         sigma = check_positive("sigma", sigma)
         M_obs = as_operator("M_obs", M_obs, shape=(None, system.N))
         v = as_finite_array("v", v, shape=(M_obs.shape[0],))

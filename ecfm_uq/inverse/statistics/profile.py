@@ -46,8 +46,16 @@ from scipy.interpolate import PchipInterpolator
 from ..._validation import check_int, check_level, describe
 from ...plotting import pyplot
 from ...threads import library_threads
-from ..core.convergence import at_bound, bounds_arrays
-from .profiler import MODEL_FAILURES, Profiler, beyond, walk
+from ..core.convergence import bounds_arrays
+from .profile_calibration import (
+    Calibration,
+    calibrate_ends,
+    check_calibratable,
+    noise_scale,
+    order_statistic,
+    simulator,
+)
+from .profile_walk import MODEL_FAILURES, Profiler, beyond, profile_concerns, walk
 from .uncertainty import interval_quantile
 
 __all__ = [
@@ -98,6 +106,9 @@ class Profile:
         open end, a second region, a branch that falls on its way out, a re-optimized
         parameter at its bound inside the interval (where the chi-squared threshold
         does not hold), an inner fit that did not converge. Empty when there is none.
+    calibration : Calibration or None
+        With ``threshold="calibrated"``: the simulated thresholds at the ends
+        (:mod:`~.profile_calibration`); ``interval`` and ``regions`` then use them.
     """
 
     index: int
@@ -110,6 +121,12 @@ class Profile:
     delta_method: np.ndarray
     regions: tuple = ()
     concerns: tuple = ()
+    calibration: Calibration | None = None
+
+    @property
+    def threshold_used(self):
+        """``"calibrated"`` (simulated at the ends: :attr:`calibration`) or ``"chi2"``."""
+        return "chi2" if self.calibration is None else "calibrated"
 
     @property
     def trusted(self):
@@ -150,6 +167,10 @@ class Profile:
         ax.plot(t, y, "-", color="C0", label="profile likelihood")
         ax.plot(self.values, 2 * self.delta, "o", ms=3, color="C0", label="computed points")
         ax.axhline(2 * self.threshold, color="k", lw=0.8, ls=":")
+        if self.calibration is not None:
+            t_c = [q[0] for q in self.calibration.points]
+            ax.plot(t_c, [2 * q[1] for q in self.calibration.points], "x", color="k", ms=5,
+                    label="calibrated threshold")  # fmt: skip
         for x in self.interval:
             if np.isfinite(x):
                 ax.axvline(x, color="C0", lw=0.8)
@@ -217,6 +238,14 @@ class ProfileSummary:
     trusted: np.ndarray = None
     names: tuple = ()
     estimate: np.ndarray = None
+
+    @property
+    def threshold_used(self):
+        """Per parameter, the threshold its interval used (``"chi2"``, ``"calibrated"``;
+        None where not profiled)."""
+        n = len(self.intervals)
+        return tuple(self.profiles[i].threshold_used if i in self.profiles else None
+                     for i in range(n))  # fmt: skip
 
     def plot(self, ax=None, names=None):
         """One panel per profiled parameter (:meth:`Profile.plot`).
@@ -371,70 +400,7 @@ def _scales(result, like, eps_hat):
     return se, naive, scale
 
 
-#: a fall of the profile on its way out larger than this fraction of the threshold is a
-#: non-monotone branch (smaller ones are the inner fits' round-off)
-MONOTONE_RTOL = 0.01
-
-
-def profile_concerns(i, values, delta, eps, main, reasons, regions, threshold, bounds,
-                     unconverged=()):  # fmt: skip
-    """The profile's own evidence against the interval of parameter ``i``.
-
-    An interval from the chi-squared (or profile-t) threshold is what it says only where
-    the profile is a regular likelihood ratio: both ends crossed, one region, the profile
-    rising on the way out, every re-optimized parameter inside its box and every inner fit
-    converged. Each failure of these is returned as a sentence; none of them is the
-    distance to the delta-method interval (a skewed likelihood is not a failure).
-
-    Parameters
-    ----------
-    i : int
-    values, delta : (k,) ndarray
-        The profile's points, increasing in ``values``.
-    eps : (k, n_eps) ndarray
-        The re-optimized parameters at those points.
-    main : (lower, upper)
-        The region around the estimate (the walks' two ends).
-    reasons : (str, str)
-        Why each end is where it is.
-    regions : sequence of (lower, upper)
-    threshold : float
-    bounds : sequence of (lo, hi)
-    unconverged : sequence of (fixed, values)
-        Inner fits that did not converge (:class:`~.profiler.Profiler`).
-    """
-    concerns = [
-        f"{side} end open" for side, r in zip(("lower", "upper"), reasons, strict=True)
-        if not r.startswith("crossed")
-    ]  # fmt: skip
-    if len(regions) > 1:
-        concerns.append(f"{len(regions)} regions below the threshold")
-    lo, hi = main
-    inside = (values >= lo) & (values <= hi)
-    t, d = values[inside], delta[inside]
-    if t.size > 2:
-        k = int(np.argmin(d))
-        fall = max(np.max(np.diff(d[: k + 1]), initial=0.0), np.max(-np.diff(d[k:]), initial=0.0))
-        if fall > MONOTONE_RTOL * threshold:
-            concerns.append(f"the profile falls by {2 * fall:.3g} (in 2*delta) on its way out")
-    hits = {}
-    for row, ti in zip(eps[inside], t, strict=True):
-        for m, side in at_bound(row, bounds):
-            if m != i:
-                hits.setdefault((m, side), ti)
-    for (m, side), ti in sorted(hits.items()):
-        b = bounds[m][0 if side == "lower" else 1]
-        concerns.append(
-            f"eps[{m}] sits at its {side} bound {b:g} (from eps[{i}]={ti:.6g}): the "
-            "chi-squared threshold does not hold there"
-        )
-    bad = [v[0] for f, v in unconverged if f == (i,) and lo <= v[0] <= hi]
-    if bad:
-        concerns.append(f"{len(bad)} inner fit(s) inside the interval did not converge")
-    return tuple(concerns)
-
-
-def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci, n_scan):
+def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci, n_scan, simulate=None):
     """Every requested profile, and (decrease, eps) of the lowest point found below the
     estimate's likelihood (None when the estimate is the minimum)."""
     profiles, best = {}, None
@@ -455,8 +421,20 @@ def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci, n_scan):
                         f"crossed at {end:.6g}, but the profile falls below the threshold "
                         f"again beyond it: {[tuple(np.round(r, 6)) for r in regions]}"
                     )
+            if np.isfinite(end) and why.startswith("crossed"):
+                # the crossing itself: where the re-optimized parameters sit at the end
+                pts.append((end, *prof.at(i, end, p[-1][2])))
             ends.append(end)
             reasons.append(why)
+        chi2_ends, calibration = tuple(ends), None
+        if simulate is not None:
+            ends, reasons, calibration = calibrate_ends(
+                prof, i, ends, reasons, pts, step, bnds[i], max_steps, simulate(i)
+            )
+            # the chi-squared scan's far regions: one that meets the calibrated one joins it
+            for r in [r for r in far if r[0] <= ends[1] and r[1] >= ends[0]]:
+                far.remove(r)
+                ends = [min(ends[0], r[0]), max(ends[1], r[1])]
         regions = sorted([(ends[0], ends[1]), *far])
         hull = (min(r[0] for r in regions), max(r[1] for r in regions))
         pts.sort(key=lambda q: q[0])
@@ -468,17 +446,20 @@ def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci, n_scan):
         eps = np.array([q[2] for q in pts])
         concerns = profile_concerns(
             i, values, delta, eps, (ends[0], ends[1]), reasons, regions, threshold[i], bnds,
-            prof.unconverged,
+            prof.unconverged, calibration is not None,
         )  # fmt: skip
+        if calibration is not None:
+            calibration = Calibration(*calibration, np.array(chi2_ends, dtype=float))
         profiles[i] = Profile(
             i, values, delta, eps, threshold[i], np.array(hull, dtype=float), tuple(reasons),
-            delta_ci[i], tuple(regions), concerns,
+            delta_ci[i], tuple(regions), concerns, calibration,
         )  # fmt: skip
     return profiles, best
 
 
 @library_threads()
-def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps=40, scan=12):
+def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps=40, scan=12,
+                       threshold="chi2", n_simulations=200, seed=0):  # fmt: skip
     """Profiles, likelihood-ratio intervals and delta-method intervals of a fit.
 
     Parameters
@@ -499,6 +480,18 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
         a return below the threshold (``regions``); 0 stops at the crossing. A side
         without a bound is followed to its crossing only: give bounds to have the whole
         admissible range searched.
+    threshold : {"chi2", "calibrated"}
+        ``"chi2"``: Wilks' :math:`\\tfrac12\\chi^2_{1}` (the profile-t one with sigma
+        profiled out, :func:`profile_threshold`). ``"calibrated"``: the likelihood-ratio
+        threshold simulated at each end (parametric bootstrap from the profiled point,
+        :mod:`~.profile_calibration`) where the chi-squared one does not hold: a
+        re-optimized parameter at its bound along the profile (a ridge to a bound), a
+        near-singular model. Gaussian least-squares likelihoods only; 2-3 simulated
+        thresholds per end, each ``2 * n_simulations`` small fits.
+    n_simulations : int
+        Simulated data sets per calibrated threshold (at least 20).
+    seed : int
+        Seed of the simulations (the same noise at every point of a profile).
 
     Returns
     -------
@@ -516,6 +509,18 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
     which = _which(which, n, getattr(result, "names", None))
     max_steps = check_int("max_steps", max_steps, minimum=1)
     scan = check_int("scan", scan, minimum=0)
+    if threshold not in ("chi2", "calibrated"):
+        raise ValueError(f'`threshold` must be "chi2" or "calibrated", got {threshold!r}')
+    n_simulations = check_int("n_simulations", n_simulations, minimum=20)
+    if order_statistic(n_simulations, level) > n_simulations:
+        raise ValueError(
+            f"`n_simulations` = {n_simulations} cannot give a {level:g} quantile (the "
+            f"{order_statistic(n_simulations, level)}-th of them): pass at least "
+            f"{int(np.ceil(level / (1 - level)))}"
+        )
+    seed = check_int("seed", seed, minimum=0)
+    if threshold == "calibrated":
+        check_calibratable(like)
     bnds = _bounds(result, bounds, n)
     eps_hat = np.asarray(result.eps, dtype=float)
     for i, (lo, hi) in enumerate(bnds):
@@ -531,7 +536,7 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
             "sigma unknown has no likelihood interval: pass `sigma` to fit"
         )
     se, naive, scale = _scales(result, like, eps_hat)
-    threshold = np.full(n, profile_threshold(like, level))
+    kind, threshold = threshold, np.full(n, profile_threshold(like, level))
     if like.noise == "replicated" and naive is not None:
         # a pseudo-likelihood is not the data's likelihood: its curvature is not the
         # estimate's precision. Magnitude adjustment (Chandler & Bate 2007): scale the
@@ -543,9 +548,16 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
 
     recentred = []
     for _ in range(_MAX_RECENTRE + 1):
+        simulate = None
+        if kind == "calibrated":
+            sd = noise_scale(like, ell_hat)
+
+            def simulate(i, sd=sd):
+                return simulator(like, i, level, scale, bnds, sd, n_simulations, seed)
+
         profiles, best = _profiles(
             Profiler(like, eps_hat, ell_hat, scale, bnds), which, threshold, z, bnds,
-            max_steps, delta_ci, scan,
+            max_steps, delta_ci, scan, simulate,
         )  # fmt: skip
         if best is None:
             break
@@ -579,8 +591,19 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
         )
     trusted = np.array([i in profiles and profiles[i].trusted for i in range(n)])
     for i, prof_i in profiles.items():
+        cal = prof_i.calibration
+        if cal is not None:
+            notes.append(
+                f"eps[{i}]: calibrated thresholds (2*delta) "
+                f"{np.round(2 * cal.thresholds, 3).tolist()} at the ends ({cal.n_simulations} simulations each; chi-squared "
+                f"{2 * prof_i.threshold:.3g}, interval {cal.chi2_interval.round(6).tolist()})"
+            )
         if prof_i.concerns:
-            notes.append(f"eps[{i}] interval not trusted: " + "; ".join(prof_i.concerns))
+            notes.append(
+                f"eps[{i}] interval not trusted: " + "; ".join(prof_i.concerns)
+                + ("" if cal is not None or not any("bound" in c for c in prof_i.concerns)
+                   else "; threshold='calibrated' simulates the threshold at the ends")
+            )  # fmt: skip
     regions = {i: list(prof_i.regions) for i, prof_i in profiles.items()}
     names = tuple(getattr(result, "names", None) or ())
     summary = ProfileSummary(

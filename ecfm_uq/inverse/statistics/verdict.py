@@ -35,6 +35,7 @@ import numpy as np
 
 from ..._validation import as_finite_array, as_operator, check_fraction, check_positive
 from ...errors import ModelEvaluationError
+from ...system import solve_steady
 from ..core.convergence import at_bound
 from ..core.result import Verdict
 
@@ -140,7 +141,7 @@ def moments_bounds_verdict(test, sigma, alpha=DEFAULT_ALPHA, at_bound=()):
     Parameters
     ----------
     test : ConsistencyTest
-        From :func:`~ecfm_uq.inverse.formulations.noise.consistency_test`.
+        From :func:`~ecfm_uq.inverse.formulations.noise_bounds.consistency_test`.
     sigma : float
     alpha : float
     at_bound : sequence of int
@@ -225,8 +226,6 @@ def consistency_verdict(
         ``chi2``, ``chi2_limit``, ``dof`` (with ``sigma``), ``at_bound`` (parameters within
         1e-8 of a bound, relative to its width), ``extreme`` (``(term, value)`` pairs).
     """
-    from ...system import solve_steady
-
     M_obs = as_operator("M_obs", M_obs)
     v = as_finite_array("v", v, shape=(M_obs.shape[0],))
     eps = system.check_eps(eps)

@@ -22,7 +22,7 @@ independent, as the paper remarks after Eq. ecfm_noise):
       \\ell_1 \\le \\bar e \\le \\ell_2,\\quad p_1 \\le s^2_e \\le p_2,
 
   with :math:`e = \\mathcal M\\theta - v`, :math:`\\bar e` its sample mean, :math:`s^2_e`
-  its sample variance and the bounds of :func:`ecfm_uq.inverse.formulations.noise.noise_bounds`.
+  its sample variance and the bounds of :func:`ecfm_uq.inverse.formulations.noise_bounds.noise_bounds`.
 
 Derivatives: :math:`\\partial R/\\partial(\\theta, \\epsilon, \\lambda) =
 [J_\\theta, J_\\epsilon, -\\Gamma]` from the system, :math:`\\nabla_\\theta\\bar e =
@@ -38,16 +38,19 @@ ECFM problem needs its ``Gamma``.
 from __future__ import annotations
 
 import time
-from dataclasses import replace
 
 import numpy as np
 import scipy.optimize as sopt
 
 from ..._validation import as_dense_rows, as_finite_array, check_positive
 from ...system import solve_steady
-from ..core.convergence import KKT_TOL, decide_status, kkt_optimality
-from ..core.result import InverseResult, Uncertainty
-from .noise import noise_bounds, sample_moments
+from ..core.convergence import KKT_TOL, kkt_optimality
+from ..core.fitter import Measured, Outcome, holds
+from ..core.result import Uncertainty
+from ..statistics.uncertainty import estimate_uncertainty
+from ..statistics.verdict import moments_bounds_verdict
+from .noise_bounds import consistency_test, noise_bounds, sample_moments
+from .steady import _uncertainty
 
 _GRADIENTS = ("analytic", "fd")
 
@@ -299,18 +302,20 @@ def _solve(problem, z0, note, gradients, maxiter, ftol, tol, method_name):
             f_scale=max((abs(x) for x in hist_loss if np.isfinite(x)), default=0.0),
             f_lower=0.0, tol=tol,  # both objectives are 1/2 ||.||^2
         )  # fmt: skip
-    status = decide_status(opt, exhausted=res.status == 9 or res.nit >= maxiter)
-    return InverseResult(
+    message = f"SLSQP: {res.message} [{opt.message}]"
+    if not np.isfinite(opt.value):  # measured, not a size: no optimality to report
+        opt = Measured(opt.converged, None)
+    return dict(
         eps=eps.copy(),
         loss=float(res.fun) if np.isfinite(res.fun) else float("inf"),
-        status=status,
-        optimality=opt.value if np.isfinite(opt.value) else None,
+        opt=opt,
+        exhausted=res.status == 9 or res.nit >= maxiter,
         method="SLSQP",
-        message=f"SLSQP: {res.message} [{opt.message}]",
+        message=message,
         nit=int(res.nit),
         nfev=int(res.nfev),
         njev=int(getattr(res, "njev", 0) or 0),
-        formulation=method_name,
+        label=method_name,
         eps_history=np.array(hist_eps),
         loss_history=np.array(hist_loss),
         state=theta.copy(),
@@ -333,6 +338,9 @@ def fit_all_at_once(problem, eps0, s):
     (ecfm_noise). ``options``: ``theta0`` (N,) and ``lam0`` (C,) starts (default: the
     Newton solution at ``eps0``, zero forces), ``jac`` (``"analytic"``, or ``"fd"`` to let
     SLSQP difference objective and constraints: benchmarks only).
+
+    Returns an :class:`~ecfm_uq.inverse.core.fitter.Outcome`: the KKT conditions measured
+    at SLSQP's point (the status is decided from them by the entry point).
     """
     if s.formulation not in ("standard", "noisy-ecfm"):
         raise ValueError(
@@ -366,37 +374,35 @@ def fit_all_at_once(problem, eps0, s):
         label = "noisy-ecfm"
     z0, note = _start(inverse, eps0, opts["theta0"], opts.get("lam0"), problem.solve_options)
     res = _solve(inverse, z0, note, opts["jac"], maxiter, ftol, tol, label)
-    if not res.success:
+    if not holds(res["opt"]):
         unc = Uncertainty.failed("uncertainty not computed: the fit did not succeed")
     elif not s.uncertainty:
         unc = Uncertainty.failed("not computed (uncertainty=False)")
     elif s.formulation == "standard":
         # the all-at-once optimum is the reduced one: same optimality condition
         # grad z^INV(eps) = 0, hence the same covariance code path as the reduced fit
-        from .steady import _uncertainty
 
         unc = _uncertainty(
-            system, inverse.M_obs, inverse.v, res.eps, "standard",
+            system, inverse.M_obs, inverse.v, res["eps"], "standard",
             dict(problem.solve_options), s.sigma,
         )  # fmt: skip
     else:
-        unc = _kkt_uncertainty(inverse, res.extra["z"], s.sigma)
-    return replace(res, uncertainty=unc, verdict=_verdict(res, inverse, s.sigma, s.alpha))
+        unc = _kkt_uncertainty(inverse, res["extra"]["z"], s.sigma)
+    verdict = _verdict(res["extra"]["discrepancy"], s.sigma, s.alpha)
+    return Outcome(**res, uncertainty=unc, verdict=verdict)
 
 
 #: a scaled moment inequality within this of zero is active at the optimum
 ACTIVE_TOL = 1e-6
 
 
-def _verdict(res, problem, sigma, alpha):
+def _verdict(discrepancy, sigma, alpha):
     """The paper's z / chi-squared test of the discrepancy (Eq. ecfm_noise) when the noise
     is modelled, as the fit's :class:`~ecfm_uq.inverse.core.result.Verdict` (``None`` without sigma)."""
     if sigma is None:
         return None
-    from ..statistics.verdict import moments_bounds_verdict
-    from .noise import consistency_test
 
-    test = consistency_test(res.extra["discrepancy"], sigma, alpha)
+    test = consistency_test(discrepancy, sigma, alpha)
     return moments_bounds_verdict(test, sigma, alpha)
 
 
@@ -409,8 +415,6 @@ def _kkt_uncertainty(problem, z, sigma):
     :math:`dx/dv = -(\\partial F/\\partial x)^{-1}\\partial F/\\partial v` and the eps
     block of the covariance is reported (Sigma_v = sigma^2 I).
     """
-    from ..statistics.uncertainty import estimate_uncertainty
-
     n = problem.size
     active = np.flatnonzero(problem.inequality(z) <= ACTIVE_TOL)
     A = np.vstack([problem.equality_jac(z), problem.inequality_jac(z)[active]])

@@ -14,9 +14,10 @@ import numpy as np
 from scipy import optimize
 
 from ...errors import ConvergenceError, ModelEvaluationError
+from ..core.convergence import at_bound as bounds_hit
 from ..core.finite_differences import fd_gradient
 
-__all__ = ["MODEL_FAILURES", "Profiler", "beyond", "walk"]
+__all__ = ["MODEL_FAILURES", "Profiler", "beyond", "profile_concerns", "walk"]
 
 MODEL_FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError)
 #: the likelihood increase standing in for "the model fails here"
@@ -78,6 +79,8 @@ class Profiler:
                 val, g = self.like(point(x))
             except MODEL_FAILURES:
                 # where the model cannot be solved: a wall the line search backs off from
+                return self.ell_hat + WALL, np.zeros(free.size)
+            if np.isnan(val) or val == np.inf:  # overflowed: a failed point too
                 return self.ell_hat + WALL, np.zeros(free.size)
             return val, g[free] * s
 
@@ -150,6 +153,14 @@ class Profiler:
         return optimize.OptimizeResult(x=x, fun=float(like.of_rss(rss)), success=ok)
 
 
+def _sum_of_squares(r):
+    """:math:`r^Tr`, infinite where it overflows or ``r`` is not finite: at extreme
+    parameter values overflow is the expected answer (a failed point, no warning)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        S = float(r @ r)
+    return S if np.isfinite(S) else np.inf
+
+
 def _levenberg_marquardt(fun, jac, x0, lb, ub, maxiter=100, rtol=1e-12):
     """Minimize :math:`\\|r(x)\\|^2` over the box [lb, ub] by Levenberg-Marquardt steps
     (Marquardt's scaling by the diagonal of :math:`J^TJ`, steps projected on the box).
@@ -167,13 +178,16 @@ def _levenberg_marquardt(fun, jac, x0, lb, ub, maxiter=100, rtol=1e-12):
     """
     x = np.clip(np.asarray(x0, dtype=float), lb, ub)
     r = fun(x)
-    S = float(r @ r)
+    S = _sum_of_squares(r)
     if not np.isfinite(S):
         return x, np.inf, False
     mu = None
     for _ in range(maxiter):
         J = jac(x)
-        g, A = J.T @ r, J.T @ J
+        with np.errstate(over="ignore", invalid="ignore"):
+            g, A = J.T @ r, J.T @ J
+        if not (np.all(np.isfinite(g)) and np.all(np.isfinite(A))):
+            return x, S, False  # a Jacobian too large to square: a failed inner fit
         # parameters held at a bound by the gradient do not count in the test
         held = ((x <= lb) & (g > 0)) | ((x >= ub) & (g < 0))
         free = ~held
@@ -187,13 +201,17 @@ def _levenberg_marquardt(fun, jac, x0, lb, ub, maxiter=100, rtol=1e-12):
         d[d <= 0] = d.max() if d.max() > 0 else 1.0
         mu = 1e-3 if mu is None else mu  # Marquardt's damping, relative to diag(A)
         while True:
+            # the parameters held at a bound stay there: the step is on the others (a step
+            # clipped back onto the bound zig-zags along it, one short step at a time)
+            step = np.zeros(x.size)
             try:
-                step = np.linalg.solve(A + mu * np.diag(d), -g)
+                Af = A[np.ix_(free, free)] + mu * np.diag(d[free])
+                step[free] = np.linalg.solve(Af, -g[free])
             except np.linalg.LinAlgError:
                 step = np.full(x.size, np.nan)
             x1 = np.clip(x + step, lb, ub)
             r1 = fun(x1) if np.all(np.isfinite(x1)) else np.full(r.size, np.inf)
-            S1 = float(r1 @ r1)
+            S1 = _sum_of_squares(r1)
             if S1 <= S:
                 break
             mu *= 4.0
@@ -344,3 +362,69 @@ def _region_end(prof, i, t_in, t_out, start, threshold):
         return crossing(prof, i, t_in, t_out, start, threshold)
     except ValueError:
         return t_out
+
+
+#: a fall of the profile on its way out larger than this fraction of the threshold is a
+#: non-monotone branch (smaller ones are the inner fits' round-off)
+MONOTONE_RTOL = 0.01
+
+
+def profile_concerns(i, values, delta, eps, main, reasons, regions, threshold, bounds,
+                     unconverged=(), calibrated=False):  # fmt: skip
+    """The profile's own evidence against the interval of parameter ``i``.
+
+    An interval from the chi-squared (or profile-t) threshold is what it says only where
+    the profile is a regular likelihood ratio: both ends crossed, one region, the profile
+    rising on the way out, every re-optimized parameter inside its box and every inner fit
+    converged. Each failure of these is returned as a sentence; none of them is the
+    distance to the delta-method interval (a skewed likelihood is not a failure).
+
+    Parameters
+    ----------
+    i : int
+    values, delta : (k,) ndarray
+        The profile's points, increasing in ``values``.
+    eps : (k, n_eps) ndarray
+        The re-optimized parameters at those points.
+    main : (lower, upper)
+        The region around the estimate (the walks' two ends).
+    reasons : (str, str)
+        Why each end is where it is.
+    regions : sequence of (lower, upper)
+    threshold : float
+    bounds : sequence of (lo, hi)
+    unconverged : sequence of (fixed, values)
+        Inner fits that did not converge (:class:`~.profile_walk.Profiler`).
+    calibrated : bool
+        The threshold was simulated (:mod:`~.profile_calibration`): a re-optimized
+        parameter at its bound is then no evidence against it.
+    """
+    concerns = [
+        f"{side} end open" for side, r in zip(("lower", "upper"), reasons, strict=True)
+        if not r.startswith("crossed")
+    ]  # fmt: skip
+    if len(regions) > 1:
+        concerns.append(f"{len(regions)} regions below the threshold")
+    lo, hi = main
+    inside = (values >= lo) & (values <= hi)
+    t, d = values[inside], delta[inside]
+    if t.size > 2:
+        k = int(np.argmin(d))
+        fall = max(np.max(np.diff(d[: k + 1]), initial=0.0), np.max(-np.diff(d[k:]), initial=0.0))
+        if fall > MONOTONE_RTOL * threshold:
+            concerns.append(f"the profile falls by {2 * fall:.3g} (in 2*delta) on its way out")
+    hits = {}
+    for row, ti in zip(eps[inside], t, strict=True) if not calibrated else ():
+        for m, side in bounds_hit(row, bounds):
+            if m != i:
+                hits.setdefault((m, side), ti)
+    for (m, side), ti in sorted(hits.items()):
+        b = bounds[m][0 if side == "lower" else 1]
+        concerns.append(
+            f"eps[{m}] sits at its {side} bound {b:g} (from eps[{i}]={ti:.6g}): the "
+            "chi-squared threshold does not hold there"
+        )
+    bad = [v[0] for f, v in unconverged if f == (i,) and lo <= v[0] <= hi]
+    if bad:
+        concerns.append(f"{len(bad)} inner fit(s) inside the interval did not converge")
+    return tuple(concerns)
