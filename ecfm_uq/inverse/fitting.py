@@ -391,10 +391,13 @@ def _result(outcome, problem, settings, noise):
 
 def _with_estimate(unc, eps, names):
     """The uncertainty told the estimate and the parameter names it belongs to (for
-    :meth:`~ecfm_uq.inverse.Uncertainty.to_inputs`)."""
+    :meth:`~ecfm_uq.inverse.Uncertainty.to_inputs`); as it is when its fitter told it
+    already (no copy)."""
     if not unc.success:
         return unc
     names = None if names is None else list(names)
+    if unc.names == names and unc.eps is not None and np.array_equal(unc.eps, eps):
+        return unc
     return dataclasses.replace(unc, eps=np.array(eps, dtype=float), names=names)
 
 

@@ -26,7 +26,6 @@ from .convergence import (
     minimize_optimality,
     polish_least_squares,
 )
-from .status import FitStatus
 
 __all__ = [
     "MINIMIZE_METHODS",
@@ -92,17 +91,18 @@ class Outcome:
     """What a driver did: the final point, what was measured there, the path and the
     failures.
 
-    ``status`` is :func:`~ecfm_uq.inverse.core.convergence.decide_status` of what was
-    measured (``None`` until :func:`verify_least_squares` measures it); ``exhausted`` is
-    whether the optimizer's budget ran out; ``claimed`` is the optimizer's own stopping
-    claim, kept only for the message (it never decides the status).
+    A driver decides no status: ``opt`` is the optimality conditions measured at ``x``
+    (an :class:`~ecfm_uq.inverse.core.convergence.Optimality`; ``None`` until
+    :func:`verify_least_squares` measures them, or when the model fails at ``x``),
+    ``exhausted`` whether the optimizer's budget ran out, ``final_error`` the model
+    failure at ``x``; ``claimed`` is the optimizer's own stopping claim, kept only for
+    the message (it never decides the status).
     """
 
     x: np.ndarray
     loss: float
     grad: np.ndarray | None
     payload: object
-    status: FitStatus | None
     message: str
     nit: int
     nfev: int
@@ -110,13 +110,26 @@ class Outcome:
     loss_history: np.ndarray
     failures: list = field(default_factory=list)
     final_error: Exception | None = None
-    optimality: float | None = None
+    opt: object = None
     #: the residual and its Jacobian at ``x`` that the status test judged (reused by the
     #: caller for the standard errors: no second Jacobian)
     residual: np.ndarray | None = None
     jacobian: np.ndarray | None = None
     exhausted: bool = False
     claimed: bool = False
+
+    @property
+    def optimality(self):
+        """The measured optimality's unit-free size (``None`` when not measured)."""
+        return None if self.opt is None else self.opt.value
+
+    @property
+    def status(self):
+        """:func:`~ecfm_uq.inverse.core.convergence.decide_status` of the measurement, for
+        the formulations that still build their result themselves (the ODE and steady
+        reduced fits); a :class:`~ecfm_uq.inverse.core.fitter.Fitter` hands the
+        measurement (``opt``, ``exhausted``, ``final_error``) to the entry point instead."""
+        return decide_status(self.opt, self.exhausted, self.final_error)
 
     @property
     def success(self):
@@ -196,8 +209,8 @@ def minimize_scaled(evaluate, eps0, method, bounds, gtol, maxiter, options):
         z, g, payload = evaluate(res.x)
     except ConvergenceError as e:  # the optimizer stopped where the model fails
         msg = f"{res.message} (the model cannot be solved at the final eps: {e})"
-        return Outcome(x, np.inf, None, None, decide_status(None, False, failure=e), msg, nit,
-                       counts["nfev"], *path, failures, e)  # fmt: skip
+        return Outcome(x, np.inf, None, None, msg, nit, counts["nfev"], *path, failures,
+                       e)  # fmt: skip
     opt = minimize_optimality(g, x, z, scale, gtol, bounds, precise=not failures)
     msg = str(res.message)
     if opt.converged and opt.test != "relative gradient":
@@ -205,13 +218,12 @@ def minimize_scaled(evaluate, eps0, method, bounds, gtol, maxiter, options):
     if failures:
         msg += f" ({len(failures)} inner solves failed; first: {failures[0]})"
     exhausted = nit >= maxiter and not opt.converged
-    return Outcome(x, z, g, payload, decide_status(opt, exhausted), msg, nit, counts["nfev"],
-                   *path, failures, optimality=opt.value, exhausted=exhausted,
-                   claimed=opt.converged)  # fmt: skip
+    return Outcome(x, z, g, payload, msg, nit, counts["nfev"], *path, failures, opt=opt,
+                   exhausted=exhausted, claimed=opt.converged)  # fmt: skip
 
 
 def verify_least_squares(out, residual, bounds, exhausted, *, polish, tol=OFFSET_TOL):
-    """Decide ``out``'s status from the least-squares optimality conditions
+    """Measure the least-squares optimality conditions at ``out.x``
     (:mod:`~ecfm_uq.inverse.core.convergence`), whatever the optimizer said.
 
     ``residual(eps) -> (r, J, payload)``. When the conditions do not hold and ``polish``
@@ -225,7 +237,7 @@ def verify_least_squares(out, residual, bounds, exhausted, *, polish, tol=OFFSET
     try:
         r, J, payload = residual(out.x)
     except ConvergenceError as e:
-        out.status = decide_status(None, exhausted, failure=e)
+        out.opt, out.final_error, out.exhausted = None, e, exhausted
         out.message = f"{out.message} ({e})"
         return out
     out.nfev += 1
@@ -238,10 +250,10 @@ def verify_least_squares(out, residual, bounds, exhausted, *, polish, tol=OFFSET
             out.x, out.loss, out.payload, opt = np.asarray(x), 0.5 * float(r @ r), payload, opt2
             msg += f"; polished by Levenberg-Marquardt steps ({n} evaluations)"
     said = out.claimed
-    out.status = decide_status(opt, exhausted)
+    out.exhausted = exhausted
     if opt.converged != said or not opt.converged or "polished" in msg:
         msg += f" [{'converged' if opt.converged else 'NOT converged'}: {opt.message}]"
-    out.message, out.optimality = msg, opt.value
+    out.message, out.opt = msg, opt
     out.residual, out.jacobian = r, J
     return out
 
@@ -278,7 +290,7 @@ def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options, check=No
     Returns
     -------
     Outcome
-        Status decided by :func:`verify_least_squares`.
+        With the optimality measured by :func:`verify_least_squares`.
 
     Raises
     ------
@@ -350,12 +362,12 @@ def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options, check=No
         msg += f" ({len(failures)} inner solves failed; first: {failures[0]})"
     if ev is None:
         e = ConvergenceError(failures[-1])
-        return Outcome(x, np.inf, None, None, decide_status(None, False, failure=e), msg, nit,
-                       counts["nfev"], np.array(hist_eps), np.array(hist_loss), failures, e)  # fmt: skip
+        return Outcome(x, np.inf, None, None, msg, nit, counts["nfev"], np.array(hist_eps),
+                       np.array(hist_loss), failures, e)  # fmt: skip
     r, J, payload = ev
-    # the status is decided by verify_least_squares from the measured optimality
+    # verify_least_squares measures the optimality (the status is decided from it)
     out = Outcome(
-        x, 0.5 * float(r @ r), J.T @ r, payload, None, msg, nit,
+        x, 0.5 * float(r @ r), J.T @ r, payload, msg, nit,
         counts["nfev"], np.array(hist_eps), np.array(hist_loss), failures,
         exhausted=res.status == 0, claimed=res.status > 0,
     )  # fmt: skip
@@ -549,12 +561,12 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     ev = evaluate(x)
     if ev is None:
         e = ConvergenceError(failures[-1])
-        return Outcome(x, np.inf, None, None, decide_status(None, False, failure=e), msg, nit,
-                       counts["nfev"], np.array(hist_eps), np.array(hist_loss), failures, e)  # fmt: skip
+        return Outcome(x, np.inf, None, None, msg, nit, counts["nfev"], np.array(hist_eps),
+                       np.array(hist_loss), failures, e)  # fmt: skip
     r = ev[0]
-    # the status is decided by verify_least_squares from the measured optimality
+    # verify_least_squares measures the optimality (the status is decided from it)
     out = Outcome(
-        x, 0.5 * float(r @ r), None, ev[2], None, msg, nit,
+        x, 0.5 * float(r @ r), None, ev[2], msg, nit,
         counts["nfev"], np.array(hist_eps), np.array(hist_loss), failures,
         exhausted=ier == 5, claimed=ier in (1, 2, 3, 4),
     )  # fmt: skip

@@ -41,17 +41,10 @@ class Measured:
 
 def measured(out):
     """What a driver (:mod:`~ecfm_uq.inverse.core.drivers`) measured at its final point,
-    as ``{"opt", "exhausted", "failure"}``: the optimality conditions' verdict and size,
-    whether the budget ran out, the model failure there. The drivers keep the measurement
-    as its :func:`~ecfm_uq.inverse.core.convergence.decide_status` reading (``status``),
-    read back here."""
-    failed = out.status is FitStatus.MODEL_FAILURE
-    failure = out.final_error if out.final_error is not None else out.message
-    return {
-        "opt": Measured(out.status is FitStatus.CONVERGED, out.optimality),
-        "exhausted": out.status is FitStatus.MAX_ITERATIONS,
-        "failure": failure if failed else None,
-    }
+    as ``{"opt", "exhausted", "failure"}``: the optimality conditions (an
+    :class:`~ecfm_uq.inverse.core.convergence.Optimality`, ``None`` where the model
+    fails), whether the budget ran out, the model failure there."""
+    return {"opt": out.opt, "exhausted": out.exhausted, "failure": out.final_error}
 
 
 def holds(opt, failure=None):

@@ -13,8 +13,8 @@ here.
 from __future__ import annotations
 
 from ..core.fitter import Fitter, Outcome
-from ..problems.model import fit_model_problem
-from ..problems.ode import fit_ode_standard
+from ..problems.model import ModelFitter
+from ..problems.ode import OdeStandardFitter
 from .all_at_once import fit_all_at_once
 from .discrepancy import fit_random_force
 from .ode_forces import fit_ode_ecfm
@@ -51,20 +51,6 @@ class FunctionFitter(Fitter):
 
     def run(self, problem, eps0, settings):
         return Outcome.from_result(type(self).fit_function(problem, eps0, settings))
-
-
-class ModelFitter(FunctionFitter):
-    """``ModelProblem``, ``"standard"``: least squares of the model function."""
-
-    kind, formulation, default_method, whitens = "model", "standard", "least-squares", False
-    fit_function = staticmethod(fit_model_problem)
-
-
-class OdeStandardFitter(FunctionFitter):
-    """``OdeProblem``, ``"standard"``: least squares of the readings present."""
-
-    kind, formulation, default_method, whitens = "ode", "standard", "least-squares", False
-    fit_function = staticmethod(fit_ode_standard)
 
 
 class OdeEcfmFitter(FunctionFitter):

@@ -224,5 +224,6 @@ def fit_ode_random(problem, eps0, s):
         loss_history=out.loss_history, state=traj, forces=series, uncertainty=unc,
         verdict=verdict, likelihood=no_likelihood("ecfm-random"), bounds=bounds,
         names=problem.names,
+        # "standard": the standard fit's Outcome (what it measured; no status)
         extra={"tau": tau, "standard": ls, "n_missing": problem.n_missing},
     )  # fmt: skip

@@ -22,7 +22,6 @@ point reached).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -33,9 +32,9 @@ from ...executor import evaluate_samples
 from ...threads import NO_DENSE
 from ..core.drivers import least_squares_lm, least_squares_scaled
 from ..core.finite_differences import fd_jacobian
-from ..core.result import InverseResult, Uncertainty
+from ..core.fitter import Fitter, Outcome, holds
+from ..core.result import Uncertainty
 from ..core.settings import check_least_squares_options
-from ..core.status import FitStatus
 from ..statistics.loglik import gaussian_likelihood, remember_last_point
 from ..statistics.uncertainty import estimate_uncertainty, least_squares_jacobian
 from ..statistics.verdict import check_bounds, model_verdict
@@ -44,7 +43,7 @@ from .noise_model import noise_model
 
 _FLOAT64 = np.dtype(np.float64)
 
-__all__ = ["ModelProblem"]
+__all__ = ["ModelFitter", "ModelProblem", "fit_model_problem", "model_fit_fields"]
 
 _JAC_MODES = ("2-point", "3-point", "cs")
 
@@ -338,8 +337,37 @@ class ModelProblem(InverseProblem):
         return float(err[worst])
 
 
+def _stalled(out):
+    """Whether a driver stopped on its own short of an optimum: the conditions measured
+    not to hold at a point where the model can be solved, the budget not run out."""
+    return (
+        out.final_error is None and out.opt is not None and not (out.opt.converged or out.exhausted)
+    )
+
+
+class ModelFitter(Fitter):
+    """``ModelProblem``, ``"standard"``: least squares of the model function
+    (:func:`fit_model_problem`)."""
+
+    kind, formulation, default_method = "model", "standard", "least-squares"
+    #: ``fit`` does not whiten for it: a ModelProblem takes its noise model itself
+    whitens = False
+
+    def run(self, problem, eps0, settings):
+        return fit_model_problem(problem, eps0, settings)
+
+
 def fit_model_problem(problem, eps0, s):
-    """:func:`~ecfm_uq.inverse.fit` for a :class:`ModelProblem` (validated settings ``s``)."""
+    """:func:`~ecfm_uq.inverse.fit` for a :class:`ModelProblem` (validated settings ``s``):
+    the :class:`~ecfm_uq.inverse.core.fitter.Outcome` (the optimality measured by the
+    drivers; ``fit`` decides the status)."""
+    return Outcome(**model_fit_fields(problem, eps0, s))
+
+
+def model_fit_fields(problem, eps0, s):
+    """The fields of :func:`fit_model_problem`'s
+    :class:`~ecfm_uq.inverse.core.fitter.Outcome`, as a dict (a fitter that adds its own,
+    :func:`~ecfm_uq.inverse.problems.ode.fit_ode_standard`, builds the outcome once)."""
     if s.formulation not in problem.formulations:
         raise ValueError(
             f"formulation={s.formulation!r} needs the model's equations (constraint forces "
@@ -395,14 +423,14 @@ def fit_model_problem(problem, eps0, s):
             own = problem.jac == "2-point" and problem.executor is None
             out = least_squares_lm(raw, eps0, s.tol, maxiter, options, check=check,
                                    differences=own)  # fmt: skip
-            if out.status is FitStatus.STALLED and s.method != "lm":
+            if _stalled(out) and s.method != "lm":
                 # LM stopped short of an optimum on its own (e.g. NIST BoxBOD from start 1
                 # with differences: its first steps send the rate off to infinity): the
                 # trust region from eps0, the same status test; the better of the two
                 trf = least_squares_scaled(residual, eps0, None, s.tol, maxiter, options,
                                            check=check)  # fmt: skip
                 trf.nfev += out.nfev
-                if trf.status is FitStatus.CONVERGED or trf.loss < out.loss:
+                if holds(trf.opt, trf.final_error) or trf.loss < out.loss:
                     trf.message = (f"Levenberg-Marquardt stalled ({out.message}); "
                                    f"trust-region reflective from eps0: {trf.message}")  # fmt: skip
                     out = trf
@@ -417,12 +445,13 @@ def fit_model_problem(problem, eps0, s):
                                                                        typical=eps0)),
     )  # fmt: skip
     if out.payload is None or out.jacobian is None:
-        return InverseResult(
-            eps=out.x, loss=np.inf, message=out.message, nit=out.nit, nfev=out.nfev,
-            status=out.status, formulation="standard", method="least-squares",
+        return dict(
+            eps=out.x, loss=np.inf, opt=out.opt, exhausted=out.exhausted,
+            failure=out.final_error, label="standard", method="least-squares",
+            message=out.message, nit=out.nit, nfev=out.nfev,
             eps_history=out.eps_history, loss_history=out.loss_history,
             verdict=model_verdict(None, None, noise, p, bounds, out.x, failed=out.message),
-            likelihood=likelihood, bounds=bounds, names=problem.names,
+            likelihood=likelihood, names=problem.names,
         )  # fmt: skip
     # the residual and Jacobian the status test judged (no second Jacobian)
     r, J, y = out.residual, np.asarray(out.jacobian, dtype=float), out.payload
@@ -438,27 +467,28 @@ def fit_model_problem(problem, eps0, s):
             except ValueError as e:
                 unc = Uncertainty.failed(f"uncertainty not computed: {e}")
             else:
-                unc = estimate_uncertainty(None, out.x, r, s2, how, dof=dof, deps_dv=D)
-                if unc.jacobian is not None and noise.known:  # d eps/d(W v) as d eps/dv
-                    # and the noise as given (the whitened fit saw sigma = 1)
-                    unc = dataclasses.replace(
-                        unc, jacobian=noise.pull_back(unc.jacobian), sigma=noise.std()
-                    )
+                # d eps/d(W v) as d eps/dv and the noise as given (the whitened fit saw
+                # sigma = 1); the estimate and its names told at once
+                unc = estimate_uncertainty(
+                    None, out.x, r, s2, how, dof=dof, deps_dv=D,
+                    names=None if problem.names is None else list(problem.names),
+                    data_noise=noise if noise.known else None,
+                )  # fmt: skip
         else:
             unc = Uncertainty.failed("uncertainty not computed: as many parameters as data "
                                      "leave no residual to estimate sigma; pass `sigma`")  # fmt: skip
     verdict = model_verdict(r, noise.whiten(problem.v), noise, p, bounds, out.x)
     message = out.message
-    if out.status is not FitStatus.CONVERGED and callable(problem.jac):
+    if not holds(out.opt, out.final_error) and callable(problem.jac):
         message += (
             " (a user-supplied `jac` that disagrees with `model` stalls a fit: check it with "
             "problem.check_derivatives(eps))"
         )
-    return InverseResult(
-        eps=out.x, loss=out.loss, status=out.status, message=message, nit=out.nit,
-        nfev=out.nfev, njev=out.nit, optimality=out.optimality, formulation="standard",
-        method="least-squares", eps_history=out.eps_history,
-        loss_history=out.loss_history, extra={"prediction": y.reshape(problem.shape)},
-        uncertainty=unc, verdict=verdict, likelihood=likelihood, bounds=bounds,
-        names=problem.names, problem=problem,
+    return dict(
+        eps=out.x, loss=out.loss, opt=out.opt, exhausted=out.exhausted,
+        failure=out.final_error, label="standard", method="least-squares",
+        message=message, nit=out.nit, nfev=out.nfev, njev=out.nit,
+        eps_history=out.eps_history, loss_history=out.loss_history,
+        extra={"prediction": y.reshape(problem.shape)}, uncertainty=unc, verdict=verdict,
+        likelihood=likelihood, names=problem.names, problem=problem,
     )  # fmt: skip

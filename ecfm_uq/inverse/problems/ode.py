@@ -30,7 +30,6 @@ data times, is :mod:`ecfm_uq.inverse.formulations.ode_forces`.
 from __future__ import annotations
 
 import copy
-import dataclasses
 import numbers
 import warnings
 
@@ -40,13 +39,14 @@ from scipy.integrate import solve_ivp
 
 from ..._validation import as_finite_array
 from ...errors import ConvergenceError
+from ..core.fitter import Fitter, Outcome
 from ..core.series import OdeTrajectory
 from ..statistics.loglik import no_likelihood
 from .interface import InverseProblem
-from .model import ModelProblem, fit_model_problem
+from .model import ModelProblem, model_fit_fields
 from .noise_model import noise_model
 
-__all__ = ["OdeProblem", "solve_with_sensitivities"]
+__all__ = ["OdeProblem", "OdeStandardFitter", "solve_with_sensitivities"]
 
 _METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
 _SQRT_EPS = np.sqrt(np.finfo(float).eps)
@@ -667,19 +667,32 @@ class OdeProblem(InverseProblem):
                             names=self.names)  # fmt: skip
 
 
+class OdeStandardFitter(Fitter):
+    """``OdeProblem``, ``"standard"``: least squares of the readings present
+    (:func:`fit_ode_standard`)."""
+
+    kind, formulation, default_method = "ode", "standard", "least-squares"
+    #: ``fit`` does not whiten for it: an OdeProblem takes its noise model itself
+    whitens = False
+
+    def run(self, problem, eps0, settings):
+        return fit_ode_standard(problem, eps0, settings)
+
+
 def fit_ode_standard(problem, eps0, s):
     """:func:`~ecfm_uq.inverse.fit` of an :class:`OdeProblem`, ``formulation="standard"``:
     least squares of the readings present, through
-    :func:`~ecfm_uq.inverse.problems.model.fit_model_problem`."""
+    :func:`~ecfm_uq.inverse.problems.model.model_fit_fields`; an
+    :class:`~ecfm_uq.inverse.core.fitter.Outcome` (``fit`` decides the status)."""
     eps0 = problem.check(eps0)
     problem.forget_solves()
-    res = fit_model_problem(problem.readings_model(), eps0, s)
+    fields = model_fit_fields(problem.readings_model(), eps0, s)
     pred = np.full(problem.data.shape, np.nan)
     try:
-        Y, _ = problem.solve(res.eps)
+        Y, _ = problem.solve(fields["eps"])
         pred = Y @ problem.H().T
-        state = problem.trajectory(res.eps)
+        state = problem.trajectory(fields["eps"])
     except ConvergenceError:
         state = None
-    extra = dict(res.extra, prediction=pred, n_missing=problem.n_missing)
-    return dataclasses.replace(res, state=state, extra=extra, formulation="standard")
+    extra = {**fields.get("extra", {}), "prediction": pred, "n_missing": problem.n_missing}
+    return Outcome(**{**fields, "state": state, "extra": extra})

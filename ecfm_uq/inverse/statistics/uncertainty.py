@@ -334,6 +334,8 @@ def estimate_uncertainty(
     hessian=None,
     dg_dv=None,
     deps_dv=None,
+    names=None,
+    data_noise=None,
     **fd_options,
 ):
     """The :class:`~ecfm_uq.inverse.Uncertainty` of an estimate, or why there is none.
@@ -371,6 +373,14 @@ def estimate_uncertainty(
         The estimate's derivative in the data itself, when known (e.g.
         :func:`least_squares_jacobian`, labelled ``"gauss-newton"``); then ``grad``,
         ``hessian`` and ``dg_dv`` are not used.
+    names : list of str, optional
+        The parameter names, recorded as ``names`` (for
+        :meth:`~ecfm_uq.inverse.Uncertainty.to_inputs`).
+    data_noise : NoiseModel, optional
+        A known noise model the data were whitened by (``data`` is :math:`Wv`,
+        ``Sigma`` 1): the recorded ``jacobian`` is then the estimate's derivative in
+        :math:`v` (``data_noise.pull_back``) and ``sigma`` the noise as given
+        (``data_noise.std()``).
     **fd_options
         ``rel_step``, ``stencil`` of :func:`implicit_covariance`.
 
@@ -411,6 +421,13 @@ def estimate_uncertainty(
         cov, D, eps = cov[block, block], D[block], eps[block]
     se, ci = confidence_intervals(eps, cov, dof=dof)
     one_sigma = noise_model in ("known", "estimated") and np.ndim(Sigma) == 0
+    if data_noise is not None:  # d eps/d(W v) as d eps/dv, and the noise as given
+        return Uncertainty(
+            True, cov=cov, stderr=se, intervals=ci,
+            method="implicit" if hessian is None and deps_dv is None else "gauss-newton",
+            noise_model=noise_model, dof=dof, jacobian=data_noise.pull_back(D),
+            sigma=data_noise.std(), eps=eps.copy(), names=names,
+        )  # fmt: skip
     return Uncertainty(
         True,
         cov=cov,
@@ -424,6 +441,7 @@ def estimate_uncertainty(
         if one_sigma
         else None,
         eps=eps.copy(),
+        names=names,
     )
 
 
