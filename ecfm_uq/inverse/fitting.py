@@ -396,8 +396,11 @@ def _with_estimate(unc, eps, names):
     if not unc.success:
         return unc
     names = None if names is None else list(names)
-    if unc.names == names and unc.eps is not None and np.array_equal(unc.eps, eps):
-        return unc
+    told = unc.eps
+    if told is not None and unc.names == names:
+        eps = np.asarray(eps, dtype=float)
+        if told.shape == eps.shape and told.tobytes() == eps.tobytes():
+            return unc
     return dataclasses.replace(unc, eps=np.array(eps, dtype=float), names=names)
 
 

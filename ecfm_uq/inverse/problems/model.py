@@ -261,6 +261,9 @@ class ModelProblem(InverseProblem):
         """``eps -> (r, J, y)``: whitened residual :math:`W(f(\\epsilon) - v)`, its
         Jacobian as a callable (computed when asked for) and the predictions.
 
+        The function's ``jacobian_at(eps, y)`` is the Jacobian alone, at a point whose
+        predictions ``y`` are known (the status test at a driver's last point).
+
         ``accurate``: one-sided differences (``jac="2-point"``) are replaced by central
         ones (error :math:`O(\\varepsilon^{2/3})` instead of :math:`O(\\varepsilon^{1/2})`
         relative): the Jacobian of the status test and of the final Gauss-Newton steps,
@@ -305,6 +308,12 @@ class ModelProblem(InverseProblem):
 
             return r, J, y
 
+        def jacobian_at(eps, y):
+            """The Jacobian ``residual(eps)[1]()`` of a point whose predictions ``y``
+            are known (no model evaluation at ``eps`` itself)."""
+            return noise.whiten(self.jacobian(eps, y, typical=typical, method=method))
+
+        residual.jacobian_at = jacobian_at
         return residual
 
     def check_derivatives(self, eps, *, rtol=1e-4):

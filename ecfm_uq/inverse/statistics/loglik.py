@@ -28,7 +28,7 @@ no :class:`LogLikelihood` and :func:`~ecfm_uq.inverse.profile_intervals` says so
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -85,8 +85,10 @@ class LogLikelihood:
         return float(self.value_only(eps) if self.value_only else self.evaluate(eps)[0])
 
 
-def least_squares_likelihood(rss_and_grad, n_data, n_eps, sigma, what, rss_only=None):
-    """``rss_and_grad(eps) -> (||r||^2, d||r||^2/deps)`` to :class:`LogLikelihood`."""
+def least_squares_likelihood(rss_and_grad, n_data, n_eps, sigma, what, rss_only=None, *,
+                             description=None, **fields):  # fmt: skip
+    """``rss_and_grad(eps) -> (||r||^2, d||r||^2/deps)`` to :class:`LogLikelihood`
+    (``description`` instead of the default one, ``fields``: more of its fields)."""
     if sigma is not None:
         s2 = float(sigma) ** 2
 
@@ -95,8 +97,10 @@ def least_squares_likelihood(rss_and_grad, n_data, n_eps, sigma, what, rss_only=
             return 0.5 * rss / s2, 0.5 * g / s2
 
         return LogLikelihood(
-            evaluate, n_eps, n_data, "known sigma", f"{what}, Gaussian noise sigma={sigma:g}",
+            evaluate, n_eps, n_data, "known sigma",
+            description or f"{what}, Gaussian noise sigma={sigma:g}",
             value_only=None if rss_only is None else (lambda eps: 0.5 * rss_only(eps) / s2),
+            **fields,
         )  # fmt: skip
     if n_data <= n_eps:
         return (
@@ -116,8 +120,9 @@ def least_squares_likelihood(rss_and_grad, n_data, n_eps, sigma, what, rss_only=
         return 0.5 * n_data * np.log(rss) if rss > 0.0 else -np.inf
 
     return LogLikelihood(
-        evaluate, n_eps, n_data, "profiled sigma", f"{what}, Gaussian noise, sigma profiled out",
-        value_only=None if rss_only is None else value_only,
+        evaluate, n_eps, n_data, "profiled sigma",
+        description or f"{what}, Gaussian noise, sigma profiled out",
+        value_only=None if rss_only is None else value_only, **fields,
     )  # fmt: skip
 
 
@@ -171,24 +176,21 @@ def gaussian_likelihood(residual, n_data, n_eps, noise, what, residual_columns=N
         r = residual(eps)[0]
         return float(r @ r)
 
-    like = least_squares_likelihood(
-        rss_and_grad, n_data, n_eps, 1.0 if noise.known else None, what, rss_only
-    )
-    if isinstance(like, str):
-        return like
     if noise.known:
         desc = f"{what}, Gaussian noise {noise.describe()}"
 
         def of_rss(rss):
             return 0.5 * rss
     else:
-        desc = like.description
+        desc = None  # least_squares_likelihood's
 
         def of_rss(rss):
             return 0.5 * n_data * np.log(rss) if rss > 0 else -np.inf
 
-    return replace(
-        like, description=desc, residual=lambda eps: residual(eps)[0],
+    # one construction, its fields all given
+    return least_squares_likelihood(
+        rss_and_grad, n_data, n_eps, 1.0 if noise.known else None, what, rss_only,
+        description=desc, residual=lambda eps: residual(eps)[0],
         residual_jacobian=residual_columns, of_rss=of_rss,
     )  # fmt: skip
 
