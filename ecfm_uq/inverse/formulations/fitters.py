@@ -1,10 +1,13 @@
 """The :class:`~ecfm_uq.inverse.core.fitter.Fitter` of each formulation whose fit is a
-function of its own module (``fit_model_problem``, ``fit_steady_problem``, ...).
+function of its own module (``fit_ode_ecfm``, ``fit_steady_problem``, ...).
 
-Each class runs that function and reads its measurement back as an
-:class:`~ecfm_uq.inverse.core.fitter.Outcome`
+Each class runs that function. The ODE rows' functions return an
+:class:`~ecfm_uq.inverse.core.fitter.Outcome`; the steady reduced fits (the
+:class:`FunctionFitter` rows) still build a result whose measurement is read back
 (:meth:`~ecfm_uq.inverse.core.fitter.Outcome.from_result`); the entry point decides the
-status and builds the result. The function checks its ``method`` and ``options`` by name
+status and builds the result. The ModelProblem and OdeProblem ``"standard"`` rows are in
+their problems' modules (:class:`~ecfm_uq.inverse.problems.model.ModelFitter`,
+:class:`~ecfm_uq.inverse.problems.ode.OdeStandardFitter`). The function checks its ``method`` and ``options`` by name
 before any model call, with its own messages. A formulation written as a Fitter from the
 start (:class:`~ecfm_uq.inverse.formulations.dynamic_fit.DynamicFitter`) needs no class
 here.
@@ -53,18 +56,25 @@ class FunctionFitter(Fitter):
         return Outcome.from_result(type(self).fit_function(problem, eps0, settings))
 
 
-class OdeEcfmFitter(FunctionFitter):
-    """``OdeProblem``, ``"ecfm"``: forces piecewise constant between data times."""
+class OdeEcfmFitter(Fitter):
+    """``OdeProblem``, ``"ecfm"``: forces piecewise constant between data times (or
+    on a basis, ``options["force_basis"]``); :func:`~.ode_forces.fit_ode_ecfm` returns
+    its :class:`Outcome`."""
 
     kind, formulation, default_method, whitens = "ode", "ecfm", "least-squares", False
-    fit_function = staticmethod(fit_ode_ecfm)
+
+    def run(self, problem, eps0, settings):
+        return fit_ode_ecfm(problem, eps0, settings)
 
 
-class OdeRandomFitter(FunctionFitter):
-    """``OdeProblem``, ``"ecfm-random"``: random forces, their variance against sigma."""
+class OdeRandomFitter(Fitter):
+    """``OdeProblem``, ``"ecfm-random"``: random forces, their variance against sigma
+    (:func:`~.ode_random.fit_ode_random` returns its :class:`Outcome`)."""
 
     kind, formulation, default_method, whitens = "ode", "ecfm-random", "least-squares", False
-    fit_function = staticmethod(fit_ode_random)
+
+    def run(self, problem, eps0, settings):
+        return fit_ode_random(problem, eps0, settings)
 
 
 class SteadyFitter(FunctionFitter):

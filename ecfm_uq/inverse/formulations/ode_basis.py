@@ -31,7 +31,8 @@ import numpy as np
 
 from ...errors import ConvergenceError
 from ..core.drivers import least_squares_scaled
-from ..core.result import InverseResult, Uncertainty
+from ..core.fitter import Outcome
+from ..core.result import Uncertainty
 from ..core.series import ForceSeries
 from ..problems.force_bases import (
     basis_matrix,
@@ -200,22 +201,21 @@ def fit_ode_basis(problem, eps0, forced, force_basis, settings, options):
         raise ConvergenceError(f"fit: {e}") from e
     why = f"not computed for force_basis={force_basis!r} (built for 'constant')"
     common = dict(
-        formulation="ecfm", method="least-squares", bounds=bounds, names=problem.names,
+        label="ecfm", method="least-squares", names=problem.names,
         likelihood=no_likelihood("ecfm"), nit=out.nit, nfev=out.nfev,
         eps_history=out.eps_history, loss_history=out.loss_history,
         uncertainty=Uncertainty.failed(f"uncertainty {why}"), verdict=no_test(f"verdict {why}"),
+        opt=out.opt, exhausted=out.exhausted, failure=out.final_error, message=out.message,
     )  # fmt: skip
     if out.payload is None:
-        return InverseResult(eps=out.x, loss=np.inf, status=out.status, message=out.message,
-                             **common)  # fmt: skip
+        return Outcome(eps=out.x, loss=np.inf, **common)
     final = forces.solve(out.x)
     series = ForceSeries(
         times=forces.knots[:-1].copy(), intervals=np.column_stack((forces.knots[:-1],
         forces.knots[1:])), values=final["means"],
         names=[problem.state_names[j] for j in forces.F], jump=None,
     )  # fmt: skip
-    return InverseResult(
-        eps=out.x, loss=out.loss, status=out.status, message=out.message, njev=out.nit,
-        optimality=out.optimality, forces=series,
+    return Outcome(
+        eps=out.x, loss=out.loss, njev=out.nit, forces=series,
         extra={"force_basis": force_basis, "force_coefficients": final["lam"]}, **common,
     )  # fmt: skip

@@ -63,7 +63,8 @@ from scipy import special, stats
 from ..._validation import as_finite_array
 from ...errors import ConvergenceError
 from ..core.drivers import least_squares_scaled
-from ..core.result import InverseResult, Uncertainty
+from ..core.fitter import Outcome
+from ..core.result import Uncertainty
 from ..core.series import ForceSeries, OdeTrajectory
 from ..problems.force_bases import check_force_basis
 from ..problems.noise_model import NoiseModel
@@ -342,12 +343,13 @@ def fit_ode_ecfm(problem, eps0, s):
         out = least_squares_scaled(residual, eps0, bounds, s.tol, maxiter, options)
     except ConvergenceError as e:
         raise ConvergenceError(f"fit: {e}") from e
-    common = dict(formulation="ecfm", method="least-squares", bounds=bounds, names=problem.names,
+    common = dict(label="ecfm", method="least-squares", names=problem.names,
                   likelihood=no_likelihood("ecfm"), nit=out.nit, nfev=out.nfev,
-                  eps_history=out.eps_history, loss_history=out.loss_history)  # fmt: skip
+                  eps_history=out.eps_history, loss_history=out.loss_history,
+                  opt=out.opt, exhausted=out.exhausted, failure=out.final_error,
+                  message=out.message)  # fmt: skip
     if out.payload is None:
-        return InverseResult(eps=out.x, loss=np.inf, status=out.status, message=out.message,
-                             verdict=no_test(out.message), **common)  # fmt: skip
+        return Outcome(eps=out.x, loss=np.inf, verdict=no_test(out.message), **common)
     final = forces.solve(out.x, with_data=s.sigma is not None, dense=True)
     series, unc, verdict, extra = _statistics(problem, forces, final, out.x, s)
     seg = final["segments"]
@@ -357,9 +359,8 @@ def fit_ode_ecfm(problem, eps0, s):
                          tuple(seg))  # fmt: skip
     traj = OdeTrajectory(ts, traj(ts), problem.state_names, tuple(seg))
     extra.update(n_missing=problem.n_missing)
-    return InverseResult(
-        eps=out.x, loss=out.loss, status=out.status, message=out.message,
-        njev=out.nit, optimality=out.optimality, state=traj, forces=series,
+    return Outcome(
+        eps=out.x, loss=out.loss, njev=out.nit, state=traj, forces=series,
         uncertainty=unc, verdict=verdict, extra=extra, **common,
     )  # fmt: skip
 

@@ -40,7 +40,7 @@ from scipy import optimize, stats
 from ..._validation import as_finite_array
 from ...errors import ConvergenceError
 from ..core.drivers import least_squares_scaled
-from ..core.result import InverseResult
+from ..core.fitter import Outcome
 from ..core.series import ForceSeries, OdeTrajectory
 from ..problems.ode import fit_ode_standard, solve_with_sensitivities
 from ..statistics.loglik import no_likelihood
@@ -217,12 +217,13 @@ def fit_ode_random(problem, eps0, s):
     ]
     verdict = decide("REML LRT tau=0", p_value, s.alpha, parts, statistic=lrt,
                      details={"tau": tau, "lrt": lrt})  # fmt: skip
-    return InverseResult(
-        eps=out.x, loss=out.loss, status=out.status, message=out.message, nit=out.nit,
-        nfev=out.nfev, njev=out.nit, optimality=out.optimality, formulation="ecfm-random",
+    return Outcome(
+        eps=out.x, loss=out.loss, opt=out.opt, exhausted=out.exhausted,
+        failure=out.final_error, message=out.message, nit=out.nit,
+        nfev=out.nfev, njev=out.nit, label="ecfm-random",
         method="least-squares", eps_history=out.eps_history,
         loss_history=out.loss_history, state=traj, forces=series, uncertainty=unc,
-        verdict=verdict, likelihood=no_likelihood("ecfm-random"), bounds=bounds,
+        verdict=verdict, likelihood=no_likelihood("ecfm-random"),
         names=problem.names,
         # "standard": the standard fit's Outcome (what it measured; no status)
         extra={"tau": tau, "standard": ls, "n_missing": problem.n_missing},
