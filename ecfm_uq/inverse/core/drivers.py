@@ -237,7 +237,9 @@ def verify_least_squares(out, residual, bounds, exhausted, *, polish, tol=OFFSET
     try:
         r, J, payload = residual(out.x)
     except ConvergenceError as e:
-        out.opt, out.final_error, out.exhausted = None, e, exhausted
+        # the model fails there: a failure whatever ``opt`` (an earlier optimizer's
+        # measurement, kept for its size) says
+        out.final_error, out.exhausted = e, exhausted
         out.message = f"{out.message} ({e})"
         return out
     out.nfev += 1

@@ -82,11 +82,11 @@ from ...system import solve_steady
 from ..core.convergence import (
     SCALED_GRADIENT_TOL,
     at_bound,
-    decide_status,
     scaled_gradient_optimality,
 )
 from ..core.finite_differences import fd_gradient
-from ..core.result import InverseResult, Uncertainty
+from ..core.fitter import Outcome
+from ..core.result import Uncertainty
 from ..core.settings import FitSettings
 from ..core.status import FitStatus
 from ..statistics.diagnostics import fd_hessian
@@ -538,7 +538,6 @@ def fit_random_force(problem, eps0, s):
     # measured: the gradient of the profiled marginal likelihood in standard-error units,
     # bounds projected, and the facts below
     opt = scaled_gradient_optimality(grad, x, search.bnds, tol=search.tol)
-    optimality = opt.value
     hits = at_bound(eps, s.bounds)
     exhausted, failure = res.nit >= search.maxiter, None
     lam, lam_sd = model.forces(lin, g_hat)
@@ -565,7 +564,6 @@ def fit_random_force(problem, eps0, s):
                 "singular at the estimate (the readings no longer depend on some parameter "
                 "combination): the minimum may lie at infinity]"
             )
-    status = decide_status(opt, exhausted, failure)
     T, p_value = model.restricted_test(lin)
     verdict = _verdict(T, p_value, g_hat, lam, lam_sd, s.alpha, hits)
     # the density of the data given eps (sample_posterior) holds the covariance at tau-hat;
@@ -587,10 +585,11 @@ def fit_random_force(problem, eps0, s):
                 f"tau cannot be re-estimated at the estimate ({e}); the intervals hold the "
                 "data covariance at tau-hat"
             )
-    return InverseResult(
-        eps=eps, loss=val, status=status, message=message,
+    # the measurement (``fit`` decides the status from it: optimality is opt.value)
+    return Outcome(
+        eps=eps, loss=val, opt=opt, exhausted=exhausted, failure=failure, message=message,
         nit=standard.nit + res.nit, nfev=standard.nfev + search.nfev,
-        njev=standard.njev + res.njev, optimality=optimality, formulation="ecfm-random",
+        njev=standard.njev + res.njev, label="ecfm-random",
         method="L-BFGS-B", forces=lam, uncertainty=unc, verdict=verdict,
         likelihood=like, interval_likelihood=interval_likelihood, extra=extra,
     )  # fmt: skip

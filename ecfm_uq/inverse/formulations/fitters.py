@@ -105,10 +105,15 @@ class SteadyEcfmFitter(SteadyFitter):
 
 
 class RandomForceFitter(SteadyFitter):
-    """``SteadyProblem``, ``"ecfm-random"``: trust region on the marginal likelihood."""
+    """``SteadyProblem``, ``"ecfm-random"``: trust region on the marginal likelihood
+    (:func:`~.discrepancy.fit_random_force` returns its :class:`Outcome`)."""
 
     kind, formulation, default_method = "steady", "ecfm-random", "least-squares"
-    fit_function = staticmethod(fit_random_force)
+
+    def run(self, problem, eps0, settings):
+        if settings.method == "all-at-once":
+            return fit_all_at_once(problem, eps0, settings)
+        return fit_random_force(problem, eps0, settings)
 
 
 class AllAtOnceFitter(Fitter):
