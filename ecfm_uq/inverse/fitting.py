@@ -313,7 +313,7 @@ def fit(
     if kind == "steady" and (formulation == "noisy-ecfm" or method == "all-at-once"):
         from .formulations.noisy import fit_all_at_once as fitter
     elif formulation == "ecfm-random":
-        from .formulations.discrepancy import fit_random_force as fitter
+        from .formulations.random_forces import fit_random_force as fitter
     elif kind == "steady":
         from .formulations.steady import fit_steady_problem as fitter
     elif kind == "dynamic":
