@@ -35,7 +35,8 @@ imports :mod:`.fitting`:
 ``coverage``        fits over synthetic data sets
 ``formulations/``   how each formulation turns a problem into an estimate: ``steady``
                     (standard and exact ECFM, reduced), ``noisy`` and ``noise`` (all at
-                    once, the paper's noise bounds), ``random_forces`` and ``sparse_forces``
+                    once, the paper's noise bounds), ``random_forces``,
+                    ``random_force_gradient``, ``random_force_search`` and ``sparse_forces``
                     (random-force ECFM), ``dynamic_fit``, ``replicated``, ``replicated_status`` and ``forces``
                     (pseudo-likelihood), ``ode_forces`` and ``ode_random`` (exact-match and
                     random-force ECFM of an ODE)
