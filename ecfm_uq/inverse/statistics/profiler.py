@@ -150,6 +150,13 @@ class Profiler:
         return optimize.OptimizeResult(x=x, fun=float(like.of_rss(rss)), success=ok)
 
 
+def _sum_of_squares(r):
+    # a residual too large to square is an infinitely bad point: inf is the answer the
+    # callers test for (np.isfinite, S1 <= S), not a numerical accident to warn about
+    with np.errstate(over="ignore"):
+        return float(r @ r)
+
+
 def _levenberg_marquardt(fun, jac, x0, lb, ub, maxiter=100, rtol=1e-12):
     """Minimize :math:`\\|r(x)\\|^2` over the box [lb, ub] by Levenberg-Marquardt steps
     (Marquardt's scaling by the diagonal of :math:`J^TJ`, steps projected on the box).
@@ -167,7 +174,7 @@ def _levenberg_marquardt(fun, jac, x0, lb, ub, maxiter=100, rtol=1e-12):
     """
     x = np.clip(np.asarray(x0, dtype=float), lb, ub)
     r = fun(x)
-    S = float(r @ r)
+    S = _sum_of_squares(r)
     if not np.isfinite(S):
         return x, np.inf, False
     mu = None
@@ -193,7 +200,7 @@ def _levenberg_marquardt(fun, jac, x0, lb, ub, maxiter=100, rtol=1e-12):
                 step = np.full(x.size, np.nan)
             x1 = np.clip(x + step, lb, ub)
             r1 = fun(x1) if np.all(np.isfinite(x1)) else np.full(r.size, np.inf)
-            S1 = float(r1 @ r1)
+            S1 = _sum_of_squares(r1)
             if S1 <= S:
                 break
             mu *= 4.0
