@@ -16,9 +16,9 @@ from ..core.fitter import Fitter, Outcome
 from ..problems.model import fit_model_problem
 from ..problems.ode import fit_ode_standard
 from .all_at_once import fit_all_at_once
-from .discrepancy import fit_random_force
 from .ode_forces import fit_ode_ecfm
 from .ode_random import fit_ode_random
+from .random_forces import fit_random_force
 from .replicated import fit_replicated_problem
 from .steady import fit_steady_problem
 
