@@ -58,8 +58,9 @@ def render_summary(entries):
 
 
 #: the studies of ``all`` that run longest, started first when ``workers > 1`` (the rest
-#: fill the other worker meanwhile); measured on 2 cores: coverage ~6.5 min of ~8.6
-LONGEST_FIRST = ("coverage",)
+#: fill the worker that frees first); CPU time measured one process each: ode ~7.5 min at
+#: R = 100, coverage ~4.5 min with its slow rows at R = 100, the rest ~2.5 min together
+LONGEST_FIRST = ("ode", "coverage")
 
 
 def _run_entry(name, out, seed, progress):

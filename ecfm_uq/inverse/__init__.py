@@ -36,7 +36,8 @@ imports :mod:`.fitting`:
 ``formulations/``   how each formulation turns a problem into an estimate: ``steady``
                     (standard and exact ECFM, reduced), ``all_at_once`` and
                     ``noise_bounds`` (all at once, the paper's noise bounds),
-                    ``discrepancy`` and ``sparse_forces`` (random-force ECFM),
+                    ``random_forces``, ``random_force_gradient``,
+                    ``random_force_search`` and ``sparse_forces`` (random-force ECFM),
                     ``dynamic_fit``, ``replicated``, ``replicated_status`` and
                     ``forces`` (pseudo-likelihood), ``ode_forces``, ``ode_basis`` and
                     ``ode_random`` (exact-match and random-force ECFM of an ODE);

@@ -62,11 +62,11 @@ DEFAULTS = {
     "n_datasets": 200,
     # the blocks whose fits cost seconds each (the beam's pseudo-likelihood, the
     # random-force ECFM's operator rows with their profiles and its discrepancy test):
-    # ~7 s per data set together (measured 2026-11-26 on two cores, R = 5; ~11 s before
-    # the sparse prior's sweeps were compiled); with 30 by default the study took 370-377 s in
-    # a fresh clone (315 s with the kernel compiled already; with 40: 434 s), so `reproduce all`
-    # stays within ten minutes; 200 on request, as v0.3 ran (each adds those ~7 s)
-    "n_datasets_slow": 30,
+    # ~7 s per data set together until the random-force ECFM had its exact gradient
+    # (2026-11-26: 30 by default, the study 370-377 s in a fresh clone), ~2 s since: with
+    # 100 the study took 267 s (264 s CPU; 2026-11-27, one worker on a shared machine),
+    # with 200 475 s CPU, too long for `reproduce all` within ten minutes; 200 on request
+    "n_datasets_slow": 100,
     "steady": {
         "n_basis": 20,
         "sensors": 7,
@@ -144,7 +144,7 @@ def add_arguments(parser):
         type=int,
         default=DEFAULTS["n_datasets_slow"],
         help="synthetic data sets of the beam and random-force ECFM blocks (default "
-        f"{DEFAULTS['n_datasets_slow']}; 200 reproduces the v0.3 rows: ~7 s per data set)",
+        f"{DEFAULTS['n_datasets_slow']}; 200 reproduces the v0.3 rows: ~2 s per data set)",
     )
     parser.add_argument(
         "--sigma",

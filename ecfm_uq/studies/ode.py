@@ -54,7 +54,7 @@ LOGISTIC_TRUTH = (1.0, 0.5, 0.25, 0.5, 4.0, 1.0)
 
 DEFAULTS = {
     "seed": 0,
-    "n_datasets": 50,
+    "n_datasets": 100,
     "relative_noise": 0.03,
     "annual_years": 20,
     "monthly_years": 10,

@@ -149,7 +149,7 @@ def test_where_tau_hat_is_zero_along_the_profile_it_is_the_standard_profile():
     """Consistent data whose REML tau-hat is zero at the estimate and at every profile point:
     the profiled marginal likelihood is the standard likelihood there, so the intervals are
     the standard fit's."""
-    from ecfm_uq.inverse.formulations.discrepancy import RandomForceModel
+    from ecfm_uq.inverse.formulations.random_forces import RandomForceModel
 
     rod = ReactionRod(6)
     clean = rod.data([1.5, 20.0])
@@ -172,7 +172,7 @@ def test_where_tau_hat_is_zero_along_the_profile_it_is_the_standard_profile():
 def test_delta_method_falls_back_to_gauss_newton_with_tau_held_and_says_why():
     """Where the observed information of the profiled likelihood is not positive definite,
     the uncertainty is (J^T S^-1 J)^-1 with S at tau-hat, computed here independently."""
-    from ecfm_uq.inverse.formulations.discrepancy import RandomForceModel, _uncertainty
+    from ecfm_uq.inverse.formulations.random_forces import RandomForceModel, _uncertainty
 
     rod, v, sigma, res = _missing_source_fit()
     model = RandomForceModel(SteadyProblem(rod.system, rod.M_obs, v), sigma)

@@ -19,9 +19,9 @@ from ..core.fitter import Fitter, Outcome
 from ..problems.model import ModelFitter
 from ..problems.ode import OdeStandardFitter
 from .all_at_once import fit_all_at_once
-from .discrepancy import fit_random_force
 from .ode_forces import fit_ode_ecfm
 from .ode_random import fit_ode_random
+from .random_forces import fit_random_force
 from .replicated import fit_replicated_problem
 from .steady import fit_steady_problem
 
@@ -106,7 +106,7 @@ class SteadyEcfmFitter(SteadyFitter):
 
 class RandomForceFitter(SteadyFitter):
     """``SteadyProblem``, ``"ecfm-random"``: trust region on the marginal likelihood
-    (:func:`~.discrepancy.fit_random_force` returns its :class:`Outcome`)."""
+    (:func:`~.random_forces.fit_random_force` returns its :class:`Outcome`)."""
 
     kind, formulation, default_method = "steady", "ecfm-random", "least-squares"
 

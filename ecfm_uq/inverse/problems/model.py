@@ -278,6 +278,7 @@ class ModelProblem(InverseProblem):
 
         whiten = noise.whiten if noise.known else None  # unknown sigma: W = I
         model, shape, checked = self.model, self.shape, self._checked
+        ones = np.ones(v.size)
 
         def residual(eps):
             nonlocal first
@@ -292,10 +293,10 @@ class ModelProblem(InverseProblem):
             if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == shape:
                 y = y.copy().ravel()
                 r = y - v
-                # r finite iff y is (v is): the sum of squares says so (the driver's
-                # loss, the same inner product), else predict's test decides (a bad
-                # value raises; finite values whose squares overflow pass)
-                if not math.isfinite(r.dot(r)):
+                # r finite iff y is (v is): its sum says so (one inner product, as
+                # all_finite; not the sum of squares, which overflows, with a warning,
+                # for finite values), else predict's test decides (a bad value raises)
+                if not math.isfinite(r.dot(ones)):
                     checked(y, eps, at_start)
             else:
                 y = checked(y, eps, at_start)

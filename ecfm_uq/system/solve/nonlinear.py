@@ -97,7 +97,11 @@ def newton(fun, z0, tol=1e-10, maxiter=50, *, linear_solver=None, scale=None, fi
     for k in range(maxiter + 1):
         try:
             r, J = first if (k == 0 and first is not None) else fun(z)
-            rnorm = float(np.linalg.norm(r))
+            # a residual too large to square (|R| > ~1e154, e.g. a rate 10^eps at an
+            # extreme eps a profile tries) is a non-finite norm, reported as NON_FINITE
+            # below: the expected answer, not a warning to print
+            with np.errstate(over="ignore"):
+                rnorm = float(np.linalg.norm(r))
             floor = 0.0
             if scale is not None and np.isfinite(rnorm) and (k == 0 or rnorm >= tol):
                 sc = scale(z)  # once per iterate: the tolerance's scale and the floor's

@@ -42,8 +42,10 @@ parameters fitted to the data do not read as a smaller variance. With
 a scalar function of the scaled variance :math:`s = \\tau^2 a_0^2/\\sigma^2`, maximized on a
 log grid and refined by Brent at every :math:`\\epsilon`; :math:`\\epsilon` then minimizes
 the marginal likelihood :math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))` from the standard
-estimate (gradient by central differences in the parameters scaled by their standard
-errors: the exact one would need :math:`\\partial A/\\partial\\epsilon`).
+estimate with its exact gradient (:mod:`~ecfm_uq.inverse.formulations.random_force_gradient`:
+:math:`\\partial A/\\partial\\epsilon` and :math:`\\partial J/\\partial\\epsilon` from one more
+back-substitution, :math:`\\hat\\tau`'s dependence on :math:`\\epsilon` by the implicit
+function theorem; the search: :mod:`~ecfm_uq.inverse.formulations.random_force_search`).
 
 "Can this model explain these data?" is the restricted likelihood-ratio test of
 :math:`\\tau = 0`, :math:`T = \\max_s 2(\\ell_R(0) - \\ell_R(s))`. The null value lies on the
@@ -92,16 +94,16 @@ from ..core.status import FitStatus
 from ..statistics.diagnostics import fd_hessian
 from ..statistics.loglik import LogLikelihood
 from ..statistics.verdict import decide
+from .random_force_gradient import profiled_gradient, second_sensitivities
+from .random_force_search import FAILURES as _FAILURES
+from .random_force_search import Search
 from .sparse_forces import sparse_force_variances
 from .steady import fit_steady_problem
 
 __all__ = ["RandomForceModel", "fit_random_force"]
 
-# the model cannot be solved there (ValueError: non-finite parameters after an overflow)
-_FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError, ValueError)
 # the scaled variance s = tau^2 * a0^2 / sigma^2 is searched on this log grid, then refined
 _S_GRID = np.concatenate([[0.0], np.logspace(-6, 10, 97)])
-_RESTARTS = 5  # L-BFGS-B restarts of the eps search after a stalled line search
 _N_SIM = 4000  # simulations of the test's null distribution (p-value resolution 1/4001)
 _SIM_SEED = 20_261_124  # fixed: the same data always give the same p-value
 _MEMO = 256  # points whose linearization and force variances a model remembers
@@ -119,6 +121,8 @@ class Linearization:
     xi: np.ndarray  # eigenvalues of K^T A A^T K / a0^2, K the complement of J
     q: np.ndarray  # squared error contrasts in that eigenbasis, over sigma^2
     J: np.ndarray  # M dE[theta]/deps, (C, n_eps)
+    dA: np.ndarray | None = None  # dA/deps, (C, n_forces, n_eps), when asked for
+    dJ: np.ndarray | None = None  # dJ/deps, (C, n_eps, n_eps), dJ[:, k, j] = d J_k / d eps_j
 
 
 class RandomForceModel:
@@ -152,16 +156,21 @@ class RandomForceModel:
         # deterministic function of eps (a0 is fixed by the first linearization)
         self._memo = OrderedDict()
 
-    def linearize(self, eps):
+    def linearize(self, eps, second=False):
         """:class:`Linearization` at ``eps`` (one solve and one multi-right-hand-side
-        back-substitution); raises the model's error where it cannot be solved."""
+        back-substitution; with ``second``, :math:`\\partial A/\\partial\\epsilon` and
+        :math:`\\partial J/\\partial\\epsilon` too, one more back-substitution); raises the
+        model's error where it cannot be solved."""
         sysm = self.system
         sol = solve_steady(sysm, eps, strict=True, **self.problem.solve_options)
         self.n_solves += 1
         r = self.v - self.M @ sysm.mean(sol.Theta)
-        dmean = np.einsum("nkc,k->nc", sol.lam_sensitivity(), sysm.E1)
-        A = np.asarray(self.M @ dmean)
-        J = np.asarray(self.M @ np.einsum("nkm,k->nm", sol.eps_sensitivity()[0], sysm.E1))
+        dTh_l, dTh_e = sol.lam_sensitivity(), sol.eps_sensitivity()[0]
+        A = np.asarray(self.M @ np.einsum("nkc,k->nc", dTh_l, sysm.E1))
+        J = np.asarray(self.M @ np.einsum("nkm,k->nm", dTh_e, sysm.E1))
+        dA = dJ = None
+        if second:
+            dA, dJ = second_sensitivities(sysm, sol, dTh_e, dTh_l, self.M)
         AA = A @ A.T
         if self.a0 is None:
             self.a0 = float(np.sqrt(max(np.trace(AA) / AA.shape[0], 1e-300)))
@@ -180,7 +189,7 @@ class RandomForceModel:
         xi, V = np.linalg.eigh(K.T @ AA @ K / self.a0**2)
         q = (V.T @ (K.T @ r)) ** 2 / self.sigma**2
         return Linearization(
-            np.asarray(eps, float), r, A, mu, (U.T @ r) ** 2, np.maximum(xi, 0.0), q, J
+            np.asarray(eps, float), r, A, mu, (U.T @ r) ** 2, np.maximum(xi, 0.0), q, J, dA, dJ
         )
 
     def nll(self, lin, s):
@@ -244,6 +253,32 @@ class RandomForceModel:
         :math:`\\tau` re-estimated (REML) at ``eps`` -- the function the estimate minimizes
         (one solve); raises the model's error where it cannot be solved."""
         lin = self._linearization(eps)
+        self._refuse_dead(lin)
+        return self._variances(lin)[1]
+
+    def profiled_gradient(self, eps):
+        """``(nll, gradient)`` of :meth:`profiled` at ``eps``: the exact gradient
+        (:func:`~ecfm_uq.inverse.formulations.random_force_gradient.profiled_gradient`,
+        one solve and two back-substitutions), by central differences only where the
+        REML estimate is not differentiable (a rank-deficient :math:`J`)."""
+        lin = self._linearization(eps, second=True)
+        g, val = self._variances(lin)
+        s = None
+        if self.prior == "shared":
+            s = float(g[0]) * self.a0**2 / self.sigma**2 if g.size else 0.0
+        grad = profiled_gradient(lin, lin.dA, lin.dJ, self.sigma, g, s, self.a0)
+        if grad is None:
+            steps = 1e-6 * np.maximum(1.0, np.abs(lin.eps))
+            grad = fd_gradient(lambda e: self.profiled(e)[0], lin.eps, steps)
+        return val, grad
+
+    def _checked_gradient(self, eps):
+        # the profiles' evaluation: refused where a parameter has no effect (profiled_nll)
+        self._refuse_dead(self._linearization(eps, second=True))
+        return self.profiled_gradient(eps)
+
+    @staticmethod
+    def _refuse_dead(lin):
         dead = np.flatnonzero(~(np.linalg.norm(lin.J, axis=0) > 0.0))
         if dead.size:
             # e.g. a reaction rate 10^eps0 that underflowed to zero: the parameter has no
@@ -251,10 +286,9 @@ class RandomForceModel:
             # one more dimension (tau-hat and the likelihood with them)
             raise ModelEvaluationError(
                 f"eps{dead.tolist()} have no effect on the readings at eps="
-                f"{np.asarray(eps).tolist()} (underflow): the error contrasts of tau are "
+                f"{lin.eps.tolist()} (underflow): the error contrasts of tau are "
                 "undefined there"
             )
-        return self._variances(lin)[1]
 
     def profiled(self, eps):
         """``(nll, g, lin)`` at ``eps``: :meth:`linearize` and :meth:`variances`,
@@ -263,14 +297,16 @@ class RandomForceModel:
         g, val = self._variances(lin)
         return val, g, lin
 
-    def _linearization(self, eps):
+    def _linearization(self, eps, second=False):
         key = np.asarray(eps, dtype=float).tobytes()
         hit = self._memo.get(key)
-        if hit is not None:
+        if hit is not None and (hit[0].dA is not None or not second):
             self._memo.move_to_end(key)
             return hit[0]
-        lin = self.linearize(eps)
-        self._memo[key] = [lin, None]
+        lin = self.linearize(eps, second)
+        # (a point seen without its second derivatives keeps its variances: the same lin)
+        self._memo[key] = [lin, None if hit is None else hit[1]]
+        self._memo.move_to_end(key)
         if len(self._memo) > _MEMO:
             self._memo.popitem(last=False)
         return lin
@@ -297,22 +333,19 @@ class RandomForceModel:
         """The data covariance :math:`\\sigma^2 I + A\\,\\mathrm{diag}(g)\\,A^T`."""
         return self.sigma**2 * np.eye(lin.A.shape[0]) + (lin.A * g) @ lin.A.T
 
-    def profiled_likelihood(self, scale, h=1e-5):
+    def profiled_likelihood(self):
         """The :class:`LogLikelihood` :math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))` of the
         profile-likelihood intervals: :math:`\\tau` re-estimated at every :math:`\\epsilon`,
-        so the intervals carry its uncertainty. Gradient by central differences with steps
-        ``h * scale`` (``scale``: the parameters' standard-error scale; the exact gradient
-        would need :math:`\\partial A/\\partial\\epsilon`)."""
-        scale = np.asarray(scale, float)
-
-        def evaluate(eps):
-            return self.profiled_nll(eps), fd_gradient(self.profiled_nll, eps, h * scale)
-
+        so the intervals carry its uncertainty. Its gradient is :meth:`profiled_gradient`,
+        exact; the value itself (eigen-decompositions, the REML root) is reproducible to
+        ~1e-12 relative only, so the profiles' inner fits keep the looser tolerances of a
+        gradient marked inexact (with the tight ones, line searches stalled on that noise
+        in equations scaled by 1e9 and left intervals untrusted)."""
         return LogLikelihood(
-            evaluate, self.system.n_eps, self.v.size, "random forces",
+            self._checked_gradient, self.system.n_eps, self.v.size, "random forces",
             f"marginal likelihood, Gaussian noise sigma={self.sigma:g} and random forces, "
             "tau re-estimated (REML) at every eps",
-            exact_gradient=False, value_only=self.profiled_nll,
+            exact_gradient=False,
         )  # fmt: skip
 
     def restricted_test(self, lin, n_sim=_N_SIM):
@@ -387,95 +420,6 @@ def rms(g):
     return float(np.sqrt(np.mean(g))) if np.size(g) else 0.0
 
 
-def _profiled(model, eps):
-    return model.profiled(eps)
-
-
-class _Search:
-    """Minimizes the profiled marginal likelihood over eps in scaled coordinates
-    ``x = (eps - eps_std) / scale``: L-BFGS-B with central-difference gradients and
-    restarts, finished derivative-free where tau > 0."""
-
-    def __init__(self, eps_std, scale, bnds, maxiter, tol):
-        self.eps_std, self.scale, self.bnds = eps_std, scale, bnds
-        self.maxiter, self.tol, self.nfev = maxiter, tol, 0
-
-    def _optimal(self, g, x):
-        return scaled_gradient_optimality(g, x, self.bnds, tol=self.tol).converged
-
-    def objective(self, model, count=True):
-        def p(x):
-            self.nfev += count
-            try:
-                return _profiled(model, self.eps_std + self.scale * x)[0]
-            except _FAILURES:
-                return np.inf
-
-        return p
-
-    def run(self, model, x0):
-        """``(x, res)`` from ``x0``; ``res.fun`` the profiled nll at ``x``."""
-        p = self.objective(model)
-        nll0 = self.objective(model, count=False)(np.zeros(x0.size))
-        base, x = nll0, np.array(x0, float)
-        last = {"g": None}
-
-        def fun(x):
-            val = p(x)
-            if not np.isfinite(val):
-                return base + 1e12, np.zeros(x.size)
-            last["g"] = fd_gradient(p, x, 1e-5)
-            return val, last["g"]
-
-        def stop_when_optimal(intermediate_result):
-            # our own criterion, not the optimizer's (its ftol on a finite-difference
-            # gradient behaves differently across scipy versions): the gradient in
-            # standard-error units (convergence.scaled_gradient_optimality) leaves eps
-            # within that fraction of a standard error
-            g = last["g"]
-            if g is not None and g.size and self._optimal(g, intermediate_result.x):
-                raise StopIteration
-
-        nit, njev, maxiter = 0, 0, self.maxiter
-        for _ in range(_RESTARTS):
-            # the standard errors of a consistent fit can be a poor scale once tau > 0
-            # (the optimum may lie many of them away): a stalled line search restarts
-            # from where it stopped, with a fresh quasi-Newton memory
-            res = optimize.minimize(
-                fun, x, jac=True, method="L-BFGS-B", bounds=self.bnds,
-                callback=stop_when_optimal,
-                options={"maxiter": maxiter - nit, "ftol": 1e-10, "gtol": 1e-6},
-            )  # fmt: skip
-            if last["g"] is not None and self._optimal(last["g"], res.x):
-                res.success = True
-            moved = np.max(np.abs(res.x - x)) if x.size else 0.0
-            nit, njev = nit + res.nit, njev + res.njev
-            if res.fun <= nll0:
-                x = res.x
-            if res.success or moved < 1e-8 or nit >= maxiter:
-                break
-        tau_positive = np.isfinite(res.fun) and np.any(
-            _profiled(model, self.eps_std + self.scale * x)[1]
-        )
-        if (tau_positive or not res.success) and self.bnds is None:
-            # with tau > 0 the optimum lies in a long flat valley (the discrepancy trading
-            # off against eps) where a small gradient in standard-error units does not
-            # mean close (a premature stop there made the estimate depend on the
-            # equations' units): finish derivative-free
-            simplex = x + np.vstack([np.zeros(x.size), 10.0 * np.eye(x.size)])
-            nm = optimize.minimize(
-                p, x, method="Nelder-Mead",
-                options={"initial_simplex": simplex, "xatol": 1e-6, "fatol": 1e-12,
-                         "maxfev": 400 * max(x.size, 1)},
-            )  # fmt: skip
-            nit += nm.nit
-            if nm.fun < res.fun:
-                x, res = nm.x, nm
-                res.success = bool(nm.success)
-        res.nit, res.njev = nit, njev
-        return x, res
-
-
 def fit_random_force(problem, eps0, s):
     """:func:`~ecfm_uq.inverse.fit` of ``formulation="ecfm-random"`` (settings ``s``).
 
@@ -514,7 +458,7 @@ def fit_random_force(problem, eps0, s):
             (None if lo is None else (lo - e) / c, None if hi is None else (hi - e) / c)
             for (lo, hi), e, c in zip(s.bounds, eps_std, scale, strict=True)
         ]
-    search = _Search(
+    search = Search(
         eps_std, scale, bnds, 200 if s.maxiter is None else s.maxiter,
         SCALED_GRADIENT_TOL if s.tol is None else s.tol,
     )  # fmt: skip
@@ -530,10 +474,12 @@ def fit_random_force(problem, eps0, s):
         found = [search.run(model, x0) for x0 in starts]
         x, res = min(found, key=lambda xr: xr[1].fun)
         model.n_solves += shared.n_solves
-    p = search.objective(model)
     eps = eps_std + scale * x
-    val, g_hat, lin = _profiled(model, eps)
-    grad = fd_gradient(p, x, 1e-5)
+    val, g_hat, lin = model.profiled(eps)
+    try:
+        grad = search.gradient(model)(x)
+    except _FAILURES:  # e.g. an estimate run off to where a parameter has no effect
+        grad = np.full(x.size, np.nan)
     # the one status decision (the optimizer's own success is not asked), from what is
     # measured: the gradient of the profiled marginal likelihood in standard-error units,
     # bounds projected, and the facts below
@@ -541,7 +487,7 @@ def fit_random_force(problem, eps0, s):
     hits = at_bound(eps, s.bounds)
     exhausted, failure = res.nit >= search.maxiter, None
     lam, lam_sd = model.forces(lin, g_hat)
-    unc = _uncertainty(p, x, scale, standard, g_hat, model, lin)
+    unc = _uncertainty(search.gradient(model), x, scale, standard, g_hat, model, lin)
     message = f"{res.message} [{opt.message}]"
     if opt.converged:
         # a small gradient is not an optimum where the data no longer determine eps (an
@@ -577,7 +523,7 @@ def fit_random_force(problem, eps0, s):
     if opts["tau_in_intervals"] == "profiled":
         try:
             model.profiled_nll(eps)
-            interval_likelihood = model.profiled_likelihood(scale)
+            interval_likelihood = model.profiled_likelihood()
         except _FAILURES as e:
             # an estimate run off to where a parameter has no effect (not converged): its
             # intervals fall back to the held covariance, and say so
@@ -595,12 +541,12 @@ def fit_random_force(problem, eps0, s):
     )  # fmt: skip
 
 
-def _uncertainty(p, x, scale, standard, g_hat, model, lin):
+def _uncertainty(grad, x, scale, standard, g_hat, model, lin):
     """Delta method of the random-force ECFM; the standard fit's where tau = 0.
 
     With tau > 0: the observed information of the profiled marginal likelihood
-    :math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))` (central differences of ``p`` in the
-    scaled parameters), which carries tau's uncertainty. Where that is not positive
+    :math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))` (central differences of its exact gradient
+    ``grad`` in the scaled parameters), which carries tau's uncertainty. Where that is not positive
     definite (a flat valley where the discrepancy trades off against eps, or the kink
     where :math:`\\hat\\tau(\\epsilon)` leaves zero), the expected (Gauss-Newton)
     information :math:`J^T S^{-1} J` with :math:`S = \\sigma^2 I + \\hat\\tau^2 AA^T` held at
@@ -618,9 +564,9 @@ def _uncertainty(p, x, scale, standard, g_hat, model, lin):
     why = None
     try:
         try:
-            H = fd_hessian(lambda y: fd_gradient(p, y, 1e-5), x, 1e-3)
+            H = fd_hessian(grad, x, 1e-3)
             w = np.linalg.eigvalsh(H)
-        except ValueError:  # the model cannot be solved next to the estimate
+        except (ConvergenceError, ModelEvaluationError, ValueError):  # not solvable nearby
             w = np.array([np.nan])
         if w[0] > 1e-10 * w[-1]:
             cov = np.linalg.inv(H) * np.outer(scale, scale)
