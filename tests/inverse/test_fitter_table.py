@@ -15,6 +15,8 @@ from ecfm_uq.inverse import fitting as fitting_module
 from ecfm_uq.inverse.core.convergence import least_squares_optimality
 from ecfm_uq.inverse.core.fitter import Fitter, Outcome
 from ecfm_uq.inverse.core.result import Uncertainty
+from ecfm_uq.inverse.core.settings import FitSettings
+from ecfm_uq.inverse.problems.noise_model import noise_model
 
 
 class WeightedLeastSquares(Fitter):
@@ -164,3 +166,37 @@ def test_a_check_inside_warm_starts_kept_leaves_the_warm_starts_as_they_were():
     np.testing.assert_array_equal(after_kept, after_clean)
     # the control: a check outside the context moves the warm start (round-off apart)
     assert not np.array_equal(after_moved, after_clean)
+
+
+def _settings(**kw):
+    base = dict(formulation="standard", method="auto", sigma=None, bounds=None, tol=None,
+                maxiter=None, options={}, uncertainty=True, alpha=0.05)  # fmt: skip
+    return FitSettings(**{**base, **kw})
+
+
+def test_the_model_row_measures_and_fit_decides_the_status_with_the_uncertainty_as_told():
+    """The ModelProblem row's fitter returns an Outcome carrying the drivers' measured
+    optimality (no status), the uncertainty already told its estimate and names (fit
+    keeps that object), and its estimate is numpy's linear least squares."""
+    x = np.linspace(0.0, 1.0, 9)
+    rng = np.random.default_rng(3)
+    v = 1.0 + 2.0 * x + 0.01 * rng.standard_normal(x.size)
+    problem = ModelProblem(lambda e: e[0] + e[1] * x, v, names=["a", "b"])
+    outcome = fitting_module.FITTERS["model", "standard"].run(problem, [0.0, 0.0], _settings())
+    assert isinstance(outcome, Outcome) and not hasattr(outcome, "status")
+    assert type(outcome.opt).__name__ == "Optimality" and outcome.opt.converged
+    truth = np.linalg.lstsq(np.column_stack((np.ones_like(x), x)), v, rcond=None)[0]
+    np.testing.assert_allclose(outcome.eps, truth, rtol=1e-7)
+    unc = outcome.uncertainty
+    assert unc.names == ["a", "b"] and np.array_equal(unc.eps, outcome.eps)
+    assert fitting_module._with_estimate(unc, outcome.eps, problem.names) is unc
+    res = fit(problem, [0.0, 0.0])
+    assert res.status is FitStatus.CONVERGED and res.optimality == outcome.optimality
+    # the known-sigma branch: the derivative in the data given and the noise as given
+    sig = np.full(x.size, 0.01)
+    known = fitting_module.FITTERS["model", "standard"].run(
+        problem, [0.0, 0.0], _settings(sigma=noise_model(sig, x.size))
+    )
+    J = np.column_stack((np.ones_like(x), x))
+    np.testing.assert_allclose(known.uncertainty.jacobian, np.linalg.pinv(J), atol=1e-7)
+    np.testing.assert_allclose(known.uncertainty.sigma, sig)
