@@ -59,7 +59,7 @@ def render_summary(entries):
 
 #: the studies of ``all`` that run longest, started first when ``workers > 1`` (the rest
 #: fill the worker that frees first); CPU time measured one process each: ode ~7.5 min at
-#: R = 100, coverage ~4.5 min with its slow rows at R = 100, the rest ~2.5 min together
+#: R = 100, coverage ~8 min with every row at R = 200, the rest ~1 min together
 LONGEST_FIRST = ("ode", "coverage")
 
 

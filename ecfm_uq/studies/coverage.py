@@ -66,7 +66,7 @@ DEFAULTS = {
     # (2026-11-26: 30 by default, the study 370-377 s in a fresh clone), ~2 s since: with
     # 100 the study took 267 s (264 s CPU; 2026-11-27, one worker on a shared machine),
     # with 200 475 s CPU, too long for `reproduce all` within ten minutes; 200 on request
-    "n_datasets_slow": 100,
+    "n_datasets_slow": 200,
     "steady": {
         "n_basis": 20,
         "sensors": 7,
