@@ -58,8 +58,8 @@ def render_summary(entries):
 
 
 #: the studies of ``all`` that run longest, started first when ``workers > 1`` (the rest
-#: fill the worker that frees first); CPU time measured one process each: ode ~7.5 min at
-#: R = 100, coverage ~8 min with every row at R = 200, the rest ~1 min together
+#: fill the worker that frees first); measured in a fresh clone on 2 cores: ode 432 s at
+#: R = 100, coverage 490 s with every row at R = 200, the rest ~1 min together (8 min 13 s)
 LONGEST_FIRST = ("ode", "coverage")
 
 
