@@ -508,18 +508,9 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     fd_base, fd_bytes, fd_j, fd_next, fd_njev = None, b"", 0, None, 0
 
     def fun(x):
-        nonlocal best_loss, fd_base, fd_bytes, fd_j, fd_njev, fd_next, last_key, last_ev
+        nonlocal best_loss, fd_base, fd_bytes, fd_j, fd_njev, fd_next
         key = x.tobytes()
-        if key == last_key:
-            ev = last_ev
-        else:  # evaluate(x, key) inlined: fun runs once per MINPACK call
-            counts["nfev"] += 1
-            try:
-                ev = list(residual(x.copy()))
-            except ConvergenceError as e:
-                failures.append(str(e))
-                ev = None
-            last_key, last_ev = key, ev
+        ev = evaluate(x, key)
         if differences:
             column = key == fd_next  # a column of MINPACK's Jacobian
             if column:
