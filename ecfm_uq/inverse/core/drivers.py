@@ -18,6 +18,7 @@ import numpy as np
 import scipy.optimize as sopt
 
 from ...errors import ConvergenceError
+from . import minpack
 from .convergence import (
     OFFSET_TOL,
     bounds_arrays,
@@ -491,26 +492,46 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     if first is None:
         raise ConvergenceError(f"the model cannot be solved at eps0={eps0}: {failures[0]}")
     m = np.size(first[0])
+    p = eps0.size
+    if m < p:
+        raise ValueError(f"the residual has {m} entries for {p} parameters: at least {p} needed")
 
     # a rejected trial point: a residual far above any other (MINPACK then shrinks the
     # step; inf would turn its norms into nan), made when one is
     def rejected():
         return np.full(m, 1e150)
 
-    best_loss = np.inf
+    # the best point so far (MINPACK returns it: it accepts only steps that lower the sum
+    # of squares), kept with its evaluation: the final point costs no model call
+    best_loss, best_key, best_ev = np.inf, None, None
     # MINPACK's differencing (lmdif's fdjac2): column j at base + h_j e_j, h_j =
     # sqrt(machine eps) |base_j| (sqrt(eps) at 0), right after each iterate; recognized
     # bit for bit, they count as one Jacobian per iterate and stay out of the path. The
     # expected point's bytes are spliced from the base's (Python floats are IEEE doubles:
     # the same sum as MINPACK's), one 8-byte slot per column, without an array copy.
     root_eps = _ROOT_EPS
-    p = eps0.size
     fd_base, fd_bytes, fd_j, fd_next, fd_njev = None, b"", 0, None, 0
 
+    # the residual's values alone where MINPACK differences them (its `plain` when it has
+    # one: no Jacobian closure, no payload; a failed point raises ConvergenceError)
+    values = getattr(residual, "plain", None) if differences else None
+    first_key, nfev = eps0.tobytes(), 0
+
     def fun(x):
-        nonlocal best_loss, fd_base, fd_bytes, fd_j, fd_njev, fd_next
+        nonlocal best_loss, best_key, best_ev, fd_base, fd_bytes, fd_j, fd_njev, fd_next, nfev
         key = x.tobytes()
-        ev = evaluate(x, key)
+        if values is None:
+            ev = evaluate(x, key)
+            r = None if ev is None else ev[0]
+        elif key == first_key:
+            ev = r = first[0]
+        else:
+            nfev += 1
+            try:
+                ev = r = values(x.copy())
+            except ConvergenceError as e:
+                failures.append(str(e))
+                ev = r = None
         if differences:
             column = key == fd_next  # a column of MINPACK's Jacobian
             if column:
@@ -525,13 +546,12 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
             else:
                 fd_next = None
             if column:
-                return rejected() if ev is None else ev[0]
-        if ev is None:
+                return rejected() if r is None else r
+        if r is None:
             return rejected()
-        r = ev[0]
         z = 0.5 * float(r.dot(r))
         if z < best_loss:
-            best_loss = z
+            best_loss, best_key, best_ev = z, key, ev
             hist_eps.append(x.copy())
             hist_loss.append(z)
         return r
@@ -552,17 +572,18 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
         raise ValueError("differences=True needs `check`, the status test's Jacobian")
     kw = {"ftol": 1e-15, "xtol": 1e-15, "gtol": 1e-15}
     kw.update(options)
-    x, _, info, mesg, ier = sopt.leastsq(
-        fun, eps0, Dfun=None if differences else jac, full_output=True,
-        # the budget counts residuals, not the p more of each differenced Jacobian
-        maxfev=maxiter * (eps0.size + 1) if differences else maxiter, **kw,
-    )  # fmt: skip
-    x = np.asarray(x, dtype=float)
-    nit = int(info.get("njev", fd_njev))
-    msg = f"Levenberg-Marquardt (MINPACK): {mesg}"
+    # the budget counts residuals, not the p more of each differenced Jacobian
+    maxfev = maxiter * (p + 1) if differences else maxiter
+    x, ier, njev = minpack.lm(fun, eps0, None if differences else jac, maxfev=maxfev, **kw)
+    nit = fd_njev if differences else njev
+    msg = f"Levenberg-Marquardt (MINPACK): {minpack.minpack_message(ier, maxfev=maxfev, **kw)}"
     if failures:
         msg += f" ({len(failures)} model evaluations failed; first: {failures[0]})"
-    ev = evaluate(x)
+    counts["nfev"] += nfev
+    key = x.tobytes()
+    if key == best_key and values is None:  # MINPACK's point, the best one: evaluated
+        last_key, last_ev = best_key, best_ev
+    ev = evaluate(x, key)
     if ev is None:
         e = ConvergenceError(failures[-1])
         return Outcome(x, np.inf, None, None, msg, nit, counts["nfev"], np.array(hist_eps),

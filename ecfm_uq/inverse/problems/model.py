@@ -314,7 +314,23 @@ class ModelProblem(InverseProblem):
             are known (no model evaluation at ``eps`` itself)."""
             return noise.whiten(self.jacobian(eps, y, typical=typical, method=method))
 
+        def plain(eps):
+            """The whitened residual alone, at a point after the first (MINPACK's
+            differencing asks for nothing else): no copy of the predictions, no Jacobian."""
+            try:
+                y = model(eps)
+            except Exception as e:  # a user callback: report any failure with its call
+                raise self._model_error(e, eps, False) from e
+            if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == shape:
+                r = y.ravel() - v  # a fresh array: the model's own is not kept
+                if not math.isfinite(r.dot(ones)):
+                    checked(y, eps, False)
+            else:
+                r = checked(y, eps, False) - v
+            return r if whiten is None else whiten(r)
+
         residual.jacobian_at = jacobian_at
+        residual.plain = plain
         return residual
 
     def check_derivatives(self, eps, *, rtol=1e-4):
