@@ -70,10 +70,17 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.optimize
+from scipy.linalg import lapack
 
 from ..._validation import all_finite
 from ...errors import ConvergenceError
 from .status import FitStatus
+
+_FLOAT64 = np.dtype(np.float64)
+#: LAPACK's divide-and-conquer SVD (what np.linalg.svd runs), double precision
+_gesdd, _gesdd_lwork = lapack.dgesdd, lapack.dgesdd_lwork
+#: gesdd's optimal workspace by shape (a handful of shapes per session)
+_gesdd_work = {}
 
 __all__ = [
     "OFFSET_TOL",
@@ -193,9 +200,12 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
     -------
     Optimality
     """
-    r = np.asarray(r, dtype=float).ravel()
-    J = np.asarray(J, dtype=float).reshape(r.size, -1)
-    eps = np.asarray(eps, dtype=float).ravel()
+    if not (type(r) is np.ndarray and r.dtype is _FLOAT64 and r.ndim == 1):
+        r = np.asarray(r, dtype=float).ravel()
+    if not (type(J) is np.ndarray and J.dtype is _FLOAT64 and J.shape[0] == r.size):
+        J = np.asarray(J, dtype=float).reshape(r.size, -1)
+    if not (type(eps) is np.ndarray and eps.dtype is _FLOAT64 and eps.ndim == 1):
+        eps = np.asarray(eps, dtype=float).ravel()
     if not (all_finite(r) and all_finite(J)):
         return Optimality(False, np.inf, "relative offset", tol, "non-finite residual or Jacobian")
     if bounds is None:  # every parameter free
@@ -214,10 +224,14 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
     # columns (a combination the data cannot see) are left out
     norms, U, sv, Vt = scaled_svd(Jf)
     if U is not None:
-        rank_ok = bool(sv[-1] > RANK_RCOND * sv[0])
+        smallest, largest = float(sv[-1]), float(sv[0])
+        rank_ok = smallest > RANK_RCOND * largest
         ur = U.T @ r
-        keep = sv > _EPS * max(n, p) * sv[0]  # lstsq's default cut-off
-        delta = -(Vt[keep].T @ (ur[keep] / sv[keep])) / norms
+        if smallest > _EPS * max(n, p) * largest:  # lstsq's default cut-off: none cut
+            delta = -(Vt.T @ (ur / sv)) / norms
+        else:
+            keep = sv > _EPS * max(n, p) * largest
+            delta = -(Vt[keep].T @ (ur[keep] / sv[keep])) / norms
         orth = r - U @ ur
         # np.linalg.norm of a vector is sqrt(x.x): the same bits without its wrapper
         norm_orth = math.sqrt(orth.dot(orth))
@@ -277,6 +291,23 @@ _last_svd = [(None, None)]
 _SVD_KEEP_MAX = 100_000
 
 
+def _thin_svd(A):
+    """``np.linalg.svd(A, full_matrices=False)`` by LAPACK's gesdd through scipy's public
+    wrapper (numpy's runs the same routine behind a heavier wrapper: several times the
+    cost for a small least-squares Jacobian); numpy's where gesdd reports a failure (it
+    raises LinAlgError, as before)."""
+    m, n = A.shape
+    lwork = _gesdd_work.get((m, n))
+    if lwork is None:  # the optimal workspace, as numpy asks for it (the same path)
+        lwork = _gesdd_work[m, n] = int(_gesdd_lwork(m, n, compute_uv=1, full_matrices=0)[0])
+    U, sv, Vt, info = _gesdd(A, compute_uv=1, full_matrices=0, lwork=lwork)
+    if info != 0:
+        return np.linalg.svd(A, full_matrices=False)
+    # numpy's layout (LAPACK writes column-major): products with U and Vt then run the
+    # same BLAS kernels, so every later bit is as before
+    return np.ascontiguousarray(U), sv, np.ascontiguousarray(Vt)
+
+
 def scaled_svd(J):
     """The thin SVD of ``J`` with its columns scaled to unit norm: ``(norms, U, sv, Vt)``
     with ``J / norms = U diag(sv) Vt`` (``U = sv = Vt = None`` when a column is zero).
@@ -295,7 +326,7 @@ def scaled_svd(J):
         return last_value
     norms = np.sqrt(np.add.reduce(J * J, axis=0))  # np.linalg.norm(J, axis=0), same bits
     if (norms > 0).all():
-        U, sv, Vt = np.linalg.svd(J / norms, full_matrices=False)
+        U, sv, Vt = _thin_svd(J / norms)
     else:
         U = sv = Vt = None
     value = (norms, U, sv, Vt)

@@ -513,13 +513,15 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     fd_base, fd_bytes, fd_j, fd_next, fd_njev = None, b"", 0, None, 0
 
     # the residual's values alone where MINPACK differences them (its `plain` when it has
-    # one: no Jacobian closure, no payload; a failed point raises ConvergenceError)
+    # one, with the sum of squares: no Jacobian closure, no payload; a failed point raises
+    # ConvergenceError)
     values = getattr(residual, "plain", None) if differences else None
     first_key, nfev = eps0.tobytes(), 0
 
     def fun(x):
         nonlocal best_loss, best_key, best_ev, fd_base, fd_bytes, fd_j, fd_njev, fd_next, nfev
         key = x.tobytes()
+        ss = None
         if values is None:
             ev = evaluate(x, key)
             r = None if ev is None else ev[0]
@@ -528,28 +530,28 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
         else:
             nfev += 1
             try:
-                ev = r = values(x.copy())
+                r, ss = values(x.copy())
             except ConvergenceError as e:
                 failures.append(str(e))
-                ev = r = None
+                r = None
+            ev = r
         if differences:
-            column = key == fd_next  # a column of MINPACK's Jacobian
-            if column:
+            if key == fd_next:  # a column of MINPACK's Jacobian
                 fd_j += 1
-                fd_njev += fd_j == p
-            else:
-                fd_base, fd_bytes, fd_j = x.tolist(), key, 0
-            if fd_j < p:  # the point of the next column
-                bj = fd_base[fd_j]
-                e = _pack_double(bj + (root_eps * abs(bj) or root_eps))
-                fd_next = fd_bytes[: 8 * fd_j] + e + fd_bytes[8 * fd_j + 8 :]
-            else:
-                fd_next = None
-            if column:
+                if fd_j < p:  # the point of the next column
+                    bj = fd_base[fd_j]
+                    e = _pack_double(bj + (root_eps * abs(bj) or root_eps))
+                    fd_next = fd_bytes[: 8 * fd_j] + e + fd_bytes[8 * fd_j + 8 :]
+                else:
+                    fd_njev += 1
+                    fd_next = None
                 return rejected() if r is None else r
+            fd_base, fd_bytes, fd_j = x.tolist(), key, 0
+            bj = fd_base[0]
+            fd_next = _pack_double(bj + (root_eps * abs(bj) or root_eps)) + key[8:]
         if r is None:
             return rejected()
-        z = 0.5 * float(r.dot(r))
+        z = 0.5 * float(r.dot(r) if ss is None else ss)
         if z < best_loss:
             best_loss, best_key, best_ev = z, key, ev
             hist_eps.append(x.copy())

@@ -279,6 +279,7 @@ class ModelProblem(InverseProblem):
         whiten = noise.whiten if noise.known else None  # unknown sigma: W = I
         model, shape, checked = self.model, self.shape, self._checked
         ones = np.ones(v.size)
+        flat = len(shape) == 1
 
         def residual(eps):
             nonlocal first
@@ -315,19 +316,23 @@ class ModelProblem(InverseProblem):
             return noise.whiten(self.jacobian(eps, y, typical=typical, method=method))
 
         def plain(eps):
-            """The whitened residual alone, at a point after the first (MINPACK's
-            differencing asks for nothing else): no copy of the predictions, no Jacobian."""
+            """``(r, r @ r)``: the whitened residual and its sum of squares alone, at a point
+            after the first (MINPACK's differencing asks for nothing else): no copy of the
+            predictions, no Jacobian; the sum doubles as the finiteness test."""
             try:
                 y = model(eps)
             except Exception as e:  # a user callback: report any failure with its call
                 raise self._model_error(e, eps, False) from e
             if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == shape:
-                r = y.ravel() - v  # a fresh array: the model's own is not kept
-                if not math.isfinite(r.dot(ones)):
-                    checked(y, eps, False)
+                r = (y if flat else y.ravel()) - v  # a fresh array: the model's is not kept
             else:
                 r = checked(y, eps, False) - v
-            return r if whiten is None else whiten(r)
+            if whiten is not None:
+                r = whiten(r)
+            ss = r.dot(r)
+            if not math.isfinite(ss):  # a bad value raises; finite ones whose square
+                checked(y, eps, False)  # overflows pass (their loss is inf)
+            return r, ss
 
         residual.jacobian_at = jacobian_at
         residual.plain = plain
