@@ -502,9 +502,9 @@ def fit_random_force(problem, eps0, s):
         # refusal as the standard fit's
         standard_holds = holds(standard.opt, standard.failure)
         if not np.any(g_hat) and not standard_holds and np.allclose(eps, standard.eps):
-            # tau = 0: this is the standard fit, and what was measured there holds: its
-            # conditions did not, its budget and its model failure (nothing measured: the
-            # model failed there) are this fit's
+            # tau = 0: this is the standard fit, and what was measured there is this
+            # fit's: its conditions did not hold, its budget, its model failure (where
+            # nothing was measured, the model failed there)
             opt = replace(opt, converged=False)
             exhausted = standard.exhausted
             failure = standard.failure
