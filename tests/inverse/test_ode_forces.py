@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from ecfm_uq.inverse import ForceSeries, OdeProblem, OdeTrajectory, fit
+from ecfm_uq.inverse.core.fitter import Outcome
 from ecfm_uq.inverse.formulations.ode_basis import BasisForces
 from ecfm_uq.inverse.formulations.ode_forces import ExactForces, forced_components
 from ecfm_uq.inverse.problems.force_bases import basis_matrix
@@ -205,6 +206,7 @@ def test_random_forces_tau_zero_on_exact_data_and_detected_harvest():
     res = fit(problem(times, clean, rtol=1e-9), TRUTH * 1.02, formulation="ecfm-random",
               sigma=sigma)  # fmt: skip
     assert res.success and res.extra["tau"] == 0.0 and res.verdict.consistent
+    assert type(res.extra["standard"]) is Outcome  # the standard fit: what it measured
     np.testing.assert_allclose(res.eps, TRUTH, rtol=1e-6)
     data = simulate(times, harvest=0.6)
     data = data + 0.03 * np.abs(data) * np.random.default_rng(5).standard_normal(data.shape)

@@ -3,8 +3,10 @@
 A driver takes ``evaluate(eps) -> (z, grad, payload)`` (the payload is whatever the
 formulation keeps at the final point: a steady solution, a trajectory), runs one
 optimizer, records the path and the inner-solve failures, and returns an
-:class:`Outcome`; the formulation turns it into an
-:class:`~ecfm_uq.inverse.InverseResult`. An inner solve that fails at a trial point
+:class:`Outcome` of what it measured (no status: the formulation hands ``opt``,
+``exhausted`` and ``final_error`` to its fitter's
+:class:`~ecfm_uq.inverse.core.fitter.Outcome`, and :func:`~ecfm_uq.inverse.fit` decides
+the status from them). An inner solve that fails at a trial point
 (:class:`~ecfm_uq.errors.ConvergenceError`) counts as ``z = inf`` there and is reported.
 """
 
@@ -22,7 +24,6 @@ from . import minpack
 from .convergence import (
     OFFSET_TOL,
     bounds_arrays,
-    decide_status,
     least_squares_optimality,
     minimize_optimality,
     polish_least_squares,
@@ -123,18 +124,6 @@ class Outcome:
     def optimality(self):
         """The measured optimality's unit-free size (``None`` when not measured)."""
         return None if self.opt is None else self.opt.value
-
-    @property
-    def status(self):
-        """:func:`~ecfm_uq.inverse.core.convergence.decide_status` of the measurement, for
-        the formulations that still build their result themselves (the ODE and steady
-        reduced fits); a :class:`~ecfm_uq.inverse.core.fitter.Fitter` hands the
-        measurement (``opt``, ``exhausted``, ``final_error``) to the entry point instead."""
-        return decide_status(self.opt, self.exhausted, self.final_error)
-
-    @property
-    def success(self):
-        return self.status.success
 
 
 def minimize_scaled(evaluate, eps0, method, bounds, gtol, maxiter, options):

@@ -23,20 +23,8 @@ from typing import Any, ClassVar
 import numpy as np
 
 from .result import Uncertainty, Verdict
-from .status import FitStatus
 
-__all__ = ["Fitter", "Measured", "Outcome", "holds", "measured"]
-
-
-@dataclass(frozen=True)
-class Measured:
-    """The optimality conditions as measured at a returned point, when a driver reports
-    only their verdict (``converged``) and unit-free size (``value``): what
-    :func:`~ecfm_uq.inverse.core.convergence.decide_status` reads of an
-    :class:`~ecfm_uq.inverse.core.convergence.Optimality`."""
-
-    converged: bool
-    value: float | None = None
+__all__ = ["Fitter", "Outcome", "holds", "measured"]
 
 
 def measured(out):
@@ -64,9 +52,9 @@ class Outcome:
     eps : (n_eps,) ndarray
         The returned point.
     loss : float
-    opt : Optimality, Measured or None
+    opt : Optimality or None
         The optimality conditions measured at ``eps`` (``None``: not measured, the model
-        fails there).
+        fails there; ``opt.value`` ``None`` where the test has no finite size).
     exhausted : bool
         Whether the optimizer's budget ran out.
     failure : Exception, str or None
@@ -111,28 +99,6 @@ class Outcome:
     def optimality(self):
         """The measured optimality's unit-free size (``None`` when not measured)."""
         return None if self.opt is None else self.opt.value
-
-    @classmethod
-    def from_result(cls, result):
-        """The outcome of a fit written before this record: an
-        :class:`~ecfm_uq.inverse.InverseResult` whose driver measured the optimality and
-        kept only its verdict (``status``) and size (``optimality``), read back as the
-        measurement (``CONVERGED``: the conditions held; ``MAX_ITERATIONS``: they did not
-        and the budget ran out; ``MODEL_FAILURE``: the model failed at ``eps``)."""
-        status = result.status
-        failed = status is FitStatus.MODEL_FAILURE
-        opt = Measured(status is FitStatus.CONVERGED, result.optimality)
-        return cls(
-            eps=result.eps, loss=result.loss, opt=opt,
-            exhausted=status is FitStatus.MAX_ITERATIONS,
-            failure=result.message if failed else None, label=result.formulation,
-            method=result.method, message=result.message, nit=result.nit,
-            nfev=result.nfev, njev=result.njev, eps_history=result.eps_history,
-            loss_history=result.loss_history, state=result.state, forces=result.forces,
-            uncertainty=result.uncertainty, verdict=result.verdict,
-            likelihood=result.likelihood, interval_likelihood=result.interval_likelihood,
-            names=result.names, problem=result.problem, extra=result.extra,
-        )  # fmt: skip
 
 
 class Fitter:

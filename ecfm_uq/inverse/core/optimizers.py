@@ -24,7 +24,10 @@ import numpy as np
 from ..._validation import as_finite_array, check_int, check_positive
 from ...errors import ConvergenceError
 from .convergence import decide_status, minimize_optimality
+from .drivers import Outcome
 from .result import InverseResult
+
+__all__ = ["adam", "run_adam"]
 
 
 def adam(
@@ -74,10 +77,65 @@ def adam(
         every iterate and its loss; ``extra["grad"]`` is the final gradient and
         ``extra["grad_history"]`` all gradients. On a failed evaluation the histories
         stop at the last successful iterate, which is returned with ``success=False``.
-        The status is decided from what is measured at the final iterate
-        (:func:`~ecfm_uq.inverse.core.convergence.decide_status`): CONVERGED when its
-        optimality holds (``optimality`` is the measured value), else MAX_ITERATIONS (the
-        epochs are a budget, not a test); MODEL_FAILURE on a failed evaluation.
+        The status is decided here, once, from what :func:`run_adam` measured at the
+        final iterate (:func:`~ecfm_uq.inverse.core.convergence.decide_status`):
+        CONVERGED when its optimality holds (``optimality`` is the measured value), else
+        MAX_ITERATIONS (the epochs are a budget, not a test); MODEL_FAILURE on a failed
+        evaluation.
+
+    Raises
+    ------
+    ConvergenceError
+        If the objective already fails at ``x0`` (there is no iterate to return).
+    """
+    out = run_adam(
+        fun_and_grad, x0, lr, epochs, betas, eps_hat, label=formulation, callback=callback,
+        gtol=gtol,
+    )  # fmt: skip
+    return InverseResult(
+        eps=out.x,
+        loss=out.loss,
+        status=decide_status(out.opt, out.exhausted, out.final_error),
+        optimality=out.optimality,
+        message=out.message,
+        nit=out.nit,
+        nfev=out.nfev,
+        njev=out.nfev,
+        formulation=formulation,
+        method="adam",
+        eps_history=out.eps_history,
+        loss_history=out.loss_history,
+        extra=out.payload,
+    )
+
+
+def run_adam(
+    fun_and_grad,
+    x0,
+    lr=1e-2,
+    epochs=250,
+    betas=(0.9, 0.999),
+    eps_hat=1e-8,
+    *,
+    label="adam",
+    callback=None,
+    gtol=1e-10,
+):
+    """Adam's iterations (the arguments of :func:`adam`; ``label`` names the objective in
+    the error raised at ``x0``) and what is measured at the final iterate, as a driver
+    reports it: no status.
+
+    Returns
+    -------
+    ~ecfm_uq.inverse.core.drivers.Outcome
+        ``x`` the final iterate, ``loss`` and ``grad`` there, ``nit`` the epochs run,
+        ``nfev`` the evaluations (each gives the gradient too), the histories of every
+        iterate; ``opt`` the optimality measured there
+        (:func:`~ecfm_uq.inverse.core.convergence.minimize_optimality`; ``None`` after a
+        failed evaluation), ``exhausted`` always (the epochs are a budget),
+        ``final_error`` the failed evaluation (the histories stop at the last successful
+        iterate); ``payload`` ``{"grad", "grad_history"}`` (the final gradient and every
+        gradient: :func:`adam`'s ``extra``).
 
     Raises
     ------
@@ -103,7 +161,7 @@ def adam(
     v = np.zeros_like(x)
     xs, fs, gs = [], [], []
     message = f"completed {epochs} epochs"
-    success = True
+    failure = None
     for k in range(epochs + 1):
         try:
             f, g = fun_and_grad(x)
@@ -112,7 +170,7 @@ def adam(
             if not (np.isfinite(f) and np.all(np.isfinite(g))):
                 raise ConvergenceError(f"objective or gradient is not finite (f={f}, g={g})")
         except ConvergenceError as e:
-            success = False
+            failure = e
             message = f"evaluation failed at epoch {k} (eps={np.array2string(x)}): {e}"
             break
         xs.append(x.copy())
@@ -130,26 +188,14 @@ def adam(
         x = x - lr * mhat / (np.sqrt(vhat) + eps_hat)
 
     if not xs:
-        raise ConvergenceError(
-            f"{formulation}: the objective fails at the starting point: {message}"
-        )
+        raise ConvergenceError(f"{label}: the objective fails at the starting point: {message}")
     opt = None
-    if success:
+    if failure is None:
         message += f"; final |grad| = {np.linalg.norm(gs[-1]):.3e}"
         scale = fs[0] if fs[0] > 0 else 1.0
         opt = minimize_optimality(gs[-1], xs[-1], fs[-1], scale, gtol, None)
-    return InverseResult(
-        eps=xs[-1],
-        loss=fs[-1],
-        status=decide_status(opt, exhausted=True, failure=None if success else message),
-        optimality=None if opt is None else opt.value,
-        message=message,
-        nit=len(xs) - 1,
-        nfev=len(xs) + (not success),
-        njev=len(xs) + (not success),
-        formulation=formulation,
-        method="adam",
-        eps_history=np.array(xs),
-        loss_history=np.array(fs),
-        extra={"grad": gs[-1], "grad_history": np.array(gs)},
-    )
+    return Outcome(
+        xs[-1], fs[-1], gs[-1], {"grad": gs[-1], "grad_history": np.array(gs)}, message,
+        len(xs) - 1, len(xs) + (failure is not None), np.array(xs), np.array(fs),
+        final_error=failure, opt=opt, exhausted=True,
+    )  # fmt: skip

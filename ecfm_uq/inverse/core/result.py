@@ -358,7 +358,12 @@ class InverseResult:
         ``force_prior``               random-force ECFM         ``"shared"`` or
                                                                 ``"sparse"``
         ``standard``                  random-force ECFM         the standard fit it
-                                                                started from (a result)
+                                      (SteadyProblem,           started from: its
+                                      OdeProblem)               ``Outcome`` (what it
+                                                                measured, no status:
+                                                                ``holds(std.opt,
+                                                                std.failure)`` whether
+                                                                its conditions held)
         ``interval_likelihood``       random-force ECFM         why ``interval_likelihood``
                                                                 is ``None`` (when it is)
         ``n_solves``                  random-force ECFM,        forward solves

@@ -38,6 +38,7 @@ ECFM problem needs its ``Gamma``.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 import scipy.optimize as sopt
@@ -45,7 +46,7 @@ import scipy.optimize as sopt
 from ..._validation import as_dense_rows, as_finite_array, check_positive
 from ...system import solve_steady
 from ..core.convergence import KKT_TOL, kkt_optimality
-from ..core.fitter import Measured, Outcome, holds
+from ..core.fitter import Outcome, holds
 from ..core.result import Uncertainty
 from ..statistics.uncertainty import estimate_uncertainty
 from ..statistics.verdict import moments_bounds_verdict
@@ -304,7 +305,7 @@ def _solve(problem, z0, note, gradients, maxiter, ftol, tol, method_name):
         )  # fmt: skip
     message = f"SLSQP: {res.message} [{opt.message}]"
     if not np.isfinite(opt.value):  # measured, not a size: no optimality to report
-        opt = Measured(opt.converged, None)
+        opt = replace(opt, value=None)
     return dict(
         eps=eps.copy(),
         loss=float(res.fun) if np.isfinite(res.fun) else float("inf"),

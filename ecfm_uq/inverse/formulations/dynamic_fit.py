@@ -21,9 +21,8 @@ from ..core.drivers import (
     verify_least_squares,
 )
 from ..core.fitter import Fitter, Outcome, holds, measured
-from ..core.optimizers import adam
+from ..core.optimizers import run_adam
 from ..core.result import Uncertainty, Verdict
-from ..core.status import FitStatus
 from ..problems.dynamic import FORMULATIONS, DynamicInverseProblem
 from ..statistics.verdict import (
     EXTREME_DECADES,
@@ -190,18 +189,18 @@ def _fit(problem, eps0, s):
 
     if method == "adam":
         opts = s.take(_ADAM_OPTIONS)
-        res = adam(
+        out = run_adam(
             problem.objective(formulation),
             eps0,
             lr=opts["lr"],
             epochs=_ADAM_EPOCHS if s.maxiter is None else s.maxiter,
             betas=opts["betas"],
             eps_hat=opts["eps_hat"],
-            formulation=formulation,
+            label=formulation,
             callback=opts["callback"],
         )
         traj = None
-        fields = _adam_measured(problem, res, residual, s.bounds)
+        fields = _adam_measured(problem, out, formulation, residual, s.bounds)
     elif method in ("least-squares", "trf"):
         out = least_squares_scaled(
             residual, eps0, s.bounds, s.tol,
@@ -259,28 +258,28 @@ def _driver_fields(out, formulation, method):
     )  # fmt: skip
 
 
-def _adam_measured(problem, res, residual, bounds):
-    """What is measured at Adam's last iterate: Adam's epochs are a budget
+def _adam_measured(problem, out, formulation, residual, bounds):
+    """What is measured at Adam's last iterate (``out``, what
+    :func:`~ecfm_uq.inverse.core.optimizers.run_adam` reports): Adam's epochs are a budget
     (``exhausted``), not a test; the least-squares optimality conditions there are the
     measurement, a failed evaluation (Adam's or the check's march) a model failure.
-    Adam's own status is not asked. The fit's fields."""
+    Adam's own optimality test is not asked. The fit's fields."""
     fields = dict(
-        eps=res.eps, loss=res.loss, message=res.message, nit=res.nit, nfev=res.nfev,
-        njev=res.njev, label=res.formulation, method=res.method,
-        eps_history=res.eps_history, loss_history=res.loss_history, extra=res.extra,
-        exhausted=True,
+        eps=out.x, loss=out.loss, message=out.message, nit=out.nit, nfev=out.nfev,
+        njev=out.nfev, label=formulation, method="adam", eps_history=out.eps_history,
+        loss_history=out.loss_history, extra=out.payload, exhausted=True,
     )  # fmt: skip
-    if res.status is FitStatus.MODEL_FAILURE:  # an evaluation failed: nothing to measure
-        return {**fields, "opt": None, "failure": res.message}
+    if out.final_error is not None:  # an evaluation failed: nothing to measure
+        return {**fields, "opt": None, "failure": out.final_error}
     try:
         with problem.warm_starts_kept():  # the check must not move the warm starts
-            r, J, _ = residual(res.eps)
+            r, J, _ = residual(out.x)
     except ConvergenceError as e:
-        message = f"{res.message} [the model cannot be marched at the last iterate: {e}]"
+        message = f"{out.message} [the model cannot be marched at the last iterate: {e}]"
         return {**fields, "opt": None, "failure": e, "message": message}
-    opt = least_squares_optimality(r, J, res.eps, bounds=bounds)
-    message = res.message if opt.converged else f"{res.message} [NOT converged: {opt.message}]"
-    return {**fields, "opt": opt, "failure": None, "nfev": res.nfev + 1, "message": message}
+    opt = least_squares_optimality(r, J, out.x, bounds=bounds)
+    message = out.message if opt.converged else f"{out.message} [NOT converged: {opt.message}]"
+    return {**fields, "opt": opt, "failure": None, "nfev": out.nfev + 1, "message": message}
 
 
 _OBJECTIVE = {

@@ -1,21 +1,20 @@
 """The :class:`~ecfm_uq.inverse.core.fitter.Fitter` of each formulation whose fit is a
 function of its own module (``fit_ode_ecfm``, ``fit_steady_problem``, ...).
 
-Each class runs that function. The ODE rows' functions return an
-:class:`~ecfm_uq.inverse.core.fitter.Outcome`; the steady reduced fits (the
-:class:`FunctionFitter` rows) still build a result whose measurement is read back
-(:meth:`~ecfm_uq.inverse.core.fitter.Outcome.from_result`); the entry point decides the
-status and builds the result. The ModelProblem and OdeProblem ``"standard"`` rows are in
-their problems' modules (:class:`~ecfm_uq.inverse.problems.model.ModelFitter`,
-:class:`~ecfm_uq.inverse.problems.ode.OdeStandardFitter`). The function checks its ``method`` and ``options`` by name
-before any model call, with its own messages. A formulation written as a Fitter from the
-start (:class:`~ecfm_uq.inverse.formulations.dynamic_fit.DynamicFitter`) needs no class
-here.
+Each class runs that function, which returns an
+:class:`~ecfm_uq.inverse.core.fitter.Outcome`: what was measured at the returned point
+(no status); the entry point decides the status and builds the result. The ModelProblem
+and OdeProblem ``"standard"`` rows are in their problems' modules
+(:class:`~ecfm_uq.inverse.problems.model.ModelFitter`,
+:class:`~ecfm_uq.inverse.problems.ode.OdeStandardFitter`). The function checks its
+``method`` and ``options`` by name before any model call, with its own messages. A
+formulation written as a Fitter from the start
+(:class:`~ecfm_uq.inverse.formulations.dynamic_fit.DynamicFitter`) needs no class here.
 """
 
 from __future__ import annotations
 
-from ..core.fitter import Fitter, Outcome
+from ..core.fitter import Fitter
 from ..problems.model import ModelFitter
 from ..problems.ode import OdeStandardFitter
 from .all_at_once import fit_all_at_once
@@ -27,7 +26,6 @@ from .steady import fit_steady_problem
 
 __all__ = [
     "AllAtOnceFitter",
-    "FunctionFitter",
     "ModelFitter",
     "OdeEcfmFitter",
     "OdeRandomFitter",
@@ -38,22 +36,6 @@ __all__ = [
     "SteadyFitter",
     "SteadyStandardFitter",
 ]
-
-
-class FunctionFitter(Fitter):
-    """A fitter that runs a fit function ``fit_function(problem, eps0, settings)``."""
-
-    #: whether ``fit`` whitens for it an array ``sigma`` and completes its likelihood
-    #: and bounds (the Galerkin formulations); a ModelProblem and an OdeProblem take
-    #: their noise model themselves
-    whitens = True
-
-    @staticmethod
-    def fit_function(problem, eps0, settings):
-        raise NotImplementedError
-
-    def run(self, problem, eps0, settings):
-        return Outcome.from_result(type(self).fit_function(problem, eps0, settings))
 
 
 class OdeEcfmFitter(Fitter):
@@ -77,19 +59,19 @@ class OdeRandomFitter(Fitter):
         return fit_ode_random(problem, eps0, settings)
 
 
-class SteadyFitter(FunctionFitter):
+class SteadyFitter(Fitter):
     """``SteadyProblem``, ``"standard"`` / ``"ecfm"``: reduced (least squares or a
-    ``minimize`` method). For every steady formulation ``method="all-at-once"`` is the
+    ``minimize`` method; :func:`~.steady.fit_steady_problem` returns its
+    :class:`Outcome`). For every steady formulation ``method="all-at-once"`` is the
     stacked SLSQP fit (:func:`~.all_at_once.fit_all_at_once`, which names the
     formulations it solves)."""
 
     kind, default_method = "steady", "least-squares"
-    fit_function = staticmethod(fit_steady_problem)
 
     def run(self, problem, eps0, settings):
-        if settings.method == "all-at-once":  # written as an Outcome already
+        if settings.method == "all-at-once":
             return fit_all_at_once(problem, eps0, settings)
-        return Outcome.from_result(type(self).fit_function(problem, eps0, settings))
+        return fit_steady_problem(problem, eps0, settings)
 
 
 class SteadyStandardFitter(SteadyFitter):

@@ -87,10 +87,9 @@ from ..core.convergence import (
     scaled_gradient_optimality,
 )
 from ..core.finite_differences import fd_gradient
-from ..core.fitter import Outcome
+from ..core.fitter import Outcome, holds
 from ..core.result import Uncertainty
 from ..core.settings import FitSettings
-from ..core.status import FitStatus
 from ..statistics.diagnostics import fd_hessian
 from ..statistics.loglik import LogLikelihood
 from ..statistics.verdict import decide
@@ -425,6 +424,14 @@ def fit_random_force(problem, eps0, s):
 
     Starts from the standard estimate (``tau = 0``) and minimizes the marginal likelihood
     with ``tau`` profiled out.
+
+    Returns
+    -------
+    Outcome
+        What was measured (no status); ``extra["standard"]`` is the standard fit's own
+        :class:`~ecfm_uq.inverse.core.fitter.Outcome` (what it measured, as
+        :func:`~ecfm_uq.inverse.formulations.ode_random.fit_ode_random` keeps its
+        standard fit).
     """
     system = problem.system
     opts = s.take({"tau_in_intervals": "profiled", "force_prior": "shared"})  # refuses unknown
@@ -493,11 +500,16 @@ def fit_random_force(problem, eps0, s):
         # a small gradient is not an optimum where the data no longer determine eps (an
         # estimate run off towards infinity, e.g. a reaction rate 10^eps0 -> 0): the same
         # refusal as the standard fit's
-        if not np.any(g_hat) and not standard.success and np.allclose(eps, standard.eps):
-            # tau = 0: this is the standard fit, and what was measured there holds
+        standard_holds = holds(standard.opt, standard.failure)
+        if not np.any(g_hat) and not standard_holds and np.allclose(eps, standard.eps):
+            # tau = 0: this is the standard fit, and what was measured there is this
+            # fit's: its conditions did not hold, its budget, its model failure (where
+            # nothing was measured, the model failed there)
             opt = replace(opt, converged=False)
-            exhausted = standard.status is FitStatus.MAX_ITERATIONS
-            failure = standard.message if standard.status is FitStatus.MODEL_FAILURE else None
+            exhausted = standard.exhausted
+            failure = standard.failure
+            if failure is None and standard.opt is None:
+                failure = standard.message
             message = f"tau = 0, the standard fit: {standard.message}"
         elif _singular(_gauss_newton_information(model, lin, g_hat)):
             # (with tau = 0 too: the search can walk on along the flat direction past

@@ -28,8 +28,9 @@ from ..core.drivers import (
     minimize_scaled,
     verify_least_squares,
 )
+from ..core.fitter import Outcome, measured
 from ..core.gradients import choose_gradient
-from ..core.result import InverseResult, Uncertainty, Verdict
+from ..core.result import Uncertainty, Verdict
 from ..problems.galerkin import lazy_standard_residual
 from ..statistics.uncertainty import estimate_uncertainty, least_squares_jacobian, residual_variance
 from ..statistics.verdict import consistency_verdict
@@ -142,7 +143,16 @@ _DEFAULT_MAX_NFEV = 2000
 
 def fit_steady_problem(problem, eps0, s):
     """:func:`~ecfm_uq.inverse.fit` for a :class:`~ecfm_uq.inverse.problems.galerkin.SteadyProblem` (validated
-    settings ``s``, a :class:`~ecfm_uq.inverse.core.settings.FitSettings`)."""
+    settings ``s``, a :class:`~ecfm_uq.inverse.core.settings.FitSettings`), reduced
+    formulations ``"standard"`` and ``"ecfm"``.
+
+    Returns
+    -------
+    Outcome
+        What was measured at the returned point (the driver's ``opt``, ``exhausted`` and
+        model failure, :func:`~ecfm_uq.inverse.core.fitter.measured`) with the
+        uncertainty and the verdict; no status (:func:`~ecfm_uq.inverse.fit` decides it).
+    """
     system = problem.system
     if s.formulation not in _OBJECTIVES:
         raise ValueError(
@@ -199,11 +209,12 @@ def fit_steady_problem(problem, eps0, s):
     except ConvergenceError as e:
         raise ConvergenceError(f"fit: {e}") from e
     if out.payload is None:  # the optimizer stopped where the model fails
-        return InverseResult(
+        return Outcome(
             eps=out.x, loss=np.inf, message=out.message, nit=out.nit, nfev=out.nfev,
-            status=out.status, formulation=s.formulation, method=method, optimality=out.optimality,
-            eps_history=out.eps_history, loss_history=out.loss_history,
+            label=s.formulation, method=method, eps_history=out.eps_history,
+            loss_history=out.loss_history,
             verdict=Verdict(False, test="none", message=f"NOT consistent: {out.final_error}"),
+            **measured(out),
         )  # fmt: skip
     res, z, sol, msg = out, out.loss, out.payload, out.message
     # the unforced solve at the estimate, shared by the verdict and the residual sigma
@@ -223,23 +234,22 @@ def fit_steady_problem(problem, eps0, s):
     )  # fmt: skip
     if verdict.consistent is False or verdict.identifiability:
         msg += f" [{verdict.message}]"
-    return InverseResult(
+    return Outcome(
         uncertainty=unc,
         eps=np.asarray(res.x),
         loss=z,
-        status=out.status,
         message=msg,
         nit=out.nit,
         nfev=out.nfev,
         njev=out.nfev,
-        optimality=out.optimality,
-        formulation=s.formulation,
+        label=s.formulation,
         method=method,
         eps_history=out.eps_history,
         loss_history=out.loss_history,
         state=sol.Theta,
         forces=lam if s.formulation == "ecfm" else None,
         verdict=verdict,
+        **measured(out),
     )
 
 
