@@ -92,6 +92,8 @@ def check_int(name, value, *, minimum=None):
 
 def check_real(name, value):
     """A finite real number (not a bool), as float, or a TypeError/ValueError naming it."""
+    if type(value) is float and math.isfinite(value):  # the common case, without the ABCs
+        return value
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise TypeError(f"`{name}` must be a real number, got {describe(value)}")
     value = float(value)
@@ -102,6 +104,8 @@ def check_real(name, value):
 
 def check_positive(name, value):
     """Return ``value`` as a positive finite float."""
+    if type(value) is float and 0.0 < value < math.inf:  # the common case, without the ABCs
+        return value
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise TypeError(f"`{name}` must be a real number, got {value!r}")
     value = float(value)

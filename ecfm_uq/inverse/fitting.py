@@ -198,8 +198,8 @@ def _check_formulation(kind, settings):
             "formulation='ecfm' (the paper's exact-match forces) or formulation="
             "'ecfm-random' (random forces, with sigma)"
         )
-    names = tuple(f for k, f in FITTERS if k == kind)  # FITTERS may gain a row (tests)
-    if settings.formulation not in names:
+    if (kind, settings.formulation) not in FITTERS:
+        names = tuple(f for k, f in FITTERS if k == kind)  # FITTERS may gain a row (tests)
         hint = ""
         if settings.formulation == "ecfm-random":
             hint = "; the random-force ECFM is defined for a SteadyProblem and an OdeProblem"

@@ -38,6 +38,17 @@ _ETA = {
 
 def fd_steps(x, method="2-point", typical=None):
     """The step :math:`h_j` of each parameter (see the module's table)."""
+    if type(x) is np.ndarray and x.ndim == 1 and x.size <= 16 and x.dtype == np.float64:
+        # a few parameters: Python floats (IEEE doubles: max and product bit for bit as
+        # numpy's), without five array operations
+        eta = _ETA[method]
+        if typical is None:
+            return np.array([(abs(v) or 1.0) * eta for v in x.tolist()])
+        t = np.asarray(typical, dtype=float).ravel().tolist()
+        if len(t) == x.size:
+            return np.array(
+                [(max(abs(v), abs(w)) or 1.0) * eta for v, w in zip(x.tolist(), t, strict=True)]
+            )
     size = np.abs(np.asarray(x, dtype=float))  # a fresh array; a scalar for a scalar x:
     if type(size) is not np.ndarray:
         size = np.array(size)

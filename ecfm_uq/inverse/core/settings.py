@@ -6,6 +6,7 @@ fitter imports the entry point, and a walk of ``sigma`` or ``tol`` from ``fit`` 
 
 from __future__ import annotations
 
+import math
 import numbers
 from dataclasses import dataclass
 
@@ -72,6 +73,8 @@ def check_least_squares_options(options, p):
             )
     for key in ("ftol", "xtol", "gtol"):
         v = options.get(key)
+        if type(v) is float and 0.0 <= v < math.inf:  # the defaults' type: no ABC check
+            continue
         if v is not None and (
             isinstance(v, bool) or not isinstance(v, numbers.Real) or not np.isfinite(v) or v < 0
         ):

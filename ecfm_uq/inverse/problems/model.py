@@ -111,6 +111,7 @@ class ModelProblem(InverseProblem):
         data = np.asarray(data, dtype=float) if not np.isscalar(data) else np.array([data])
         self.shape = data.shape
         self.v = as_finite_array("data", data.ravel())
+        self._ones = np.ones(self.v.size)  # a finiteness test by one inner product
         self.model, self.jac, self.executor = model, jac, executor
         self.names = None if names is None else [str(n) for n in names]
 
@@ -136,6 +137,19 @@ class ModelProblem(InverseProblem):
             if all_finite(y):
                 return y
         return self._checked(y, eps, first)
+
+    def _stencil_value(self, eps):
+        """:meth:`predict` for a point of a difference stencil, used at once (no copy of
+        the model's array; the same checks)."""
+        try:
+            y = self.model(eps)
+        except Exception as e:  # a user callback: report any failure with its call
+            raise self._model_error(e, eps, False) from e
+        if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == self.shape:
+            y = y.reshape(-1)
+            if math.isfinite(y.dot(self._ones)):
+                return y
+        return self._checked(y, eps, False)
 
     def _model_error(self, e, eps, first):
         """The error to raise for ``model(eps)`` raising ``e`` (see :meth:`predict`)."""
@@ -188,7 +202,8 @@ class ModelProblem(InverseProblem):
                 self._check_analytic(eps, J, typical)
             return J
         return fd_jacobian(
-            self.predict, eps, method=method or self.jac, typical=typical, f0=y,
+            self._stencil_value if self.executor is None else self.predict, eps,
+            method=method or self.jac, typical=typical, f0=y,
             columns=columns,
             map_points=None if self.executor is None else self._map,
         )  # fmt: skip
@@ -416,7 +431,7 @@ def model_fit_fields(problem, eps0, s):
     options = s.take({"polish": True, "x_scale": "jac", "ftol": 1e-15, "xtol": 1e-15,
                       "gtol": 1e-15})  # fmt: skip
     eps0 = as_finite_array("eps0", eps0, ndim=1)
-    p, n = eps0.size, problem.n_data
+    p, n = eps0.size, problem.v.size
     bounds = check_bounds(s.bounds, p)
     options = check_least_squares_options(options, p)
     if n < p:
