@@ -249,10 +249,19 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
         offset = np.inf  # nothing to compare with: the step test decides
     offset = float(offset)
     # relative to each parameter (a parameter at exactly 0: to the largest, else 1)
-    ref = np.abs(eps[free])
-    if not ref.all():
-        ref[ref == 0] = np.abs(eps).max() or 1.0
-    step = float((np.abs(delta) / ref).max())  # the method: np.max without its wrapper
+    if p <= 16 and bounds is None:
+        # a few parameters: Python floats (the same IEEE quotients and maximum as numpy's,
+        # without four array operations)
+        ref = [abs(e) for e in eps.tolist()]
+        if 0.0 in ref:
+            big = max(ref) or 1.0
+            ref = [e or big for e in ref]
+        step = max(abs(d) / e for d, e in zip(delta.tolist(), ref, strict=True))
+    else:
+        ref = np.abs(eps[free])
+        if not ref.all():
+            ref[ref == 0] = np.abs(eps).max() or 1.0
+        step = float((np.abs(delta) / ref).max())  # the method: np.max without its wrapper
     if offset <= tol and rank_ok:
         return Optimality(True, offset, "relative offset", tol,
                           f"relative offset {offset:.1e} <= {tol:.0e}")  # fmt: skip

@@ -420,7 +420,9 @@ def estimate_uncertainty(
     if block is not None:
         cov, D, eps = cov[block, block], D[block], eps[block]
     se, ci = confidence_intervals(eps, cov, dof=dof)
-    one_sigma = noise_model in ("known", "estimated") and np.ndim(Sigma) == 0
+    one_sigma = noise_model in ("known", "estimated") and (
+        type(Sigma) is float or np.ndim(Sigma) == 0
+    )
     if data_noise is not None:  # d eps/d(W v) as d eps/dv, and the noise as given
         return Uncertainty(
             True, cov=cov, stderr=se, intervals=ci,

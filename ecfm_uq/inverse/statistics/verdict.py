@@ -285,7 +285,7 @@ def residual_verdict(e, v, sigma=None, alpha=DEFAULT_ALPHA, n_fitted=0, *, rtol=
     out = dict(details or {})
     # np.linalg.norm of a real vector is sqrt(x.x): the same bits without its wrapper
     out["force_to_data"] = float(math.sqrt(e.dot(e)) / max(math.sqrt(v.dot(v)), 1e-300))
-    out["peak_sensor_index"] = int(np.argmax(np.abs(e)))
+    out["peak_sensor_index"] = int(np.abs(e).argmax())  # np.argmax without its wrapper
     force = out.get("peak_force_index")
     where = "" if force is None else f"; largest force {force}"
     if sigma is None:
