@@ -330,7 +330,10 @@ def fit(
         maxiter = check_int("maxiter", maxiter, minimum=1)
     if not isinstance(uncertainty, bool | numbers.Integral):
         raise TypeError(f"`uncertainty` must be True or False, got {uncertainty!r}")
-    n_eps = problem.system.n_eps if kind not in ("model", "ode") else np.size(eps0)
+    if kind not in ("model", "ode"):
+        n_eps = problem.system.n_eps
+    else:  # a list's length without np.size's array conversion
+        n_eps = len(eps0) if type(eps0) in (list, tuple) else np.size(eps0)
     settings = FitSettings(
         formulation=formulation,
         method=method,

@@ -502,8 +502,8 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     fd_base, fd_bytes, fd_j, fd_next, fd_njev = None, b"", 0, None, 0
 
     # the residual's values alone where MINPACK differences them (its `plain` when it has
-    # one, with the sum of squares: no Jacobian closure, no payload; a failed point raises
-    # ConvergenceError)
+    # one: with the sum of squares and the uncopied payload, no Jacobian closure; a failed
+    # point raises ConvergenceError)
     values = getattr(residual, "plain", None) if differences else None
     first_key, nfev = eps0.tobytes(), 0
 
@@ -515,15 +515,15 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
             ev = evaluate(x, key)
             r = None if ev is None else ev[0]
         elif key == first_key:
-            ev = r = first[0]
+            ev, r = first, first[0]
         else:
             nfev += 1
             try:
-                r, ss = values(x.copy())
+                r, ss, y = values(x.copy())
             except ConvergenceError as e:
                 failures.append(str(e))
                 r = None
-            ev = r
+            ev = None
         if differences:
             if key == fd_next:  # a column of MINPACK's Jacobian
                 fd_j += 1
@@ -542,7 +542,9 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
             return rejected()
         z = 0.5 * float(r.dot(r) if ss is None else ss)
         if z < best_loss:
-            best_loss, best_key, best_ev = z, key, ev
+            # the best point's evaluation kept (its predictions copied: the model's array)
+            best_ev = [r, None, y.copy()] if ev is None else ev
+            best_loss, best_key = z, key
             hist_eps.append(x.copy())
             hist_loss.append(z)
         return r
@@ -572,7 +574,7 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
         msg += f" ({len(failures)} model evaluations failed; first: {failures[0]})"
     counts["nfev"] += nfev
     key = x.tobytes()
-    if key == best_key and values is None:  # MINPACK's point, the best one: evaluated
+    if key == best_key:  # MINPACK's point, the best one: evaluated
         last_key, last_ev = best_key, best_ev
     ev = evaluate(x, key)
     if ev is None:
@@ -582,10 +584,19 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     r = ev[0]
     # verify_least_squares measures the optimality (the status is decided from it)
     out = Outcome(
-        x, 0.5 * float(r @ r), None, ev[2], msg, nit,
-        counts["nfev"], np.array(hist_eps), np.array(hist_loss), failures,
-        exhausted=ier == 5, claimed=ier in (1, 2, 3, 4),
-    )  # fmt: skip
+        x,
+        0.5 * float(r @ r),
+        None,
+        ev[2],
+        msg,
+        nit,
+        counts["nfev"],
+        None,
+        None,
+        failures,
+        exhausted=ier == 5,
+        claimed=ier in (1, 2, 3, 4),
+    )  # fmt: skip (the path's arrays are made once, at the end)
 
     def cached(e):
         ev = evaluate(np.array(e, dtype=float))

@@ -79,6 +79,7 @@ def check_least_squares_options(options, p):
             isinstance(v, bool) or not isinstance(v, numbers.Real) or not np.isfinite(v) or v < 0
         ):
             raise ValueError(f"options[{key!r}] must be a number >= 0 or None, got {v!r}")
-    if not isinstance(options.get("polish", True), bool | np.bool_):
+    polish = options.get("polish", True)
+    if type(polish) is not bool and not isinstance(polish, np.bool_):
         raise TypeError(f"options['polish'] must be True or False, got {options['polish']!r}")
     return options

@@ -293,7 +293,7 @@ class ModelProblem(InverseProblem):
 
         whiten = noise.whiten if noise.known else None  # unknown sigma: W = I
         model, shape, checked = self.model, self.shape, self._checked
-        ones = np.ones(v.size)
+        ones = self._ones
         flat = len(shape) == 1
 
         def residual(eps):
@@ -331,23 +331,26 @@ class ModelProblem(InverseProblem):
             return noise.whiten(self.jacobian(eps, y, typical=typical, method=method))
 
         def plain(eps):
-            """``(r, r @ r)``: the whitened residual and its sum of squares alone, at a point
-            after the first (MINPACK's differencing asks for nothing else): no copy of the
-            predictions, no Jacobian; the sum doubles as the finiteness test."""
+            """``(r, r @ r, y)``: the whitened residual, its sum of squares and the
+            predictions (the model's own array, not copied: the caller copies what it
+            keeps), at a point after the first (MINPACK's differencing asks for nothing
+            more): no Jacobian; the sum doubles as the finiteness test."""
             try:
                 y = model(eps)
             except Exception as e:  # a user callback: report any failure with its call
                 raise self._model_error(e, eps, False) from e
             if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == shape:
-                r = (y if flat else y.ravel()) - v  # a fresh array: the model's is not kept
+                if not flat:
+                    y = y.ravel()
             else:
-                r = checked(y, eps, False) - v
+                y = checked(y, eps, False)
+            r = y - v  # a fresh array
             if whiten is not None:
                 r = whiten(r)
             ss = r.dot(r)
             if not math.isfinite(ss):  # a bad value raises; finite ones whose square
                 checked(y, eps, False)  # overflows pass (their loss is inf)
-            return r, ss
+            return r, ss, y
 
         residual.jacobian_at = jacobian_at
         residual.plain = plain
@@ -501,7 +504,7 @@ def model_fit_fields(problem, eps0, s):
         )  # fmt: skip
     # the residual and Jacobian the status test judged (no second Jacobian)
     r, J, y = out.residual, np.asarray(out.jacobian, dtype=float), out.payload
-    unc = Uncertainty.failed("not computed (uncertainty=False)")
+    unc = None
     if s.uncertainty:
         if noise.known:
             s2, how, dof = 1.0, "known", None
@@ -523,6 +526,8 @@ def model_fit_fields(problem, eps0, s):
         else:
             unc = Uncertainty.failed("uncertainty not computed: as many parameters as data "
                                      "leave no residual to estimate sigma; pass `sigma`")  # fmt: skip
+    if unc is None:
+        unc = Uncertainty.failed("not computed (uncertainty=False)")
     verdict = model_verdict(r, noise.whiten(problem.v), noise, p, bounds, out.x)
     message = out.message
     if not holds(out.opt, out.final_error) and callable(problem.jac):
