@@ -388,7 +388,7 @@ def fit_all_at_once(problem, eps0, s):
         )  # fmt: skip
     else:
         unc = _kkt_uncertainty(inverse, res["extra"]["z"], s.sigma)
-    verdict = _verdict(res["extra"]["discrepancy"], s.sigma, s.alpha)
+    verdict = _verdict(res["extra"]["discrepancy"], s.sigma, s.alpha, s.sigma_label)
     return Outcome(**res, uncertainty=unc, verdict=verdict)
 
 
@@ -396,14 +396,15 @@ def fit_all_at_once(problem, eps0, s):
 ACTIVE_TOL = 1e-6
 
 
-def _verdict(discrepancy, sigma, alpha):
+def _verdict(discrepancy, sigma, alpha, sigma_label=None):
     """The paper's z / chi-squared test of the discrepancy (Eq. ecfm_noise) when the noise
-    is modelled, as the fit's :class:`~ecfm_uq.inverse.core.result.Verdict` (``None`` without sigma)."""
+    is modelled, as the fit's :class:`~ecfm_uq.inverse.core.result.Verdict` (``None``
+    without sigma); ``sigma_label`` names the noise in its message."""
     if sigma is None:
         return None
 
     test = consistency_test(discrepancy, sigma, alpha)
-    return moments_bounds_verdict(test, sigma, alpha)
+    return moments_bounds_verdict(test, sigma, alpha, sigma_label=sigma_label)
 
 
 def _kkt_uncertainty(problem, z, sigma):
