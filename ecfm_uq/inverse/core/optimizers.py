@@ -24,6 +24,7 @@ import numpy as np
 from ..._validation import as_finite_array, check_int, check_positive
 from ...errors import ConvergenceError
 from .convergence import decide_status, minimize_optimality
+from .details import DynamicDetails
 from .result import InverseResult
 
 
@@ -151,5 +152,5 @@ def adam(
         method="adam",
         eps_history=np.array(xs),
         loss_history=np.array(fs),
-        extra={"grad": gs[-1], "grad_history": np.array(gs)},
+        extra=DynamicDetails(grad=gs[-1], grad_history=np.array(gs)),
     )

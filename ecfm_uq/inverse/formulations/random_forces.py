@@ -86,6 +86,7 @@ from ..core.convergence import (
     at_bound,
     scaled_gradient_optimality,
 )
+from ..core.details import RandomForceDetails
 from ..core.finite_differences import fd_gradient
 from ..core.fitter import Outcome
 from ..core.result import Uncertainty
@@ -519,10 +520,10 @@ def fit_random_force(problem, eps0, s):
     # the density of the data given eps (sample_posterior) holds the covariance at tau-hat;
     # the intervals and likelihood-ratio tests profile tau out: re-estimated at every eps
     like = model.conditional_likelihood(lin, g_hat)
-    extra = {
-        "force_stderr": lam_sd, "tau": rms(g_hat), "force_prior": model.prior,
-        "force_tau": np.sqrt(g_hat), "standard": standard, "n_solves": model.n_solves,
-    }  # fmt: skip
+    extra = RandomForceDetails(
+        force_stderr=lam_sd, tau=rms(g_hat), force_prior=model.prior,
+        force_tau=np.sqrt(g_hat), standard=standard, n_solves=model.n_solves,
+    )  # fmt: skip
     interval_likelihood = None
     if opts["tau_in_intervals"] == "profiled":
         try:
@@ -531,7 +532,7 @@ def fit_random_force(problem, eps0, s):
         except _FAILURES as e:
             # an estimate run off to where a parameter has no effect (not converged): its
             # intervals fall back to the held covariance, and say so
-            extra["interval_likelihood"] = (
+            interval_likelihood = (
                 f"tau cannot be re-estimated at the estimate ({e}); the intervals hold the "
                 "data covariance at tau-hat"
             )
