@@ -131,7 +131,7 @@ def main(argv=None):
     )
     for (name, grads), (t, res) in rows.items():
         print(
-            f"{name:<11} {grads:<9} {res.extra['n_variables']:>5} {t:8.2f} {res.nit:>5} "
+            f"{name:<11} {grads:<9} {res.extra['z'].size:>5} {t:8.2f} {res.nit:>5} "
             f"{res.nfev:>7} {str(res.success):>8} {res.loss:11.4e}  {res.message}"
         )
     for name in ("standard", "noisy-ecfm"):

@@ -60,7 +60,8 @@ imports :mod:`.fitting`:
                     ``convergence`` (the one status decision),
                     ``drivers`` and ``optimizers`` (the optimizer calls), ``gradients``,
                     ``finite_differences``; the types handed around: ``settings`` (the
-                    validated arguments), ``result`` (the one frozen result), ``series``
+                    validated arguments), ``result`` (the one frozen result),
+                    ``details`` (each formulation's typed ``result.extra``), ``series``
                     (an ODE's forces and trajectory), ``status``,
                     ``summary_table``
 ==================  ======================================================================

@@ -53,7 +53,6 @@ from __future__ import annotations
 
 import dataclasses
 import numbers
-import re
 
 import numpy as np
 
@@ -81,7 +80,6 @@ from .problems.model import ModelProblem
 from .problems.noise_model import NoiseModel, noise_model
 from .problems.ode import OdeProblem
 from .problems.whitening import dynamic_noise_model, jacobian_in_data_units, whitened_problem
-from .statistics.loglik import LogLikelihood
 from .statistics.verdict import DEFAULT_ALPHA, check_alpha, check_bounds
 
 __all__ = ["FITTERS", "FORMULATIONS", "fit"]
@@ -351,32 +349,31 @@ def fit(
     noise = settings.sigma if isinstance(settings.sigma, NoiseModel) else None
     if noise is None or kind not in _WHITENED_KINDS:
         return _result(fitter.run(problem, eps0, settings), problem, settings, None)
-    # an array sigma: the same fit of whitened sensors and data, sigma = 1
+    # an array sigma: the same fit of whitened sensors and data, sigma = 1, its messages
+    # naming the noise as given
     whitened = whitened_problem(problem, noise)
-    outcome = fitter.run(whitened, eps0, dataclasses.replace(settings, sigma=1.0))
+    label = f"sigma=1 (whitened: {noise.describe()})"
+    outcome = fitter.run(
+        whitened, eps0, dataclasses.replace(settings, sigma=1.0, sigma_label=label)
+    )
     return _result(outcome, problem, settings, noise)
 
 
 def _result(outcome, problem, settings, noise):
     """The one :class:`~ecfm_uq.inverse.InverseResult` of a fit, built once from the
     fitter's :class:`~ecfm_uq.inverse.core.fitter.Outcome`: the status decided from what
-    was measured (:func:`~ecfm_uq.inverse.core.convergence.decide_status`), the messages
-    and the estimate's derivative in the data given (``noise``: an array ``sigma``
-    whitened), the likelihood (or why there is none) and the bounds the profiles need,
+    was measured (:func:`~ecfm_uq.inverse.core.convergence.decide_status`), the
+    estimate's derivative in the data given (``noise``: an array ``sigma`` whitened), the
+    likelihood (or why there is none) and the bounds the profiles need,
     the uncertainty told the estimate and its parameter names."""
-    parts = {
-        "message": outcome.message,
-        "uncertainty": outcome.uncertainty,
-        "verdict": outcome.verdict,
-        "likelihood": outcome.likelihood,
-        "interval_likelihood": outcome.interval_likelihood,
-    }
+    unc = outcome.uncertainty
     if noise is not None:
-        parts = _in_data_units(parts, noise)
-    if parts["likelihood"] is None:
-        parts["likelihood"] = problem.log_likelihood(settings.formulation, settings.sigma)
+        unc = _in_data_units(unc, noise)
+    likelihood = outcome.likelihood
+    if likelihood is None:
+        likelihood = problem.log_likelihood(settings.formulation, settings.sigma)
     names = outcome.names
-    parts["uncertainty"] = _with_estimate(parts["uncertainty"], outcome.eps, names)
+    unc = _with_estimate(unc, outcome.eps, names)
     histories = {
         name: value
         for name in ("eps_history", "loss_history")
@@ -388,7 +385,9 @@ def _result(outcome, problem, settings, noise):
         nit=outcome.nit, nfev=outcome.nfev, njev=outcome.njev,
         optimality=outcome.optimality, formulation=outcome.label, method=outcome.method,
         state=outcome.state, forces=outcome.forces, bounds=settings.bounds, names=names,
-        extra=outcome.extra, problem=outcome.problem, **histories, **parts,
+        extra=outcome.extra, problem=outcome.problem, message=outcome.message,
+        uncertainty=unc, verdict=outcome.verdict, likelihood=likelihood,
+        interval_likelihood=outcome.interval_likelihood, **histories,
     )  # fmt: skip
 
 
@@ -407,32 +406,13 @@ def _with_estimate(unc, eps, names):
     return dataclasses.replace(unc, eps=np.array(eps, dtype=float), names=names)
 
 
-def _in_data_units(parts, noise):
-    """The parts of a fit of whitened data reported for the data given: the estimate's
-    derivative in ``v`` (not ``W v``), and messages that name the noise as given where
-    the fitter saw ``sigma = 1``."""
-    unit = re.compile(r"sigma ?= ?1(?![\d.e])")
-    said = f"sigma=1 (whitened: {noise.describe()})"
-
-    def restate(text):
-        return unit.sub(said, text)
-
-    unc = parts["uncertainty"]
-    changes = {
-        "uncertainty": dataclasses.replace(
-            unc,
-            jacobian=jacobian_in_data_units(unc.jacobian, noise),
-            message=restate(unc.message),
-            sigma=noise.std() if unc.success and unc.noise_model == "known" else unc.sigma,
-        ),  # fmt: skip
-        "message": restate(parts["message"]),
-    }
-    for name in ("likelihood", "interval_likelihood"):
-        like = parts[name]
-        if isinstance(like, LogLikelihood):
-            changes[name] = dataclasses.replace(like, description=restate(like.description))
-    if parts["verdict"] is not None:
-        changes["verdict"] = dataclasses.replace(
-            parts["verdict"], message=restate(parts["verdict"].message)
-        )
-    return {**parts, **changes}
+def _in_data_units(unc, noise):
+    """The uncertainty of a fit of whitened data reported for the data given: the
+    estimate's derivative in ``v`` (not ``W v``) and the noise standard deviations as
+    given (the messages name the noise as given already: the fitter ran with
+    ``FitSettings.sigma_label``)."""
+    return dataclasses.replace(
+        unc,
+        jacobian=jacobian_in_data_units(unc.jacobian, noise),
+        sigma=noise.std() if unc.success and unc.noise_model == "known" else unc.sigma,
+    )

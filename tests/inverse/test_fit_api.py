@@ -42,7 +42,7 @@ def data(sigma=0.0, seed=0):
 def documented_extra_keys():
     """The keys of the ``extra`` table in the InverseResult docstring (first column)."""
     doc = InverseResult.__doc__
-    table = doc[doc.index("extra : dict") :].split("=====")
+    table = doc[doc.index("extra : Details") :].split("=====")
     rows = "".join(table[2:-1])  # between the header's rule and the closing rule
     return {m for line in rows.splitlines() for m in re.findall(r"``(\w+)``", line[:38])}
 

@@ -166,7 +166,7 @@ def test_extra_keys_documented_and_no_likelihood_for_profiles():
     from ecfm_uq.inverse import InverseResult, profile_likelihood
 
     doc = InverseResult.__doc__
-    rows = "".join(doc[doc.index("extra : dict") :].split("=====")[2:-1])
+    rows = "".join(doc[doc.index("extra : Details") :].split("=====")[2:-1])
     keys = {m for line in rows.splitlines() for m in re.findall(r"``(\w+)``", line[:38])}
     data = simulate(ANNUAL[:6]) * (1 + 0.02 * np.random.default_rng(3).standard_normal((6, 2)))
     pb = problem(ANNUAL[:6], data, rtol=1e-7)

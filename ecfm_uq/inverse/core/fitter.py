@@ -22,6 +22,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from .details import Details
 from .result import Uncertainty, Verdict
 
 __all__ = ["Fitter", "Outcome", "holds", "measured"]
@@ -63,9 +64,9 @@ class Outcome:
         The formulation's label on the result (``result.formulation``).
     method : str
         The optimizer that ran.
-    extra : dict
-        The formulation's typed details (the keys documented on
-        :class:`~ecfm_uq.inverse.InverseResult`).
+    extra : Details
+        The formulation's typed details (:mod:`~ecfm_uq.inverse.core.details`; the keys
+        documented on :class:`~ecfm_uq.inverse.InverseResult`).
 
     The other fields are the result's (``message``, ``nit``, ``nfev``, ``njev``, the
     histories, ``state``, ``forces``, ``uncertainty``, ``verdict``, ``likelihood``,
@@ -93,7 +94,7 @@ class Outcome:
     interval_likelihood: Any = None
     names: list | None = None
     problem: Any = None
-    extra: dict = field(default_factory=dict)
+    extra: Details = field(default_factory=Details)
 
     @property
     def optimality(self):

@@ -24,6 +24,7 @@ import numpy as np
 from ..._validation import as_finite_array, check_int, check_positive
 from ...errors import ConvergenceError
 from .convergence import decide_status, minimize_optimality
+from .details import DynamicDetails
 from .drivers import Outcome
 from .result import InverseResult
 
@@ -134,7 +135,7 @@ def run_adam(
         (:func:`~ecfm_uq.inverse.core.convergence.minimize_optimality`; ``None`` after a
         failed evaluation), ``exhausted`` always (the epochs are a budget),
         ``final_error`` the failed evaluation (the histories stop at the last successful
-        iterate); ``payload`` ``{"grad", "grad_history"}`` (the final gradient and every
+        iterate); ``payload`` a :class:`~.details.DynamicDetails` ``(grad, grad_history)`` (the final gradient and every
         gradient: :func:`adam`'s ``extra``).
 
     Raises
@@ -195,7 +196,7 @@ def run_adam(
         scale = fs[0] if fs[0] > 0 else 1.0
         opt = minimize_optimality(gs[-1], xs[-1], fs[-1], scale, gtol, None)
     return Outcome(
-        xs[-1], fs[-1], gs[-1], {"grad": gs[-1], "grad_history": np.array(gs)}, message,
+        xs[-1], fs[-1], gs[-1], DynamicDetails(grad=gs[-1], grad_history=np.array(gs)), message,
         len(xs) - 1, len(xs) + (failure is not None), np.array(xs), np.array(fs),
         final_error=failure, opt=opt, exhausted=True,
     )  # fmt: skip

@@ -10,7 +10,8 @@ standard, ECFM, noisy, pseudo-likelihood, steady or dynamic — returns an
   ``njev``, ``optimality``;
 * the estimate: ``eps``, ``loss``, histories; the formulation's ``state``
   (:math:`\\Theta`) and constraint ``forces`` (:math:`\\lambda`) where it has them;
-  further formulation-specific outputs in ``extra`` (each key documented on
+  further formulation-specific outputs in ``extra``, a typed record per formulation
+  (:mod:`~ecfm_uq.inverse.core.details`, each key documented there and on
   :class:`InverseResult`);
 * ``uncertainty``: an :class:`Uncertainty` (covariance, standard errors, intervals, how
   they were computed, or why not);
@@ -32,6 +33,7 @@ from scipy import special, stats
 
 from ...chaos.inputs import Inputs
 from ...chaos.student import StudentInputs
+from .details import Details
 from .status import FitStatus
 from .summary_table import summary_table
 
@@ -301,13 +303,17 @@ class InverseResult:
     likelihood : LogLikelihood, str or None
         The fit's negative log-likelihood in :math:`\\epsilon` (for
         :func:`~ecfm_uq.inverse.profile_intervals`), or why it has none.
-    interval_likelihood : LogLikelihood or None
+    interval_likelihood : LogLikelihood, str or None
         Where it differs from ``likelihood``, the one the profile-likelihood intervals and
         likelihood-ratio tests use: for the random-force ECFM,
         :math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))` with the discrepancy's
         :math:`\\tau` re-estimated at every :math:`\\epsilon` (``likelihood`` holds the
         data covariance at :math:`\\hat\\tau`: a density of the data given
         :math:`\\epsilon`, what :func:`~ecfm_uq.inverse.sample_posterior` samples).
+        A string where it cannot be built, saying why (:math:`\\tau` cannot be
+        re-estimated at the estimate): the intervals then use ``likelihood``. ``None``
+        where the intervals use ``likelihood`` by design (every other formulation, and
+        the random-force ECFM with ``options={"tau_in_intervals": "held"}``).
     bounds : list of (lo, hi) or None
         The bounds the fit ran with.
     names : list of str or None
@@ -315,83 +321,94 @@ class InverseResult:
     problem : ModelProblem or None
         The :class:`~ecfm_uq.inverse.problems.model.ModelProblem` that was fitted (its model
         gives :meth:`predict` its default quantity); ``None`` for the other problems.
-    extra : dict
-        Formulation-specific outputs, each key below (and no other):
+    extra : Details
+        Formulation-specific outputs: one frozen record per formulation family
+        (:mod:`ecfm_uq.inverse.core.details`, each field documented there), read like a
+        dict (``extra["tau"]``, ``extra.get("steps")``, ``"tau" in extra``) or by
+        attribute (``extra.tau``); a field that is ``None`` (not computed by this fit) is
+        not a key. Each key below (and no other):
 
         ============================  ========================  =========================
-        key                           formulation               meaning
+        key                           record (formulation)      meaning
         ============================  ========================  =========================
-        ``prediction``                ModelProblem,             the model at ``eps``, in
-                                      OdeProblem                the data's shape
-        ``n_missing``                 OdeProblem                readings skipped (NaN)
-        ``significant_forces``        OdeProblem ECFM (sigma)   ``(component, (t_start,
+        ``prediction``                ModelDetails, OdeDetails  the model at ``eps``, in
+                                      (ModelProblem,            the data's shape
+                                      OdeProblem standard)
+        ``n_missing``                 OdeDetails,               readings skipped (NaN)
+                                      OdeEcfmDetails,
+                                      OdeRandomDetails
+        ``significant_forces``        OdeEcfmDetails (sigma)    ``(component, (t_start,
                                                                 t_end), z)`` of each
                                                                 force interval whose
                                                                 z-score passes the
                                                                 Bonferroni bound
-        ``force_cov``                 OdeProblem ECFM (sigma)   covariance of the forces
+        ``force_cov``                 OdeEcfmDetails (sigma)    covariance of the forces
                                                                 (readings order)
-        ``discrepancy``               all-at-once (SLSQP)       model minus data at the
-                                                                optimum, ``(C,)``
-        ``mean_discrepancy``,         all-at-once               its sample mean and
+        ``force_basis``,              OdeEcfmDetails            the forces' basis in time
+        ``force_coefficients``        (``options["force_        and their coefficients
+                                      basis"]``)                in it
+        ``discrepancy``               AllAtOnceDetails          model minus data at the
+                                      (all-at-once SLSQP)       optimum, ``(C,)``
+        ``mean_discrepancy``,         AllAtOnceDetails          its sample mean and
         ``var_discrepancy``                                     variance
-        ``residual_norm``             all-at-once               norm of the model
+        ``residual_norm``             AllAtOnceDetails          norm of the model
                                                                 equations' residual
-        ``inequality``                all-at-once               the scaled moment
+        ``inequality``                AllAtOnceDetails          the scaled moment
                                                                 inequalities (>= 0 when
                                                                 met)
-        ``moment_bounds``             all-at-once               the z / chi-squared bounds
+        ``moment_bounds``             AllAtOnceDetails          the z / chi-squared bounds
                                                                 (dict)
-        ``z``                         all-at-once               the stacked unknowns
+        ``z``                         AllAtOnceDetails          the stacked unknowns
                                                                 (theta, eps, lam)
-        ``n_variables``               all-at-once               ``z.size``
-        ``start``                     all-at-once               how the start was built
-        ``gradients``                 all-at-once               ``"analytic"`` or ``"fd"``
-        ``wall_time_s``               all-at-once               SLSQP's wall time
-        ``slsqp_status``              all-at-once, ``penalty``  SLSQP's exit mode
-        ``tau``                       random-force ECFM         rms of the forces'
-                                                                standard deviations
-        ``force_tau``                 random-force ECFM         each force's standard
+        ``start``                     AllAtOnceDetails          how the start was built
+        ``gradients``                 AllAtOnceDetails          ``"analytic"`` or ``"fd"``
+        ``wall_time_s``               AllAtOnceDetails          SLSQP's wall time
+        ``slsqp_status``              AllAtOnceDetails,         SLSQP's exit mode
+                                      PenaltyDetails
+        ``tau``                       RandomForceDetails,       rms of the forces'
+                                      OdeRandomDetails          standard deviations
+        ``force_tau``                 RandomForceDetails        each force's standard
                                                                 deviation, ``(C,)``
-        ``force_stderr``              random-force ECFM         posterior standard
+        ``force_stderr``              RandomForceDetails        posterior standard
                                                                 deviations of ``forces``
-        ``force_prior``               random-force ECFM         ``"shared"`` or
+        ``force_prior``               RandomForceDetails        ``"shared"`` or
                                                                 ``"sparse"``
-        ``standard``                  random-force ECFM         the standard fit it
-                                      (SteadyProblem,           started from: its
-                                      OdeProblem)               ``Outcome`` (what it
+        ``standard``                  RandomForceDetails,       the standard fit it
+                                      OdeRandomDetails          started from: its
+                                                                ``Outcome`` (what it
                                                                 measured, no status:
                                                                 ``holds(std.opt,
                                                                 std.failure)`` whether
                                                                 its conditions held)
-        ``interval_likelihood``       random-force ECFM         why ``interval_likelihood``
-                                                                is ``None`` (when it is)
-        ``n_solves``                  random-force ECFM,        forward solves
-                                      replicated
-        ``force_norm``                replicated                :math:`\\|\\lambda\\|`
-        ``neg_log_likelihood``        replicated                the pseudo-likelihood
-        ``grad_eps``                  replicated                its gradient in eps
-        ``mu``, ``var``               replicated                the model's mean and
+        ``n_solves``                  RandomForceDetails,       forward solves
+                                      ReplicatedDetails
+        ``force_norm``                ReplicatedDetails         :math:`\\|\\lambda\\|`
+        ``neg_log_likelihood``        ReplicatedDetails         the pseudo-likelihood
+        ``grad_eps``                  ReplicatedDetails         its gradient in eps
+        ``mu``, ``var``               ReplicatedDetails         the model's mean and
                                                                 variance at the sensors
-        ``n_failures``                replicated                failed evaluations
-        ``optimality_solves``         replicated                solves of the status test
-        ``inner_message``,            ``inner-outer``           the last inner solve:
-        ``inner_nit``,                                          message, iterations (all),
+        ``n_failures``                ReplicatedDetails         failed evaluations
+        ``optimality_solves``         ReplicatedDetails         solves of the status test
+        ``inner_message``,            InnerOuterDetails         the last inner solve:
+        ``inner_nit``,                (``inner-outer``)         message, iterations (all),
         ``hess_lam_min_eig``,                                   Hessian in lam (smallest
         ``hess_lam_cond``,                                      eigenvalue, condition),
         ``dlam_deps``                                           :math:`d\\lambda/d\\epsilon`
-        ``penalty``,                  ``penalty``               the weight, the log force
-        ``log_force_term``,                                     term, the norm of the
+        ``penalty``,                  PenaltyDetails            the weight, the log force
+        ``log_force_term``,           (``penalty``)             term, the norm of the
         ``grad_lam_norm``,                                      gradient in lam, the
         ``force_scaling_slope``                                 slope in log force scale
                                                                 (0 at a minimum)
-        ``grad``, ``grad_history``    Adam (dynamic)            final gradient, all
+        ``grad``, ``grad_history``    DynamicDetails (Adam)     final gradient, all
                                                                 gradients
-        ``steps``                     dynamic, ``scheme=        the frozen time grid
-                                      "adaptive"``              (dict: ``n_steps``,
-                                                                ``met``, ``max_error``,
+        ``steps``                     DynamicDetails            the frozen time grid
+                                      (``scheme=                (dict: ``n_steps``,
+                                      "adaptive"``)             ``met``, ``max_error``,
                                                                 ``times``, ...)
         ============================  ========================  =========================
+
+        The steady ``"standard"`` and ``"ecfm"`` fits by least squares or ``minimize``
+        have none (:class:`~ecfm_uq.inverse.core.details.Details`, empty).
     """
 
     eps: np.ndarray
@@ -414,7 +431,7 @@ class InverseResult:
     interval_likelihood: Any = None
     bounds: list | None = None
     names: list | None = None
-    extra: dict = field(default_factory=dict)
+    extra: Details = field(default_factory=Details)
     problem: Any = None
 
     def __post_init__(self):
@@ -447,7 +464,12 @@ class InverseResult:
             )
         if self.verdict is not None and not isinstance(self.verdict, Verdict):
             raise TypeError(f"`verdict` must be a Verdict, got {type(self.verdict).__name__}")
-        put("extra", dict(self.extra))
+        if not isinstance(self.extra, Details):
+            raise TypeError(
+                f"`extra` must be a Details record (ecfm_uq.inverse.core.details), got "
+                f"{type(self.extra).__name__}: each formulation reports its outputs in its "
+                "own record, every field documented"
+            )
 
     @property
     def success(self):

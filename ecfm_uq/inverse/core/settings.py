@@ -17,7 +17,14 @@ __all__ = ["FitSettings", "check_least_squares_options"]
 
 @dataclass(frozen=True)
 class FitSettings:
-    """The validated arguments of :func:`fit`, handed to the problem kind's fitter."""
+    """The validated arguments of :func:`fit`, handed to the problem kind's fitter.
+
+    ``sigma_label`` is how the fitter's messages name the noise where the number
+    ``sigma`` would mislead: an array ``sigma`` is whitened once and the fitter runs on
+    the whitened problem with ``sigma = 1``, so its messages say ``"sigma=1 (whitened:
+    sigma per observation (0.015 to 0.055))"``, the noise as given; ``None`` (the
+    default): ``sigma`` is the noise as given, written as its number.
+    """
 
     formulation: str
     method: str
@@ -28,6 +35,7 @@ class FitSettings:
     options: dict
     uncertainty: bool
     alpha: float
+    sigma_label: str | None = None
 
     def take(self, known):
         """``options`` completed by the defaults in ``known`` (name -> default).

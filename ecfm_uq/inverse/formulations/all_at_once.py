@@ -46,6 +46,7 @@ import scipy.optimize as sopt
 from ..._validation import as_dense_rows, as_finite_array, check_positive
 from ...system import solve_steady
 from ..core.convergence import KKT_TOL, kkt_optimality
+from ..core.details import AllAtOnceDetails
 from ..core.fitter import Outcome, holds
 from ..core.result import Uncertainty
 from ..statistics.uncertainty import estimate_uncertainty
@@ -281,20 +282,19 @@ def _solve(problem, z0, note, gradients, maxiter, ftol, tol, method_name):
     theta, eps, lam = problem.split(z)
     e = problem.discrepancy(z)
     mean, var = sample_moments(e) if e.size >= 2 else (float(e.mean()), 0.0)
-    extra = {
-        "discrepancy": e,
-        "mean_discrepancy": mean,
-        "var_discrepancy": var,
-        "residual_norm": float(np.linalg.norm(problem.equality(z))),
-        "inequality": problem.inequality(z),
-        "moment_bounds": problem.bounds,
-        "slsqp_status": int(res.status),
-        "start": note,
-        "gradients": gradients,
-        "wall_time_s": wall,
-        "n_variables": problem.size,
-        "z": z,
-    }
+    extra = AllAtOnceDetails(
+        discrepancy=e,
+        mean_discrepancy=mean,
+        var_discrepancy=var,
+        residual_norm=float(np.linalg.norm(problem.equality(z))),
+        inequality=problem.inequality(z),
+        moment_bounds=problem.bounds,
+        slsqp_status=int(res.status),
+        start=note,
+        gradients=gradients,
+        wall_time_s=wall,
+        z=z,
+    )
     # the status is read from the KKT conditions at z, not from SLSQP's own "success"
     with np.errstate(all="ignore"):
         opt = kkt_optimality(
@@ -388,8 +388,8 @@ def fit_all_at_once(problem, eps0, s):
             dict(problem.solve_options), s.sigma,
         )  # fmt: skip
     else:
-        unc = _kkt_uncertainty(inverse, res["extra"]["z"], s.sigma)
-    verdict = _verdict(res["extra"]["discrepancy"], s.sigma, s.alpha)
+        unc = _kkt_uncertainty(inverse, res["extra"].z, s.sigma)
+    verdict = _verdict(res["extra"].discrepancy, s.sigma, s.alpha, s.sigma_label)
     return Outcome(**res, uncertainty=unc, verdict=verdict)
 
 
@@ -397,14 +397,15 @@ def fit_all_at_once(problem, eps0, s):
 ACTIVE_TOL = 1e-6
 
 
-def _verdict(discrepancy, sigma, alpha):
+def _verdict(discrepancy, sigma, alpha, sigma_label=None):
     """The paper's z / chi-squared test of the discrepancy (Eq. ecfm_noise) when the noise
-    is modelled, as the fit's :class:`~ecfm_uq.inverse.core.result.Verdict` (``None`` without sigma)."""
+    is modelled, as the fit's :class:`~ecfm_uq.inverse.core.result.Verdict` (``None``
+    without sigma); ``sigma_label`` names the noise in its message."""
     if sigma is None:
         return None
 
     test = consistency_test(discrepancy, sigma, alpha)
-    return moments_bounds_verdict(test, sigma, alpha)
+    return moments_bounds_verdict(test, sigma, alpha, sigma_label=sigma_label)
 
 
 def _kkt_uncertainty(problem, z, sigma):

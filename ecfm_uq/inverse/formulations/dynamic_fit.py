@@ -13,6 +13,7 @@ import numpy as np
 from ..._validation import check_choice
 from ...errors import ConvergenceError
 from ..core.convergence import OFFSET_TOL, at_bound, least_squares_optimality
+from ..core.details import DynamicDetails
 from ..core.drivers import (
     LEAST_SQUARES_KEYWORDS,
     check_minimize_method,
@@ -128,7 +129,7 @@ class DynamicFitter(Fitter):
                 atol=check.atol, max_error=check.max_error, met=check.met,
                 refrozen=refrozen, times=check.times, message=check.message,
             )  # fmt: skip
-        return Outcome(**{**fields, "extra": {**fields["extra"], "steps": steps}})
+        return Outcome(**{**fields, "extra": dataclasses.replace(fields["extra"], steps=steps)})
 
 
 def _without_covariance(s):
@@ -172,7 +173,7 @@ def _failed_at_start(problem, eps0, s, error):
         label=s.formulation, method=s.method,
         uncertainty=Uncertainty.failed("not computed: the fit did not start"),
         verdict=Verdict(None, message=message),
-        extra={"steps": dict(n_steps=None, met=False, message=str(error))},
+        extra=DynamicDetails(steps=dict(n_steps=None, met=False, message=str(error))),
     )  # fmt: skip
 
 
@@ -254,7 +255,7 @@ def _driver_fields(out, formulation, method):
     return dict(
         eps=out.x, loss=out.loss, message=out.message, nit=out.nit, nfev=out.nfev,
         njev=out.nfev, label=formulation, method=method, eps_history=out.eps_history,
-        loss_history=out.loss_history, extra={}, **measured(out),
+        loss_history=out.loss_history, extra=DynamicDetails(), **measured(out),
     )  # fmt: skip
 
 

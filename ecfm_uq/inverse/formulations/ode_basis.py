@@ -30,6 +30,7 @@ import copy
 import numpy as np
 
 from ...errors import ConvergenceError
+from ..core.details import OdeEcfmDetails
 from ..core.drivers import least_squares_scaled
 from ..core.fitter import Outcome
 from ..core.result import Uncertainty
@@ -208,7 +209,8 @@ def fit_ode_basis(problem, eps0, forced, force_basis, settings, options):
         opt=out.opt, exhausted=out.exhausted, failure=out.final_error, message=out.message,
     )  # fmt: skip
     if out.payload is None:
-        return Outcome(eps=out.x, loss=np.inf, **common)
+        return Outcome(eps=out.x, loss=np.inf, extra=OdeEcfmDetails(n_missing=problem.n_missing),
+                       **common)  # fmt: skip
     final = forces.solve(out.x)
     series = ForceSeries(
         times=forces.knots[:-1].copy(), intervals=np.column_stack((forces.knots[:-1],
@@ -217,5 +219,6 @@ def fit_ode_basis(problem, eps0, forced, force_basis, settings, options):
     )  # fmt: skip
     return Outcome(
         eps=out.x, loss=out.loss, njev=out.nit, forces=series,
-        extra={"force_basis": force_basis, "force_coefficients": final["lam"]}, **common,
+        extra=OdeEcfmDetails(n_missing=problem.n_missing, force_basis=force_basis,
+                             force_coefficients=final["lam"]), **common,
     )  # fmt: skip

@@ -62,6 +62,7 @@ from scipy import special, stats
 
 from ..._validation import as_finite_array
 from ...errors import ConvergenceError
+from ..core.details import OdeEcfmDetails
 from ..core.drivers import least_squares_scaled
 from ..core.fitter import Outcome
 from ..core.result import Uncertainty
@@ -349,7 +350,8 @@ def fit_ode_ecfm(problem, eps0, s):
                   opt=out.opt, exhausted=out.exhausted, failure=out.final_error,
                   message=out.message)  # fmt: skip
     if out.payload is None:
-        return Outcome(eps=out.x, loss=np.inf, verdict=no_test(out.message), **common)
+        return Outcome(eps=out.x, loss=np.inf, verdict=no_test(out.message),
+                       extra=OdeEcfmDetails(n_missing=problem.n_missing), **common)  # fmt: skip
     final = forces.solve(out.x, with_data=s.sigma is not None, dense=True)
     series, unc, verdict, extra = _statistics(problem, forces, final, out.x, s)
     seg = final["segments"]
@@ -358,10 +360,9 @@ def fit_ode_ecfm(problem, eps0, s):
     traj = OdeTrajectory(ts, np.zeros((ts.size, problem.n_state)), problem.state_names,
                          tuple(seg))  # fmt: skip
     traj = OdeTrajectory(ts, traj(ts), problem.state_names, tuple(seg))
-    extra.update(n_missing=problem.n_missing)
     return Outcome(
-        eps=out.x, loss=out.loss, njev=out.nit, state=traj, forces=series,
-        uncertainty=unc, verdict=verdict, extra=extra, **common,
+        eps=out.x, loss=out.loss, njev=out.nit, state=traj, forces=series, uncertainty=unc,
+        verdict=verdict, extra=OdeEcfmDetails(n_missing=problem.n_missing, **extra), **common,
     )  # fmt: skip
 
 

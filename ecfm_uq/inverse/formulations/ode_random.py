@@ -39,6 +39,7 @@ from scipy import optimize, stats
 
 from ..._validation import as_finite_array
 from ...errors import ConvergenceError
+from ..core.details import OdeRandomDetails
 from ..core.drivers import least_squares_scaled
 from ..core.fitter import Outcome
 from ..core.series import ForceSeries, OdeTrajectory
@@ -226,5 +227,5 @@ def fit_ode_random(problem, eps0, s):
         verdict=verdict, likelihood=no_likelihood("ecfm-random"),
         names=problem.names,
         # "standard": the standard fit's Outcome (what it measured; no status)
-        extra={"tau": tau, "standard": ls, "n_missing": problem.n_missing},
+        extra=OdeRandomDetails(tau=tau, standard=ls, n_missing=problem.n_missing),
     )  # fmt: skip

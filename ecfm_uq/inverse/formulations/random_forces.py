@@ -86,6 +86,7 @@ from ..core.convergence import (
     at_bound,
     scaled_gradient_optimality,
 )
+from ..core.details import RandomForceDetails
 from ..core.finite_differences import fd_gradient
 from ..core.fitter import Outcome, holds
 from ..core.result import Uncertainty
@@ -137,13 +138,17 @@ class RandomForceModel:
         ``"shared"``: one variance :math:`\\tau^2` for every force (REML);
         ``"sparse"``: a variance per force, by maximum marginal likelihood
         (:mod:`~ecfm_uq.inverse.formulations.sparse_forces`), for a discrepancy that is localized.
+    sigma_label : str, optional
+        How the likelihoods' descriptions name the noise (``"sigma=1 (whitened: ...)"``
+        for a fit of whitened data); default ``"sigma=<sigma>"``.
     """
 
-    def __init__(self, problem, sigma, prior="shared"):
+    def __init__(self, problem, sigma, prior="shared", sigma_label=None):
         system = problem.system
         if system.Gamma is None:
             raise ValueError("the random-force ECFM needs a system with constraint forces (Gamma)")
         self.problem, self.system, self.sigma = problem, system, float(sigma)
+        self.sigma_label = sigma_label or f"sigma={self.sigma:g}"
         self.M = problem.M_obs
         self.v = problem.v
         self.a0 = None  # force-to-data scale, fixed at the first linearization
@@ -342,7 +347,7 @@ class RandomForceModel:
         in equations scaled by 1e9 and left intervals untrusted)."""
         return LogLikelihood(
             self._checked_gradient, self.system.n_eps, self.v.size, "random forces",
-            f"marginal likelihood, Gaussian noise sigma={self.sigma:g} and random forces, "
+            f"marginal likelihood, Gaussian noise {self.sigma_label} and random forces, "
             "tau re-estimated (REML) at every eps",
             exact_gradient=False,
         )  # fmt: skip
@@ -395,7 +400,7 @@ class RandomForceModel:
         what = "Gaussian, sigma" if none else "GLS with the estimated discrepancy"
         return LogLikelihood(
             evaluate, sysm.n_eps, self.v.size, "known sigma" if none else "random forces",
-            f"{what} covariance held at the estimate (sigma={self.sigma:g}, tau={rms(g):.3g})",
+            f"{what} covariance held at the estimate ({self.sigma_label}, tau={rms(g):.3g})",
             value_only=value,
         )  # fmt: skip
 
@@ -469,14 +474,14 @@ def fit_random_force(problem, eps0, s):
         eps_std, scale, bnds, 200 if s.maxiter is None else s.maxiter,
         SCALED_GRADIENT_TOL if s.tol is None else s.tol,
     )  # fmt: skip
-    model = RandomForceModel(problem, s.sigma, "shared")
+    model = RandomForceModel(problem, s.sigma, "shared", s.sigma_label)
     x, res = search.run(model, np.zeros(system.n_eps))
     if opts["force_prior"] == "sparse":
         # the sparse prior's profiled likelihood has local minima (forces switching on and
         # off): searched from the standard estimate and from the shared prior's, the lower
         # kept
         shared = model
-        model = RandomForceModel(problem, s.sigma, "sparse")
+        model = RandomForceModel(problem, s.sigma, "sparse", s.sigma_label)
         starts = [np.zeros(system.n_eps)] + ([x] if np.any(x) else [])
         found = [search.run(model, x0) for x0 in starts]
         x, res = min(found, key=lambda xr: xr[1].fun)
@@ -527,10 +532,10 @@ def fit_random_force(problem, eps0, s):
     # the density of the data given eps (sample_posterior) holds the covariance at tau-hat;
     # the intervals and likelihood-ratio tests profile tau out: re-estimated at every eps
     like = model.conditional_likelihood(lin, g_hat)
-    extra = {
-        "force_stderr": lam_sd, "tau": rms(g_hat), "force_prior": model.prior,
-        "force_tau": np.sqrt(g_hat), "standard": standard, "n_solves": model.n_solves,
-    }  # fmt: skip
+    extra = RandomForceDetails(
+        force_stderr=lam_sd, tau=rms(g_hat), force_prior=model.prior,
+        force_tau=np.sqrt(g_hat), standard=standard, n_solves=model.n_solves,
+    )  # fmt: skip
     interval_likelihood = None
     if opts["tau_in_intervals"] == "profiled":
         try:
@@ -539,7 +544,7 @@ def fit_random_force(problem, eps0, s):
         except _FAILURES as e:
             # an estimate run off to where a parameter has no effect (not converged): its
             # intervals fall back to the held covariance, and say so
-            extra["interval_likelihood"] = (
+            interval_likelihood = (
                 f"tau cannot be re-estimated at the estimate ({e}); the intervals hold the "
                 "data covariance at tau-hat"
             )

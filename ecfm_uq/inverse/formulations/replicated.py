@@ -68,6 +68,7 @@ from ..core.convergence import (
     at_bound,
     bounds_arrays,
 )
+from ..core.details import InnerOuterDetails, PenaltyDetails, ReplicatedDetails
 from ..core.fitter import Outcome
 from ..core.result import Uncertainty
 from ..problems.moments import moment_verdict, replicate_statistics
@@ -390,6 +391,13 @@ _FITTERS = {
     "standard": _fit_standard,
 }
 
+#: the typed details (``result.extra``) of each
+_DETAILS = {
+    "inner-outer": InnerOuterDetails,
+    "penalty": PenaltyDetails,
+    "standard": ReplicatedDetails,
+}
+
 
 #: defaults of the pseudo-likelihood fits: ``tol`` is the status test's (the relative
 #: Newton decrement, :func:`eps_optimality`); the optimizers' own stopping rules are
@@ -537,7 +545,7 @@ def fit_replicated_problem(problem, eps0, s):
         loss_history=np.array(tr.loss),
         state=p.Theta,
         forces=lam,
-        extra=extra,
+        extra=_DETAILS[formulation](**extra),
         verdict=verdict,
     )
 

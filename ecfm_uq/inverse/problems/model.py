@@ -30,6 +30,7 @@ from ..._validation import all_finite, as_finite_array, as_model_output
 from ...errors import ConvergenceError, ModelEvaluationError
 from ...executor import evaluate_samples
 from ...threads import NO_DENSE
+from ..core.details import ModelDetails
 from ..core.drivers import least_squares_lm, least_squares_scaled
 from ..core.finite_differences import fd_jacobian
 from ..core.fitter import Fitter, Outcome, holds
@@ -500,7 +501,7 @@ def model_fit_fields(problem, eps0, s):
             message=out.message, nit=out.nit, nfev=out.nfev,
             eps_history=out.eps_history, loss_history=out.loss_history,
             verdict=model_verdict(None, None, noise, p, bounds, out.x, failed=out.message),
-            likelihood=likelihood, names=problem.names,
+            likelihood=likelihood, names=problem.names, extra=ModelDetails(),
         )  # fmt: skip
     # the residual and Jacobian the status test judged (no second Jacobian)
     r, J, y = out.residual, np.asarray(out.jacobian, dtype=float), out.payload
@@ -540,6 +541,6 @@ def model_fit_fields(problem, eps0, s):
         failure=out.final_error, label="standard", method="least-squares",
         message=message, nit=out.nit, nfev=out.nfev, njev=out.nit,
         eps_history=out.eps_history, loss_history=out.loss_history,
-        extra={"prediction": y.reshape(problem.shape)}, uncertainty=unc, verdict=verdict,
+        extra=ModelDetails(prediction=y.reshape(problem.shape)), uncertainty=unc, verdict=verdict,
         likelihood=likelihood, names=problem.names, problem=problem,
     )  # fmt: skip

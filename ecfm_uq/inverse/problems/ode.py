@@ -39,6 +39,7 @@ from scipy.integrate import solve_ivp
 
 from ..._validation import as_finite_array
 from ...errors import ConvergenceError
+from ..core.details import OdeDetails
 from ..core.fitter import Fitter, Outcome
 from ..core.series import OdeTrajectory
 from ..statistics.loglik import no_likelihood
@@ -694,5 +695,5 @@ def fit_ode_standard(problem, eps0, s):
         state = problem.trajectory(fields["eps"])
     except ConvergenceError:
         state = None
-    extra = {**fields.get("extra", {}), "prediction": pred, "n_missing": problem.n_missing}
+    extra = OdeDetails(prediction=pred, n_missing=problem.n_missing)
     return Outcome(**{**fields, "state": state, "extra": extra})

@@ -315,8 +315,11 @@ def _quantile(result, level):
 
 
 def _likelihood(result):
-    # the random-force ECFM's intervals profile tau out (result.interval_likelihood)
-    like = getattr(result, "interval_likelihood", None) or getattr(result, "likelihood", None)
+    # the random-force ECFM's intervals profile tau out (result.interval_likelihood); a
+    # string there says why they cannot: they hold tau at its estimate (result.likelihood)
+    like = getattr(result, "interval_likelihood", None)
+    if like is None or isinstance(like, str):
+        like = getattr(result, "likelihood", None)
     if like is None or isinstance(like, str):
         why = like or "it was not made by ecfm_uq.inverse.fit"
         raise ValueError(f"`result` has no likelihood to profile: {why}")

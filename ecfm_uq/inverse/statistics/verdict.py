@@ -131,7 +131,7 @@ def no_test(reason=None, *, at_bound=(), extreme=(), details=None):
                   extreme=extreme, details=details)  # fmt: skip
 
 
-def moments_bounds_verdict(test, sigma, alpha=DEFAULT_ALPHA, at_bound=()):
+def moments_bounds_verdict(test, sigma, alpha=DEFAULT_ALPHA, at_bound=(), sigma_label=None):
     """The paper's noise test (Eq. ecfm_noise) as a :class:`~ecfm_uq.inverse.core.result.Verdict`.
 
     The two-sided z test of the discrepancy's sample mean and the chi-squared test of
@@ -145,6 +145,10 @@ def moments_bounds_verdict(test, sigma, alpha=DEFAULT_ALPHA, at_bound=()):
     sigma : float
     alpha : float
     at_bound : sequence of int
+    sigma_label : str, optional
+        How the message names the noise (``"sigma=1 (whitened: ...)"`` for a fit of
+        whitened data, :class:`~ecfm_uq.inverse.core.settings.FitSettings`); default
+        ``"sigma = <sigma>"``.
     """
     from scipy import stats
 
@@ -156,7 +160,7 @@ def moments_bounds_verdict(test, sigma, alpha=DEFAULT_ALPHA, at_bound=()):
     p = min(1.0, 2.0 * min(p_mean, p_var))
     parts = [
         f"discrepancy mean {test.mean:.3g} (p = {p_mean:.2g}), variance {test.var:.3g} "
-        f"(p = {p_var:.2g}) against sigma = {sigma:g}, Bonferroni p = {p:.3g} "
+        f"(p = {p_var:.2g}) against {sigma_label or f'sigma = {sigma:g}'}, Bonferroni p = {p:.3g} "
         f"{'>=' if p >= alpha else '<'} alpha = {alpha:g}"
     ]
     return decide(
