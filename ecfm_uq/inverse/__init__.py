@@ -58,7 +58,8 @@ imports :mod:`.fitting`:
 ``core/``           shared machinery: ``fitter`` (the shape of every fit: a
                     ``Fitter``'s steps and the ``Outcome`` it measures),
                     ``convergence`` (the one status decision),
-                    ``drivers`` and ``optimizers`` (the optimizer calls), ``gradients``,
+                    ``drivers`` and ``optimizers`` (the optimizer calls), ``minpack``
+                    (MINPACK's Levenberg-Marquardt called directly), ``gradients``,
                     ``finite_differences``; the types handed around: ``settings`` (the
                     validated arguments), ``result`` (the one frozen result),
                     ``details`` (each formulation's typed ``result.extra``), ``series``

@@ -140,14 +140,15 @@ class ModelProblem(InverseProblem):
         return self._checked(y, eps, first)
 
     def _stencil_value(self, eps):
-        """:meth:`predict` for a point of a difference stencil, used at once (no copy of
-        the model's array; the same checks)."""
+        """:meth:`predict` for a point of a difference stencil (the same checks, the
+        finiteness test by one inner product; a copy: a model may reuse its output array,
+        and the stencil holds one point's values across the next call)."""
         try:
             y = self.model(eps)
         except Exception as e:  # a user callback: report any failure with its call
             raise self._model_error(e, eps, False) from e
         if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == self.shape:
-            y = y.reshape(-1)
+            y = y.copy().reshape(-1)
             if math.isfinite(y.dot(self._ones)):
                 return y
         return self._checked(y, eps, False)
