@@ -24,6 +24,12 @@ __all__ = ["FAILURES", "Search"]
 FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError, ValueError)
 _RESTARTS = 5  # L-BFGS-B restarts of the eps search after a stalled line search
 _NEWTON_STEPS = 20  # Newton steps finishing the eps search where tau > 0
+_VALLEY_STEPS = (2.0, -2.0, 5.0, -5.0, 10.0, -10.0)  # shifts along the valley, standard errors
+_VALLEY_ROUNDS = 3  # re-centred on a lower point at most this many times
+_PROBE_ITER = None  # L-BFGS-B iterations of a probe's descent
+_FLOOR_STEPS = 2  # Newton steps across the valley from a probe
+_PROBES_DESCENDED = 2  # probes descended to a minimum, the lowest on the floor
+_DISTINCT = 0.5  # minima farther apart than this (standard errors) are distinct
 
 
 class Search:
@@ -58,7 +64,40 @@ class Search:
 
     def run(self, model, x0):
         """``(x, res)`` from ``x0``; ``res.fun`` the profiled nll at ``x``."""
+        x, res = self._descend(model, x0)
+        tau_positive = np.isfinite(res.fun) and np.any(
+            model.profiled(self.eps_std + self.scale * x)[1]
+        )
+        finish = (tau_positive or not res.success) and self.bnds is None
         p = self.objective(model)
+        if finish and model.prior == "shared" and np.isfinite(res.fun):
+            # with tau > 0 the optimum lies in a long flat valley (the discrepancy trading
+            # off against eps) where a small gradient in standard-error units does not
+            # mean close (a premature stop there made the estimate depend on the
+            # equations' units): finish by Newton steps until a step is below 1e-6
+            # standard errors, derivative-free where they do not get there
+            x_n, val_n, steps, done = self._newton(p, self.gradient(model), x, res.fun)
+            res.nit += steps
+            if done:
+                res.fun, res.success = val_n, True
+                return x_n, res
+        if finish:
+            simplex = x + np.vstack([np.zeros(x.size), 10.0 * np.eye(x.size)])
+            nm = optimize.minimize(
+                p, x, method="Nelder-Mead",
+                options={"initial_simplex": simplex, "xatol": 1e-6, "fatol": 1e-12,
+                         "maxfev": 400 * max(x.size, 1)},
+            )  # fmt: skip
+            nit, njev = res.nit + nm.nit, res.njev
+            if nm.fun < res.fun:
+                x, res = nm.x, nm
+                res.success = bool(nm.success)
+            res.nit, res.njev = nit, njev
+        return x, res
+
+    def _descend(self, model, x0, maxiter=None):
+        """L-BFGS-B on the exact gradient from ``x0``, restarted after a stalled line
+        search: ``(x, res)``, ``res.nit`` and ``res.njev`` summed over the restarts."""
         try:  # with its second derivatives: the search's first point is usually this one
             nll0 = model.profiled_gradient(self.eps_std)[0]
         except FAILURES:
@@ -84,7 +123,8 @@ class Search:
             if g is not None and g.size and self._optimal(g, intermediate_result.x):
                 raise StopIteration
 
-        nit, njev, maxiter = 0, 0, self.maxiter
+        nit, njev = 0, 0
+        maxiter = self.maxiter if maxiter is None else maxiter
         for _ in range(_RESTARTS):
             # the standard errors of a consistent fit can be a poor scale once tau > 0
             # (the optimum may lie many of them away): a stalled line search restarts
@@ -102,37 +142,87 @@ class Search:
                 x = res.x
             if res.success or moved < 1e-8 or nit >= maxiter:
                 break
-        tau_positive = np.isfinite(res.fun) and np.any(
-            model.profiled(self.eps_std + self.scale * x)[1]
-        )
-        finish = (tau_positive or not res.success) and self.bnds is None
-        if finish and model.prior == "shared" and np.isfinite(res.fun):
-            # with tau > 0 the optimum lies in a long flat valley (the discrepancy trading
-            # off against eps) where a small gradient in standard-error units does not
-            # mean close (a premature stop there made the estimate depend on the
-            # equations' units): finish by Newton steps until a step is below 1e-6
-            # standard errors, derivative-free where they do not get there. (Not with a
-            # variance per force: its likelihood has local minima, forces switching on
-            # and off, and the wide simplex below finds lower ones than a local method)
-            x_n, val_n, steps, done = self._newton(p, self.gradient(model), x, res.fun)
-            nit += steps
-            if done:
-                res.fun, res.success = val_n, True
-                res.nit, res.njev = nit, njev
-                return x_n, res
-        if finish:
-            simplex = x + np.vstack([np.zeros(x.size), 10.0 * np.eye(x.size)])
-            nm = optimize.minimize(
-                p, x, method="Nelder-Mead",
-                options={"initial_simplex": simplex, "xatol": 1e-6, "fatol": 1e-12,
-                         "maxfev": 400 * max(x.size, 1)},
-            )  # fmt: skip
-            nit += nm.nit
-            if nm.fun < res.fun:
-                x, res = nm.x, nm
-                res.success = bool(nm.success)
         res.nit, res.njev = nit, njev
         return x, res
+
+    def run_sparse(self, model, starts):
+        """The sparse prior's search: ``(x, res)``, the lowest of L-BFGS-B descents from
+        ``starts`` (scaled coordinates) and, where tau > 0 there, of descents from points
+        along the valley's flattest direction, finished by Newton steps.
+
+        With a variance per force the profiled likelihood has local minima along the
+        valley where the discrepancy trades off against eps (forces switching on and
+        off): short descents (``_PROBE_ITER`` iterations) from the best point found,
+        shifted by ``_VALLEY_STEPS`` standard errors along the Hessian's flattest
+        eigenvector; the lowest is descended to the end and, where that is a distinct
+        lower minimum (farther than ``_DISTINCT`` standard errors), the probing repeats
+        from it (at most ``_VALLEY_ROUNDS`` times). ``self.winner`` records where the
+        estimate came from: ``"start <k>"`` or ``"valley <round>:<t>"``."""
+        found = [(self._descend(model, x0), f"start {k}") for k, x0 in enumerate(starts)]
+        (x, res), self.winner = min(found, key=lambda f: f[0][1].fun)
+        nit = sum(r.nit for (_, r), _ in found)
+        njev = sum(r.njev for (_, r), _ in found)
+        if not np.isfinite(res.fun) or self.bnds is not None:
+            res.nit, res.njev = nit, njev
+            return x, res
+        if not np.any(model.profiled(self.eps_std + self.scale * x)[1]):
+            res.nit, res.njev = nit, njev
+            return x, res  # tau = 0: a smooth least-squares minimum, no valley
+        grad = self.gradient(model)
+        for k in range(_VALLEY_ROUNDS):
+            try:
+                w, V = self._hessian_eigen(grad, x)
+            except FAILURES:
+                break
+            probes = []
+            for t in _VALLEY_STEPS:
+                y, val = self._to_floor(model, x + t * V[:, 0], V[:, 1:], w[1:])
+                probes.append((val, t, y))
+            probes.sort(key=lambda f: f[0])
+            best = None
+            for val, t, y in probes[:_PROBES_DESCENDED]:
+                if not np.isfinite(val):
+                    continue
+                xt, rt = self._descend(model, y)
+                nit, njev = nit + rt.nit, njev + rt.njev
+                if rt.fun < res.fun and (best is None or rt.fun < best[1].fun):
+                    best = (xt, rt, f"valley {k}:{t:g}")
+            if best is None:
+                break
+            distinct = np.max(np.abs(best[0] - x)) > _DISTINCT
+            x, res, self.winner = best
+            if not distinct:
+                break
+        p = self.objective(model)
+        x_n, val_n, steps, done = self._newton(p, grad, x, res.fun)
+        nit += steps
+        if done and val_n <= res.fun:
+            x, res.fun, res.success = x_n, val_n, True
+        res.nit, res.njev = nit, njev
+        return x, res
+
+    def _hessian_eigen(self, grad, x):
+        """Eigenvalues and eigenvectors of the Hessian at ``x`` (forward differences of
+        the exact gradient), ascending."""
+        g = grad(x)
+        H = np.column_stack([(grad(x + 1e-4 * e) - g) / 1e-4 for e in np.eye(x.size)])
+        self.nfev += 1 + x.size
+        return np.linalg.eigh(0.5 * (H + H.T))
+
+    def _to_floor(self, model, y, Q, wq):
+        """``y`` moved to the valley's floor across it: Newton steps in the directions
+        ``Q`` (curvatures ``wq``), ``_FLOOR_STEPS`` of them; ``(y, value there)``."""
+        y, val = np.array(y, float), np.inf
+        for _ in range(_FLOOR_STEPS + 1):
+            self.nfev += 1
+            try:
+                val, g = model.profiled_gradient(self.eps_std + self.scale * y)
+            except FAILURES:
+                return y, np.inf
+            if _ == _FLOOR_STEPS or not np.all(wq > 0):
+                break
+            y = y - Q @ ((Q.T @ (g * self.scale)) / wq)
+        return y, val
 
     def _newton(self, p, grad, x, val):
         """Newton steps on the exact gradient ``grad``, the Hessian by forward differences

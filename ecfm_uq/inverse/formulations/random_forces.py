@@ -471,8 +471,7 @@ def fit_random_force(problem, eps0, s):
         shared = model
         model = RandomForceModel(problem, s.sigma, "sparse")
         starts = [np.zeros(system.n_eps)] + ([x] if np.any(x) else [])
-        found = [search.run(model, x0) for x0 in starts]
-        x, res = min(found, key=lambda xr: xr[1].fun)
+        x, res = search.run_sparse(model, starts)
         model.n_solves += shared.n_solves
     eps = eps_std + scale * x
     val, g_hat, lin = model.profiled(eps)
