@@ -33,9 +33,9 @@ __all__ = ["FAILURES", "Search"]
 FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError, ValueError)
 _RESTARTS = 5  # L-BFGS-B restarts of the eps search after a stalled line search
 _NEWTON_STEPS = 20  # Newton steps finishing the eps search where tau > 0
-_VALLEY_STEPS = (2.0, -2.0, 5.0, -5.0, 10.0, -10.0)  # shifts along the valley, standard errors
+_VALLEY_STEPS = (2.0, -2.0, 5.0, -5.0)  # shifts along the valley, standard errors
 _VALLEY_ROUNDS = 3  # re-centred on a lower point at most this many times
-_FLOOR_STEPS = 2  # Newton steps across the valley from a probe
+_FLOOR_STEPS = 1  # Newton steps across the valley from a probe
 _PROBES_DESCENDED = 2  # probes descended to a minimum, the lowest on the floor
 _DISTINCT = 0.5  # minima farther apart than this (standard errors) are distinct
 
