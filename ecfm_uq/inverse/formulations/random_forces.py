@@ -66,9 +66,11 @@ so a parameter inside the operator can take part of a localized source; with a v
 force the forces explaining a localized source are cheap and the parameter is not traded for
 it (Brynjarsdottir & O'Hagan 2014: what the discrepancy's prior says decides what the
 parameters absorb). The profiled likelihood then has local minima (forces switching on and
-off): :math:`\\epsilon` is searched from the standard estimate and from the shared prior's,
-the lower kept. The verdict is the same test of :math:`\\tau = 0` at the estimate: one rule
-for both priors.
+off) along the valley where the discrepancy trades off against :math:`\\epsilon`: it is
+searched from the standard estimate, from the shared prior's and from probes along that
+valley, the lowest kept, all with the exact gradient
+(:meth:`~ecfm_uq.inverse.formulations.random_force_search.Search.run_sparse`). The
+verdict is the same test of :math:`\\tau = 0` at the estimate: one rule for both priors.
 """
 
 from __future__ import annotations
@@ -478,13 +480,12 @@ def fit_random_force(problem, eps0, s):
     x, res = search.run(model, np.zeros(system.n_eps))
     if opts["force_prior"] == "sparse":
         # the sparse prior's profiled likelihood has local minima (forces switching on and
-        # off): searched from the standard estimate and from the shared prior's, the lower
-        # kept
+        # off): searched from the standard estimate, from the shared prior's and along the
+        # valley between them, the lowest kept
         shared = model
         model = RandomForceModel(problem, s.sigma, "sparse", s.sigma_label)
         starts = [np.zeros(system.n_eps)] + ([x] if np.any(x) else [])
-        found = [search.run(model, x0) for x0 in starts]
-        x, res = min(found, key=lambda xr: xr[1].fun)
+        x, res = search.run_sparse(model, starts)
         model.n_solves += shared.n_solves
     eps = eps_std + scale * x
     val, g_hat, lin = model.profiled(eps)
