@@ -7,8 +7,10 @@ the parameter's bound."""
 import numpy as np
 import pytest
 
-from ecfm_uq.inverse import ModelProblem, fit, profile_likelihood
+from ecfm_uq.inverse import ModelProblem, SteadyProblem, fit, profile_likelihood
 from ecfm_uq.inverse.statistics.profile import profile_concerns
+from ecfm_uq.spectral import SineBasis, hat_forces, load, mass, sensor_matrix, stiffness
+from ecfm_uq.system import Coefficient, GalerkinSystem, LinearTerm, LoadTerm, solve_steady
 
 S = np.array([0.02, 0.02, 0.06, 0.06, 0.11, 0.11, 0.22, 0.22, 0.56, 0.56, 1.10, 1.10])
 RATE = np.array([76, 47, 97, 107, 123, 139, 159, 152, 191, 201, 207, 200], dtype=float)
@@ -141,3 +143,39 @@ def test_where_a_nuisance_first_reaches_its_bound_beyond_an_end_is_located():
     assert 2 * prof.delta[k] < 5.991
     (c,) = prof.concerns
     assert c.startswith("eps[0] reaches its lower bound -9.7 beyond the lower end")
+
+
+@pytest.mark.slow
+def test_random_force_misses_on_a_ridge_to_a_bound_are_flagged_or_have_a_discrepancy():
+    """Issue 37's ridge: -kappa w'' + c w = s read at five points, kappa pi^2 = 50.5, the
+    user's bound c >= -50 just above the singular operator, truth (-50, 10) on it, 2 %
+    noise. The random-force ECFM's intervals miss the truth far more often than 5 % (0.78
+    and 0.83 of 120 data sets, docs/calibration.md): every miss of a fit with tau-hat = 0
+    (the standard likelihood) is flagged by a bound inside the joint region; the misses
+    left unflagged are those with a discrepancy estimated (tau-hat > 0), which pushes the
+    estimate up the ridge, away from the bound."""
+    B = SineBasis(16)
+    xs = np.linspace(0.2, 0.8, 5)
+    terms = [LinearTerm(50.5 / np.pi**2 * stiffness(B)), LinearTerm(mass(B),
+             Coefficient.parameter(0)), LoadTerm.scaled(-load(B, np.ones_like),
+             Coefficient.parameter(1))]  # fmt: skip
+    system = GalerkinSystem(terms, 2, Gamma=hat_forces(B, xs, 0.05))
+    M = sensor_matrix(B, xs)
+    truth = np.array([-50.0, 10.0])
+    y0 = M @ solve_steady(system, truth, strict=True).Theta[:, 0]
+    sigma = 0.02 * np.abs(y0).mean()
+    rng = np.random.default_rng(1)
+    misses = []
+    for _ in range(20):
+        y = y0 + sigma * rng.standard_normal(y0.size)
+        res = fit(SteadyProblem(system, M, y), truth, formulation="ecfm-random", sigma=sigma,
+                  bounds=[(-50.0, 2000.0), (0.01, 1e5)])  # fmt: skip
+        prof = profile_likelihood(res)
+        for j in range(2):
+            lo, hi = prof.intervals[j]
+            if not lo <= truth[j] <= hi:
+                misses.append((res.extra["tau"], bool(prof.profiles[j].concerns)))
+    assert misses  # 4 of 40 intervals miss (data sets 4 and 5 of this stream)
+    for tau, flagged in misses:
+        assert flagged or tau > 0, misses
+    assert any(flagged and tau == 0 for tau, flagged in misses), misses
