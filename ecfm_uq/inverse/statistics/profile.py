@@ -105,7 +105,8 @@ class Profile:
         The profile's own evidence against its interval (:func:`profile_concerns`): an
         open end, a second region, a branch that falls on its way out, a re-optimized
         parameter at its bound inside the interval (where the chi-squared threshold
-        does not hold), an inner fit that did not converge. Empty when there is none.
+        does not hold) or just beyond an end, inside the joint region (a ridge to a
+        bound), an inner fit that did not converge. Empty when there is none.
     calibration : Calibration or None
         With ``threshold="calibrated"``: the simulated thresholds at the ends
         (:mod:`~.profile_calibration`); ``interval`` and ``regions`` then use them.
