@@ -55,7 +55,7 @@ from .profile_calibration import (
     order_statistic,
     simulator,
 )
-from .profile_walk import MODEL_FAILURES, Profiler, beyond, profile_concerns, walk
+from .profile_walk import MODEL_FAILURES, Profiler, beyond, bound_touches, profile_concerns, walk
 from .uncertainty import interval_quantile
 
 __all__ = [
@@ -105,7 +105,8 @@ class Profile:
         The profile's own evidence against its interval (:func:`profile_concerns`): an
         open end, a second region, a branch that falls on its way out, a re-optimized
         parameter at its bound inside the interval (where the chi-squared threshold
-        does not hold), an inner fit that did not converge. Empty when there is none.
+        does not hold) or just beyond an end, inside the joint region (a ridge to a
+        bound), an inner fit that did not converge. Empty when there is none.
     calibration : Calibration or None
         With ``threshold="calibrated"``: the simulated thresholds at the ends
         (:mod:`~.profile_calibration`); ``interval`` and ``regions`` then use them.
@@ -290,8 +291,9 @@ class LikelihoodRatioTest:
     eps: np.ndarray
 
 
-def profile_threshold(like, level):
-    """The crossing level of :math:`\\ell_p(t) - \\hat\\ell`.
+def profile_threshold(like, level, k=1):
+    """The crossing level of :math:`\\ell_p(t) - \\hat\\ell` (of a joint region of ``k``
+    parameters: :math:`\\chi^2_k`, :math:`kF_{k,n-p}`).
 
     Known noise: :math:`\\tfrac12\\chi^2_{1,\\mathrm{level}}` (Wilks). Sigma profiled out
     (:math:`\\ell = \\tfrac n2\\log S`, :math:`S` the sum of squares): the profile-t
@@ -302,9 +304,9 @@ def profile_threshold(like, level):
     """
     if like.noise == "profiled sigma":
         dof = like.n_data - like.n_eps
-        F = stats.f.ppf(level, 1, dof)
-        return 0.5 * like.n_data * np.log1p(F / dof)
-    return 0.5 * stats.chi2.ppf(level, 1)
+        F = stats.f.ppf(level, k, dof)
+        return 0.5 * like.n_data * np.log1p(k * F / dof)
+    return 0.5 * stats.chi2.ppf(level, k)
 
 
 def _quantile(result, level):
@@ -403,7 +405,8 @@ def _scales(result, like, eps_hat):
     return se, naive, scale
 
 
-def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci, n_scan, simulate=None):
+def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci, n_scan, simulate=None,
+              joint=None):  # fmt: skip
     """Every requested profile, and (decrease, eps) of the lowest point found below the
     estimate's likelihood (None when the estimate is the minimum)."""
     profiles, best = {}, None
@@ -438,6 +441,8 @@ def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci, n_scan, simu
             for r in [r for r in far if r[0] <= ends[1] and r[1] >= ends[0]]:
                 far.remove(r)
                 ends = [min(ends[0], r[0]), max(ends[1], r[1])]
+        if simulate is None:  # where a parameter first reaches its bound beyond the ends
+            pts += bound_touches(prof, i, pts, ends, bnds)
         regions = sorted([(ends[0], ends[1]), *far])
         hull = (min(r[0] for r in regions), max(r[1] for r in regions))
         pts.sort(key=lambda q: q[0])
@@ -449,7 +454,7 @@ def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci, n_scan, simu
         eps = np.array([q[2] for q in pts])
         concerns = profile_concerns(
             i, values, delta, eps, (ends[0], ends[1]), reasons, regions, threshold[i], bnds,
-            prof.unconverged, calibration is not None,
+            prof.unconverged, calibration is not None, None if joint is None else joint[i],
         )  # fmt: skip
         if calibration is not None:
             calibration = Calibration(*calibration, np.array(chi2_ends, dtype=float))
@@ -546,6 +551,8 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
         # threshold by the robust (sandwich) over the naive (inverse-Hessian) variance
         robust = np.where(np.isfinite(se), se**2, np.diag(naive))
         threshold = threshold * robust / np.diag(naive)
+    # the joint region's level: a bound inside it is evidence against an interval
+    joint = threshold * (profile_threshold(like, level, n) / profile_threshold(like, level))
     z = _quantile(result, level)
     delta_ci = np.column_stack([eps_hat - z * se, eps_hat + z * se])
 
@@ -560,7 +567,7 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
 
         profiles, best = _profiles(
             Profiler(like, eps_hat, ell_hat, scale, bnds), which, threshold, z, bnds,
-            max_steps, delta_ci, scan, simulate,
+            max_steps, delta_ci, scan, simulate, joint,
         )  # fmt: skip
         if best is None:
             break

@@ -17,7 +17,7 @@ from ...errors import ConvergenceError, ModelEvaluationError
 from ..core.convergence import at_bound as bounds_hit
 from ..core.finite_differences import fd_gradient
 
-__all__ = ["MODEL_FAILURES", "Profiler", "beyond", "profile_concerns", "walk"]
+__all__ = ["MODEL_FAILURES", "Profiler", "beyond", "bound_touches", "profile_concerns", "walk"]
 
 MODEL_FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError)
 #: the likelihood increase standing in for "the model fails here"
@@ -364,13 +364,64 @@ def _region_end(prof, i, t_in, t_out, start, threshold):
         return t_out
 
 
+#: bisection steps locating where a re-optimized parameter first reaches its bound beyond
+#: an interval's end (the gap between two profile points shrinks 2**-8-fold)
+TOUCH_BISECTIONS = 8
+
+
+def _at_bound(i, t, row, bounds):
+    """The (parameter, side) pairs at their bound at a profile point, ``eps[i] = t``
+    included (the profiled parameter at its own bound)."""
+    row = np.array(row, dtype=float)
+    row[i] = t
+    return bounds_hit(row, bounds)
+
+
+def bound_touches(prof, i, pts, ends, bounds):
+    """Where a parameter first sits at its bound beyond each end of an interval.
+
+    Outward from each finite end, the first computed profile point at which some parameter
+    (the profiled one or a re-optimized one) is at its bound; when the point before it is
+    not, the first such ``t`` between the two is located by bisection
+    (``TOUCH_BISECTIONS`` inner fits), since the profile rises steeply past it (the
+    parameter held at the bound cannot follow a ridge) and the point found first can be far
+    above the lowest point of the bound's face. Returns the new points (t, delta, eps).
+    """
+    new = []
+    for direction, end in ((-1, ends[0]), (1, ends[1])):
+        if not np.isfinite(end):
+            continue
+        out = sorted((q for q in pts if direction * (q[0] - end) >= 0),
+                     key=lambda q: direction * (q[0] - end))  # fmt: skip
+        k = next((k for k, q in enumerate(out) if _at_bound(i, q[0], q[2], bounds)), None)
+        if k is None or k == 0:
+            continue
+        (t_in, _, e_in), t_at = out[k - 1], out[k][0]
+        if t_at == t_in:
+            continue
+        found = None
+        for _ in range(TOUCH_BISECTIONS):
+            t = 0.5 * (t_in + t_at)
+            try:
+                d, e = prof.at(i, t, e_in)
+            except MODEL_FAILURES:
+                break
+            if _at_bound(i, t, e, bounds):
+                t_at, found = t, (t, d, e)
+            else:
+                t_in, e_in = t, e
+        if found is not None:
+            new.append(found)
+    return new
+
+
 #: a fall of the profile on its way out larger than this fraction of the threshold is a
 #: non-monotone branch (smaller ones are the inner fits' round-off)
 MONOTONE_RTOL = 0.01
 
 
 def profile_concerns(i, values, delta, eps, main, reasons, regions, threshold, bounds,
-                     unconverged=(), calibrated=False):  # fmt: skip
+                     unconverged=(), calibrated=False, joint=None):  # fmt: skip
     """The profile's own evidence against the interval of parameter ``i``.
 
     An interval from the chi-squared (or profile-t) threshold is what it says only where
@@ -396,8 +447,16 @@ def profile_concerns(i, values, delta, eps, main, reasons, regions, threshold, b
     unconverged : sequence of (fixed, values)
         Inner fits that did not converge (:class:`~.profile_walk.Profiler`).
     calibrated : bool
-        The threshold was simulated (:mod:`~.profile_calibration`): a re-optimized
-        parameter at its bound is then no evidence against it.
+        The threshold was simulated (:mod:`~.profile_calibration`): a parameter at its
+        bound is then no evidence against it.
+    joint : float, optional
+        The joint confidence region's level of ``delta`` (:math:`\\tfrac12\\chi^2_p`,
+        p the number of parameters). Outside the interval, the first profile point on
+        each side with a parameter at its bound (the profiled one, or a re-optimized one:
+        :func:`bound_touches`) is evidence against the interval when its ``delta`` is
+        below this: the bound is then inside the region of parameters the data do not
+        exclude, and the chi-squared threshold, which assumes an interior optimum with
+        room around it, need not hold (a likelihood ridge running to a bound).
     """
     concerns = [
         f"{side} end open" for side, r in zip(("lower", "upper"), reasons, strict=True)
@@ -424,6 +483,23 @@ def profile_concerns(i, values, delta, eps, main, reasons, regions, threshold, b
             f"eps[{m}] sits at its {side} bound {b:g} (from eps[{i}]={ti:.6g}): the "
             "chi-squared threshold does not hold there"
         )
+    for side, outward in (("lower", values < lo), ("upper", values > hi)):
+        if joint is None or calibrated or not outward.any():
+            continue
+        ks = np.flatnonzero(outward)
+        for k in ks[::-1] if side == "lower" else ks:
+            near = _at_bound(i, values[k], eps[k], bounds)
+            if near:
+                if delta[k] < joint:
+                    m, where = near[0]
+                    b = bounds[m][0 if where == "lower" else 1]
+                    concerns.append(
+                        f"eps[{m}] reaches its {where} bound {b:g} beyond the {side} end "
+                        f"(at eps[{i}]={values[k]:.6g}, 2*delta = {2 * delta[k]:.3g}, inside "
+                        f"the joint region's {2 * joint:.3g}): the chi-squared threshold "
+                        "need not hold so near a bound"
+                    )
+                break
     bad = [v[0] for f, v in unconverged if f == (i,) and lo <= v[0] <= hi]
     if bad:
         concerns.append(f"{len(bad)} inner fit(s) inside the interval did not converge")
