@@ -403,13 +403,14 @@ def _counted(check, counts, known=None):
     return judge
 
 
-#: options of the Levenberg-Marquardt driver (MINPACK's lmder through scipy's leastsq)
+#: options of the Levenberg-Marquardt driver (MINPACK's lmdif/lmder: :mod:`.minpack`)
 LM_KEYWORDS = ("polish", "ftol", "xtol", "gtol", "x_scale")
 
 
 def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differences=False):
-    """MINPACK's Levenberg-Marquardt (``scipy.optimize.leastsq``, lmder: compiled, the
-    Jacobian from ``residual``), then the status test of :func:`verify_least_squares`.
+    """MINPACK's Levenberg-Marquardt (:func:`~.minpack.lm`: scipy's compiled lmder with the
+    Jacobian from ``residual``, or lmdif differencing it), then the status test of
+    :func:`verify_least_squares`.
 
     The unbounded fit of :func:`least_squares_scaled` at the speed of
     ``scipy.optimize.curve_fit``: MINPACK scales the parameters by the column norms of
