@@ -119,10 +119,11 @@ class _GrowingDesign:
         self.n = len(omega)
         self.position = {}
         self.alpha = np.zeros((1, len(germs)), dtype=np.int64)
-        # the columns live in a column-major buffer grown by half (B is a view of its first
-        # ones): appending to a copied array cost a copy of all columns per extension
-        self._buffer = np.ones((self.n, 1), order="F")
-        self.B = self._buffer
+        # the columns are the rows of a C-ordered buffer grown in place by half (B is the
+        # column-major view of its first rows): appending to a copied array cost a copy of
+        # all columns per extension, and a grown copy of the buffer one per growth
+        self._rows = np.ones((1, self.n))
+        self.B = self._rows.T
         self.G = np.array([[float(self.n)]])
         self.XtY = Y.sum(axis=0, keepdims=True)
         self.degree, self.tables, self.unit = -1, None, None
@@ -141,21 +142,23 @@ class _GrowingDesign:
                 ]
                 self.degree = p
                 self.unit = [bool(np.all(t[0] == 1.0)) for t in self.tables]
-            BnT = self.tables[0][new_alpha[:, 0]]
-            for d in range(1, len(self.germs)):
-                if self.unit[d]:
-                    # a zero degree multiplies by exactly 1: only the columns using input d
-                    use = np.flatnonzero(new_alpha[:, d])
-                    BnT[use] *= self.tables[d][new_alpha[use, d]]
-                else:
-                    BnT *= self.tables[d][new_alpha[:, d]]
-            Bn = BnT.T  # (n, new), column-major
             k0, k1 = self.B.shape[1], self.B.shape[1] + len(new)
             check_allocation(
                 8.0 * (self.n * k1 + 2 * k1 * k1),
                 f"the adaptive sparse-regression design of {k1} candidates from n = {self.n} runs",
                 "pass a smaller `order`, or a `q_norm` < 1",
             )
+            if k1 > len(self._rows):
+                self._grow(k1)
+            # each new column evaluated in its row of the buffer: the product over the inputs
+            # in their order, a zero degree of a unit table skipped (it multiplies by 1)
+            BnT = self._rows[k0:k1]
+            for row, a in zip(BnT, new_alpha.tolist(), strict=True):
+                row[:] = self.tables[0][a[0]]
+                for d in range(1, len(a)):
+                    if a[d] or not self.unit[d]:
+                        row *= self.tables[d][a[d]]
+            Bn = BnT.T  # (n, new), column-major
             cross = self.B.T @ Bn
             G = np.empty((k1, k1))
             G[:k0, :k0] = self.G
@@ -164,19 +167,27 @@ class _GrowingDesign:
             G[k0:, k0:] = Bn.T @ Bn
             self.G = G
             self.XtY = np.vstack([self.XtY, Bn.T @ self.Y])
-            if k1 > self._buffer.shape[1]:
-                width = max(k1, 3 * self._buffer.shape[1] // 2)
-                if 8.0 * self.n * (k0 + width) > SELECTION_SHARE * memory_budget():
-                    width = k1  # no room to spare: v0.4's peak, old and new columns once
-                buffer = np.empty((self.n, width), order="F")
-                buffer[:, :k0] = self.B
-                self._buffer = buffer
-            self._buffer[:, k0:k1] = Bn
-            self.B = self._buffer[:, :k1]
+            self.B = self._rows[:k1].T
             self.alpha = np.vstack([self.alpha, new_alpha])
             for k, a in enumerate(new):
                 self.position[a] = k0 + k
         return np.array([self.position[a] for a in map(tuple, alpha.tolist())], dtype=np.int64)
+
+    def _grow(self, k1):
+        """Room for at least k1 columns: the buffer's rows grown by half, in place if it can."""
+        k0 = self.B.shape[1]
+        width = max(k1, 3 * len(self._rows) // 2)
+        if 8.0 * self.n * (k0 + width) > SELECTION_SHARE * memory_budget():
+            width = k1  # no room to spare (a copy, if the resize cannot be in place, holds both)
+        self.B = None  # the buffer's only view: a resize in place needs no other reference
+        try:
+            # realloc: the pages move without a copy (the new rows are zero-filled)
+            self._rows.resize((width, self.n))
+        except ValueError:  # another reference to the buffer (or its views): copy it
+            rows = np.empty((width, self.n))
+            rows[:k0] = self._rows[:k0]
+            self._rows = rows
+        self.B = self._rows[:k0].T
 
     def select(self, j, pos, first_steps):
         """Hybrid LAR on the columns at ``pos`` for output column j: (positions, coef, LOO)."""
