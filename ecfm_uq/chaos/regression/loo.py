@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.linalg as sla
+from scipy.linalg.blas import dtrsm
 from scipy.linalg.lapack import dpotrf
 
+from .._kernels import nested_loo_rows
 from .compression import row_blocks
 
 __all__ = ["CHOLESKY_RTOL", "NestedLooRows", "cholesky_prefix", "loo_nested", "loo_nested_rows"]
@@ -118,6 +120,7 @@ class NestedLooRows:
 
     def __init__(self, design, y, G, b):
         self.design, self.y, self.G, self.b = design, y, G, b
+        self.columns = design.T  # C-ordered (no copy) for the column-major design
         n = len(y)
         self.h = np.zeros(n)
         self.fitted = np.zeros(n)
@@ -136,27 +139,14 @@ class NestedLooRows:
             W = Rinv[:, k0:]
             new = np.zeros(s - k0)
             for a, b in row_blocks(n, 4 * s):
-                X = self.design[a:b][:, sel]
+                # the block's rows of the selected columns, one column per row (C order):
+                # the nested sums then run along contiguous rows
+                XT = self.columns[sel, a:b]
                 if k0:
-                    Q = X @ W
-                else:  # all columns: the triangular solve, half the products
-                    Q = sla.solve_triangular(R, X.T, trans="T", check_finite=False).T
-                # in place: r = y - fitted and 1 - h of the nested fits, then (r / (1 - h))^2
-                r = Q * z[None, k0:]
-                np.cumsum(r, axis=1, out=r)
-                r += self.fitted[a:b, None]
-                self.fitted[a:b] = r[:, -1]
-                np.subtract(y[a:b, None], r, out=r)
-                np.multiply(Q, Q, out=Q)
-                np.cumsum(Q, axis=1, out=Q)
-                Q += self.h[a:b, None]
-                self.h[a:b] = Q[:, -1]
-                np.subtract(1.0, Q, out=Q)
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    np.divide(r, Q, out=r)
-                r[Q <= 1e-10] = np.inf
-                np.multiply(r, r, out=r)
-                new += np.sum(r, axis=0)
+                    QT = W.T @ XT
+                else:  # all columns: Q = X R^{-1} by a triangular solve, half the products
+                    QT = dtrsm(1.0, R, XT.T, side=1, overwrite_b=1).T
+                nested_loo_rows(QT, z[k0:], y[a:b], self.fitted[a:b], self.h[a:b], new)
             self.sum_e2 = np.concatenate([self.sum_e2, new])
         var = np.var(y) if np.var(y) > 0 else 1.0
         loo = self.sum_e2[:s] / n / var
