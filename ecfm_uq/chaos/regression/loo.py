@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.linalg as sla
-from scipy.linalg.blas import dtrsm
+from scipy.linalg.blas import dtrmm
 from scipy.linalg.lapack import dpotrf
 
 from .._kernels import nested_loo_rows
@@ -144,8 +144,8 @@ class NestedLooRows:
                 XT = self.columns[sel, a:b]
                 if k0:
                     QT = W.T @ XT
-                else:  # all columns: Q = X R^{-1} by a triangular solve, half the products
-                    QT = dtrsm(1.0, R, XT.T, side=1, overwrite_b=1).T
+                else:  # all columns: Q = X R^{-1} by a triangular product, half the flops
+                    QT = dtrmm(1.0, Rinv, XT.T, side=1, overwrite_b=1).T
                 nested_loo_rows(QT, z[k0:], y[a:b], self.fitted[a:b], self.h[a:b], new)
             self.sum_e2 = np.concatenate([self.sum_e2, new])
         var = np.var(y) if np.var(y) > 0 else 1.0
