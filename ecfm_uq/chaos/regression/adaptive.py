@@ -104,6 +104,20 @@ def affordable(n, P, K=0, solver="lars"):
     )
 
 
+def largest_affordable(n, solver="lars"):
+    """The most candidates of an affordable set from n runs (the work and candidate caps).
+
+    The candidate sets of one q-norm are nested, so a column-wise selection meets at most
+    ``len(_ADAPTIVE_Q)`` times this many columns.
+    """
+    cap = _candidate_cap(n, solver)
+    work = _ADAPTIVE_WORK * max(1.0, n / _ADAPTIVE_WORK_RUNS)
+    if not work < cap * n * n:
+        return cap
+    # P <= n: n P^2 <= work; P > n: n^2 P <= work
+    return min(max(math.isqrt(int(work // n)), int(work // (n * n))), cap)
+
+
 class _GrowingDesign:
     """The candidate columns met so far, their Gram matrix and correlations, grown in place.
 
@@ -114,14 +128,16 @@ class _GrowingDesign:
     columns are refitted, by a QR of the design.
     """
 
-    def __init__(self, germs, omega, Y):
+    def __init__(self, germs, omega, Y, capacity=1):
         self.germs, self.omega, self.Y = germs, omega, Y
         self.n = len(omega)
+        self.capacity = int(capacity)
         self.position = {}
         self.alpha = np.zeros((1, len(germs)), dtype=np.int64)
-        # the columns are the rows of a C-ordered buffer grown in place by half (B is the
-        # column-major view of its first rows): appending to a copied array cost a copy of
-        # all columns per extension, and a grown copy of the buffer one per growth
+        # the columns are the rows of a C-ordered buffer (B is the column-major view of its
+        # first rows) allocated for all the columns the selection may meet (``capacity``)
+        # when that fits the memory budget: appending to a copied array cost a copy of all
+        # columns per extension, and a buffer grown by half still a copy per growth
         self._rows = np.ones((1, self.n))
         self.B = self._rows.T
         self.G = np.array([[float(self.n)]])
@@ -174,19 +190,21 @@ class _GrowingDesign:
         return np.array([self.position[a] for a in map(tuple, alpha.tolist())], dtype=np.int64)
 
     def _grow(self, k1):
-        """Room for at least k1 columns: the buffer's rows grown by half, in place if it can."""
+        """Room for at least k1 columns: ``capacity`` at once, else the rows grown by half.
+
+        The buffer is allocated, not written: its pages are only touched (and held) as
+        columns are evaluated, so a buffer of ``capacity`` columns costs what its used
+        columns cost, with no copy of the held columns as the design grows.
+        """
         k0 = self.B.shape[1]
-        width = max(k1, 3 * len(self._rows) // 2)
+        width = max(k1, 3 * len(self._rows) // 2, self.capacity)
         if 8.0 * self.n * (k0 + width) > SELECTION_SHARE * memory_budget():
-            width = k1  # no room to spare (a copy, if the resize cannot be in place, holds both)
-        self.B = None  # the buffer's only view: a resize in place needs no other reference
-        try:
-            # realloc: the pages move without a copy (the new rows are zero-filled)
-            self._rows.resize((width, self.n))
-        except ValueError:  # another reference to the buffer (or its views): copy it
-            rows = np.empty((width, self.n))
-            rows[:k0] = self._rows[:k0]
-            self._rows = rows
+            width = max(k1, 3 * len(self._rows) // 2)
+            if 8.0 * self.n * (k0 + width) > SELECTION_SHARE * memory_budget():
+                width = k1  # no room to spare: v0.4's peak, old and new columns once
+        rows = np.empty((width, self.n))
+        rows[:k0] = self._rows[:k0]
+        self._rows = rows
         self.B = self._rows[:k0].T
 
     def select(self, j, pos, first_steps):
@@ -300,7 +318,9 @@ def select_adaptive(germs, omega, Y, early_stop, max_degree, solver):
     """
     n, m = Y.shape
     dim = len(germs)
-    design = _GrowingDesign(germs, omega, Y)
+    design = _GrowingDesign(
+        germs, omega, Y, 1 + len(_ADAPTIVE_Q) * m * largest_affordable(n, solver)
+    )
     picked, info = [], dict(degree=[], q_norm=[], n_terms=[], errors=[], n_candidates=[])
     trace0 = None
     for j in range(m):
