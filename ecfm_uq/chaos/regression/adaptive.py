@@ -15,6 +15,7 @@ candidates per run, memory budget); the result keeps the selected terms only (a
 from __future__ import annotations
 
 import math
+import mmap
 
 import numpy as np
 
@@ -118,6 +119,19 @@ def largest_affordable(n, solver="lars"):
     return min(max(math.isqrt(int(work // n)), int(work // (n * n))), cap)
 
 
+def _untouched(rows, n):
+    """An uninitialised (rows, n) array whose pages are only held once written.
+
+    A private anonymous mapping of 4 KiB pages where the platform has one: NumPy asks
+    for transparent huge pages for large arrays, whose first touch can cost several times
+    the zeroing (compaction) when the design buffer is reserved for its most columns.
+    """
+    if hasattr(mmap, "MAP_PRIVATE") and hasattr(mmap, "MAP_ANONYMOUS") and rows * n:
+        pages = mmap.mmap(-1, 8 * rows * n, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+        return np.frombuffer(pages, dtype=float).reshape(rows, n)
+    return np.empty((rows, n))
+
+
 class _GrowingDesign:
     """The candidate columns met so far, their Gram matrix and correlations, grown in place.
 
@@ -202,7 +216,7 @@ class _GrowingDesign:
             width = max(k1, 3 * len(self._rows) // 2)
             if 8.0 * self.n * (k0 + width) > SELECTION_SHARE * memory_budget():
                 width = k1  # no room to spare: v0.4's peak, old and new columns once
-        rows = np.empty((width, self.n))
+        rows = _untouched(width, self.n)
         rows[:k0] = self._rows[:k0]
         self._rows = rows
         self.B = self._rows[:k0].T
