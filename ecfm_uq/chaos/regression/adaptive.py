@@ -45,6 +45,9 @@ _ADAPTIVE_WORK_RUNS = 1000
 # grows as P^2; small designs still see OpenTURNS' few hundred (q = 0.5, degree 10).
 _ADAPTIVE_PER_RUN = 2
 _ADAPTIVE_MIN_CAP = 500
+# The polynomial tables of the inputs are computed this many degrees beyond the first one
+# needed, and again when a candidate goes past them (a table per input, degree + 1 rows of n).
+_TABLE_AHEAD = 4
 # OMP is the method for exactly sparse models from few runs (P >> n, compressed sensing):
 # it keeps v0.3's ten candidates per run.
 _OMP_PER_RUN = 10
@@ -165,7 +168,10 @@ class _GrowingDesign:
             new_alpha = np.array(new, dtype=np.int64)
             p = int(new_alpha.max())
             if p > self.degree:
-                # transposed, (p + 1, n): a column's values per input are one row to gather
+                # transposed, (p + 1, n): a column's values per input are one row to gather;
+                # _TABLE_AHEAD degrees ahead, as the degree grows one at a time (the values
+                # of a degree do not depend on the highest one: the same three-term steps)
+                p = max(p, self.degree + _TABLE_AHEAD)
                 self.tables = [
                     np.ascontiguousarray(g.table(self.omega[:, d], p).T)
                     for d, g in enumerate(self.germs)
