@@ -12,7 +12,6 @@ Small kernels, each compiled once and cached on disk (``cache=True``):
 ``triple_sparse_mixed`` the same tensor as coordinate lists, built from the per-variable
                         selection rules (triangle; parity for symmetric germs)
 ``triple_cross``     the (Pa, P, P) coupling tensor between two bases
-``nested_loo_rows``  the nested fits' leave-one-out sums over a block of rows, one pass
 
 A Legendre basis passes its one table once per variable (the same products in the same
 order as the v0.2 single-table kernels these replaced, so the tensors are bit-identical).
@@ -263,39 +262,3 @@ def triple_cross(alpha_a, alpha, tables):
                     v *= tables[d, alpha_a[a, d], alpha[i, d], alpha[j, d]]
                 T[a, i, j] = v
     return T
-
-
-@numba.njit(cache=True, fastmath={"reassoc"})  # the sums over rows in SIMD lanes
-def nested_loo_rows(QT, z, y, fitted, h, sums):
-    """Add the squared LOO residuals of nested fits, over a block of rows, to ``sums``.
-
-    ``QT`` (m, b) holds the next m columns of :math:`Q = X R^{-1}` at b rows (one column per
-    row of QT), ``z`` their m coefficients :math:`Q^T y`, ``fitted`` and ``h`` the fitted
-    values and hat diagonals of the b rows from the earlier columns (updated in place to
-    include these). For column k the fit's residual :math:`r = y - f^{(k)}` and hat value
-    :math:`h^{(k)}` continue cumulative sums; ``sums[k] += sum_i (r_i / (1 - h_i))^2``, or
-    inf where :math:`1 - h_i \\le 10^{-10}`. One pass over QT instead of a dozen array
-    passes; the sum over the rows may be reassociated (vectorised: three times faster),
-    which changes the sums by rounding only (a few 1e-15 relative); infinities and NaNs
-    propagate as in IEEE arithmetic.
-    """
-    m, b = QT.shape
-    cf = np.zeros(b)
-    ch = np.zeros(b)
-    for k in range(m):
-        zk = z[k]
-        acc = 0.0
-        for i in range(b):
-            q = QT[k, i]
-            cf[i] += q * zk
-            ch[i] += q * q
-            one_h = 1.0 - (ch[i] + h[i])
-            if one_h <= 1e-10:
-                acc += np.inf
-            else:
-                e = (y[i] - (cf[i] + fitted[i])) / one_h
-                acc += e * e
-        sums[k] += acc
-    for i in range(b):
-        fitted[i] += cf[i]
-        h[i] += ch[i]

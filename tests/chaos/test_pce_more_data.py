@@ -15,7 +15,6 @@ from _models import BOREHOLE_BOUNDS, borehole, borehole_indices
 from scipy.stats import qmc
 
 from ecfm_uq.chaos import ChaosBasis, fit_pce
-from ecfm_uq.chaos._kernels import nested_loo_rows
 from ecfm_uq.chaos.germs import LEGENDRE
 from ecfm_uq.chaos.regression.adaptive import (
     _GrowingDesign,
@@ -23,7 +22,7 @@ from ecfm_uq.chaos.regression.adaptive import (
     hyperbolic_indices,
     largest_affordable,
 )
-from ecfm_uq.chaos.regression.loo import NestedLooRows, loo_nested
+from ecfm_uq.chaos.regression.loo import NestedLooRows, loo_nested, nested_loo_rows
 from ecfm_uq.memory import set_memory_budget
 
 

@@ -8,12 +8,12 @@ in design form (:func:`loo_nested`), or in Gram form a block of rows at a time
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import scipy.linalg as sla
 from scipy.linalg.blas import dtrmm
 from scipy.linalg.lapack import dpotrf
 
-from .._kernels import nested_loo_rows
 from .compression import row_blocks
 
 __all__ = ["CHOLESKY_RTOL", "NestedLooRows", "cholesky_prefix", "loo_nested", "loo_nested_rows"]
@@ -21,6 +21,42 @@ __all__ = ["CHOLESKY_RTOL", "NestedLooRows", "cholesky_prefix", "loo_nested", "l
 # Gram path: a selected column whose Cholesky pivot falls below this share of its norm is
 # numerically dependent on the earlier ones (the Gram squares the conditioning).
 CHOLESKY_RTOL = 1e-6
+
+
+@numba.njit(cache=True, fastmath={"reassoc"})  # the sums over rows in SIMD lanes
+def nested_loo_rows(QT, z, y, fitted, h, sums):
+    """Add the squared LOO residuals of nested fits, over a block of rows, to ``sums``.
+
+    ``QT`` (m, b) holds the next m columns of :math:`Q = X R^{-1}` at b rows (one column per
+    row of QT), ``z`` their m coefficients :math:`Q^T y`, ``fitted`` and ``h`` the fitted
+    values and hat diagonals of the b rows from the earlier columns (updated in place to
+    include these). For column k the fit's residual :math:`r = y - f^{(k)}` and hat value
+    :math:`h^{(k)}` continue cumulative sums; ``sums[k] += sum_i (r_i / (1 - h_i))^2``, or
+    inf where :math:`1 - h_i \\le 10^{-10}`. One pass over QT instead of a dozen array
+    passes; the sum over the rows may be reassociated (vectorised: three times faster),
+    which changes the sums by rounding only (a few 1e-15 relative); infinities and NaNs
+    propagate as in IEEE arithmetic.
+    """
+    m, b = QT.shape
+    cf = np.zeros(b)
+    ch = np.zeros(b)
+    for k in range(m):
+        zk = z[k]
+        acc = 0.0
+        for i in range(b):
+            q = QT[k, i]
+            cf[i] += q * zk
+            ch[i] += q * q
+            one_h = 1.0 - (ch[i] + h[i])
+            if one_h <= 1e-10:
+                acc += np.inf
+            else:
+                e = (y[i] - (cf[i] + fitted[i])) / one_h
+                acc += e * e
+        sums[k] += acc
+    for i in range(b):
+        fitted[i] += cf[i]
+        h[i] += ch[i]
 
 
 def loo_nested(Q, R, y):
