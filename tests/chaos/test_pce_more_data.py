@@ -16,6 +16,7 @@ from scipy.stats import qmc
 
 from ecfm_uq.chaos import ChaosBasis, fit_pce
 from ecfm_uq.chaos.germs import LEGENDRE
+from ecfm_uq.chaos.regression import adaptive
 from ecfm_uq.chaos.regression.adaptive import (
     _GrowingDesign,
     affordable,
@@ -162,3 +163,24 @@ def test_growing_design_reserved_or_grown_holds_the_same_columns():
         np.testing.assert_array_equal(d.alpha, ref.alpha)
         np.testing.assert_array_equal(d.B, ref.B)
         np.testing.assert_array_equal(d.G, ref.G)
+
+
+def test_growing_design_falls_back_when_the_mapping_is_refused(monkeypatch):
+    # a system that refuses the reserved mapping (strict overcommit): the columns are
+    # held in exact-size arrays instead, the same design
+    rng = np.random.default_rng(2)
+    omega, Y = rng.random((120, 2)), rng.standard_normal((120, 1))
+    ref = _GrowingDesign([LEGENDRE] * 2, omega, Y, 100)
+    for p in (2, 5):
+        ref.extend(hyperbolic_indices(2, p, 1.0))
+
+    def refuse(rows, n):
+        raise MemoryError("refused")
+
+    monkeypatch.setattr(adaptive, "_untouched", refuse)
+    new = _GrowingDesign([LEGENDRE] * 2, omega, Y, 100)
+    for p in (2, 5):
+        new.extend(hyperbolic_indices(2, p, 1.0))
+    assert len(ref._rows) == 100 and len(new._rows) == new.B.shape[1] == 21
+    np.testing.assert_array_equal(new.B, ref.B)
+    np.testing.assert_array_equal(new.G, ref.G)

@@ -125,12 +125,17 @@ def largest_affordable(n, solver="lars"):
 def _untouched(rows, n):
     """An uninitialised (rows, n) array whose pages are only held once written.
 
-    A private anonymous mapping of 4 KiB pages where the platform has one: NumPy asks
-    for transparent huge pages for large arrays, whose first touch can cost several times
-    the zeroing (compaction) when the design buffer is reserved for its most columns.
+    A private anonymous mapping of 4 KiB pages, not reserved against the swap, where the
+    platform has one: NumPy asks for transparent huge pages for large arrays, whose first
+    touch can cost several times the zeroing (compaction) when the design buffer is
+    reserved for its most columns. Raises MemoryError when the mapping is refused.
     """
-    if hasattr(mmap, "MAP_PRIVATE") and hasattr(mmap, "MAP_ANONYMOUS") and rows * n:
-        pages = mmap.mmap(-1, 8 * rows * n, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+    flags = getattr(mmap, "MAP_PRIVATE", 0) | getattr(mmap, "MAP_ANONYMOUS", 0)
+    if flags and rows * n:
+        try:
+            pages = mmap.mmap(-1, 8 * rows * n, flags=flags | getattr(mmap, "MAP_NORESERVE", 0))
+        except OSError as err:
+            raise MemoryError(f"no mapping of {8 * rows * n} bytes: {err}") from err
         return np.frombuffer(pages, dtype=float).reshape(rows, n)
     return np.empty((rows, n))
 
@@ -217,12 +222,20 @@ class _GrowingDesign:
         columns cost, with no copy of the held columns as the design grows.
         """
         k0 = self.B.shape[1]
-        width = max(k1, 3 * len(self._rows) // 2, self.capacity)
-        if 8.0 * self.n * (k0 + width) > SELECTION_SHARE * memory_budget():
-            width = max(k1, 3 * len(self._rows) // 2)
-            if 8.0 * self.n * (k0 + width) > SELECTION_SHARE * memory_budget():
-                width = k1  # no room to spare: v0.4's peak, old and new columns once
-        rows = _untouched(width, self.n)
+        half = max(k1, 3 * len(self._rows) // 2)
+        # the widest within the budget (old and new columns held once while copied; at k1
+        # none to spare, v0.4's peak) that the system maps: a system that reserves every
+        # mapping against its memory may refuse the capacity
+        widths = [w for w in (max(half, self.capacity), half) if w > k1]
+        widths = [w for w in widths if 8.0 * self.n * (k0 + w) <= SELECTION_SHARE * memory_budget()]
+        for width in widths:
+            try:
+                rows = _untouched(width, self.n)
+                break
+            except MemoryError:
+                continue
+        else:
+            rows = np.empty((k1, self.n))
         rows[:k0] = self._rows[:k0]
         self._rows = rows
         self.B = self._rows[:k0].T
