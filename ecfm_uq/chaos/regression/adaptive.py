@@ -148,6 +148,10 @@ class _GrowingDesign:
     of :math:`G = \\Psi^T\\Psi` and :math:`\\Psi^T Y` it needs, centres and scales them
     (the constant column is column 0) and runs LAR in its Gram form; only the selected
     columns are refitted, by a QR of the design.
+
+    ``capacity``: the most columns the selection may meet (:func:`largest_affordable` per
+    q-chain and output); the buffer is reserved for them at once when the memory budget
+    allows, untouched until written, and otherwise grown by half.
     """
 
     def __init__(self, germs, omega, Y, capacity=1):

@@ -16,7 +16,14 @@ from scipy.linalg.lapack import dpotrf
 
 from .compression import row_blocks
 
-__all__ = ["CHOLESKY_RTOL", "NestedLooRows", "cholesky_prefix", "loo_nested", "loo_nested_rows"]
+__all__ = [
+    "CHOLESKY_RTOL",
+    "NestedLooRows",
+    "cholesky_prefix",
+    "loo_nested",
+    "loo_nested_rows",
+    "nested_loo_rows",
+]
 
 # Gram path: a selected column whose Cholesky pivot falls below this share of its norm is
 # numerically dependent on the earlier ones (the Gram squares the conditioning).
