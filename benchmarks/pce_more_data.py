@@ -31,7 +31,13 @@ Ks ~ N(30, 7.5) truncated to Ks > 0, Zv ~ U(49, 51), Zm ~ U(54, 56);
 S = (Q / (300 Ks sqrt((Zm - Zv) / 5000)))^0.6 + Zv - 58.5) at n = 1 000: the default fit's
 time (median of 5), to check the rule leaves small designs as they were.
 
-Run: ``python benchmarks/pce_more_data.py [--n 1000 10000 100000] [--old] [--part borehole|flood|all]``.
+``--old`` also prints the default's CPU time over the v0.4 rule's (same process, warm);
+``--fresh`` times both rules in fresh processes (imports, design and fit, as a user's
+script sees them), interleaved; ``--v04 DIR`` also v0.4's own default from a checkout of
+it (``git worktree add DIR 360e218``): the v0.4 rule above runs v0.5's faster refits.
+
+Run: ``python benchmarks/pce_more_data.py [--n 1000 10000 100000] [--old] [--fresh]
+[--v04 DIR] [--part borehole|flood|all]``.
 """
 
 from __future__ import annotations
@@ -43,6 +49,7 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import math  # noqa: E402
+import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 import warnings  # noqa: E402
@@ -53,7 +60,11 @@ from scipy import stats  # noqa: E402
 from scipy.stats import qmc  # noqa: E402
 
 from ecfm_uq.chaos import fit_pce  # noqa: E402
-from ecfm_uq.chaos.regression import adaptive  # noqa: E402
+
+try:
+    from ecfm_uq.chaos.regression import adaptive  # noqa: E402
+except ImportError:  # a v0.4 package (``--v04``'s child processes): its default only
+    adaptive = None
 
 # the borehole function and its quadrature indices are the tests' (tests/_models.py)
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
@@ -80,33 +91,79 @@ def fit(X, Y, bounds):
     return pce, time.process_time() - c0, time.perf_counter() - w0
 
 
-def run_borehole(ns, old):
+def fit_rule(X, Y, runs):
+    """The default fit with the work limit's run count ``runs`` (None: the package's)."""
+    if runs is None:
+        return fit(X, Y, BOREHOLE)
+    keep = adaptive._ADAPTIVE_WORK_RUNS
+    adaptive._ADAPTIVE_WORK_RUNS = runs
+    try:
+        return fit(X, Y, BOREHOLE)
+    finally:
+        adaptive._ADAPTIVE_WORK_RUNS = keep
+
+
+def fresh_cpu(n, rule, package=None):
+    """CPU seconds of a fresh process that imports, designs and fits (rule: default|v0.4).
+
+    ``package``: the directory to import ``ecfm_uq`` from (default: this checkout's).
+    """
+    root = package or str(Path(__file__).resolve().parents[1])
+    out = subprocess.run(
+        [sys.executable, __file__, "--child", str(n), rule],
+        capture_output=True,
+        text=True,
+        check=True,
+        env={**os.environ, "PYTHONPATH": str(root)},
+    )
+    return float(out.stdout.split()[-1])
+
+
+def child(n, rule):
+    """In a fresh process: the fit, then the process's CPU time so far (imports included)."""
+    X = design(n)
+    fit_rule(X, borehole(X), math.inf if rule == "v0.4" else None)
+    print(f"{time.process_time():.3f}")
+
+
+def run_borehole(ns, old, fresh, v04=None):
     S0, T0 = borehole_indices(REFERENCE_NODES)
     print("borehole, 8 uniform inputs, LHS seed 0; reference indices by quadrature")
     print(f"  S = {np.array2string(S0, precision=6)}")
     print(f"  T = {np.array2string(T0, precision=6)}")
     rules = [("default", None)] + ([("v0.4 rule", math.inf)] if old else [])
     print(
-        f"{'rule':>10} {'n':>7} {'index error':>12} {'LOO':>9} {'terms':>6} {'cpu s':>7} {'wall s':>7}"
+        f"{'rule':>10} {'n':>7} {'index error':>12} {'LOO':>9} {'terms':>6} {'cpu s':>7} "
+        f"{'wall s':>7}" + (f" {'cpu / v0.4 rule':>15}" if old else "")
     )
     for n in ns:
         X = design(n)
         Y = borehole(X)
+        cpus = {}
         for label, runs in rules:
-            keep = adaptive._ADAPTIVE_WORK_RUNS
-            if runs is not None:
-                adaptive._ADAPTIVE_WORK_RUNS = runs
-            try:
-                pce, cpu, wall = fit(X, Y, BOREHOLE)
-            finally:
-                adaptive._ADAPTIVE_WORK_RUNS = keep
+            pce, cpu, wall = fit_rule(X, Y, runs)
+            cpus[label] = cpu
             err = max(np.max(np.abs(pce.first_order() - S0)), np.max(np.abs(pce.total() - T0)))
             d = pce.diagnostics
             print(
                 f"{label:>10} {n:>7} {err:12.2e} {float(d['corrected_loo_error']):9.1e} "
-                f"{int(d['n_terms']):>6} {cpu:7.2f} {wall:7.2f}",
+                f"{int(d['n_terms']):>6} {cpu:7.2f} {wall:7.2f}"
+                + (f" {cpus['default'] / cpu:15.2f}" if label != "default" else ""),
                 flush=True,
             )
+    if fresh:
+        # a user's script: a fresh process that imports, designs and fits, each rule
+        # interleaved with the others (the ratios of one run, on a machine shared with others)
+        print("fresh processes (imports, design, fit), CPU s; ratio = default / the other:")
+        head = f"{'n':>7} {'default':>8} {'v0.4 rule':>10} {'ratio':>6}"
+        print(head + (f" {'v0.4 default':>13} {'ratio':>6}" if v04 else ""))
+        for n in ns:
+            new, rule = fresh_cpu(n, "default"), fresh_cpu(n, "v0.4")
+            line = f"{n:>7} {new:8.2f} {rule:10.2f} {new / rule:6.2f}"
+            if v04:
+                old = fresh_cpu(n, "default", v04)
+                line += f" {old:13.2f} {new / old:6.2f}"
+            print(line, flush=True)
     print("v0.4 (main, 360e218, before the change), same designs:")
     for n, err, cpu in V04:
         print(f"{'v0.4':>10} {n:>7} {err:12.2e}" + (f" {'':>9} {'':>6} {cpu:7.2f}" if cpu else ""))
@@ -166,10 +223,22 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, nargs="+", default=[1000, 10000, 100000])
     parser.add_argument("--old", action="store_true", help="v0.4's rule beside the default")
+    parser.add_argument(
+        "--fresh", action="store_true", help="both rules also in fresh processes (imports included)"
+    )
+    parser.add_argument(
+        "--v04",
+        metavar="DIR",
+        help="a v0.4 checkout (git worktree add DIR 360e218): its default in fresh processes too",
+    )
     parser.add_argument("--part", choices=("borehole", "flood", "all"), default="all")
+    parser.add_argument("--child", nargs=2, metavar=("N", "RULE"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.child:
+        child(int(args.child[0]), args.child[1])
+        return
     if args.part in ("borehole", "all"):
-        run_borehole(args.n, args.old)
+        run_borehole(args.n, args.old, args.fresh or bool(args.v04), args.v04)
     if args.part in ("flood", "all"):
         run_flood()
 

@@ -14,9 +14,16 @@ import scipy.linalg as sla
 from _models import BOREHOLE_BOUNDS, borehole, borehole_indices
 from scipy.stats import qmc
 
-from ecfm_uq.chaos import fit_pce
-from ecfm_uq.chaos.regression.adaptive import affordable, hyperbolic_indices
-from ecfm_uq.chaos.regression.loo import NestedLooRows, loo_nested
+from ecfm_uq.chaos import ChaosBasis, fit_pce
+from ecfm_uq.chaos.germs import LEGENDRE
+from ecfm_uq.chaos.regression import adaptive
+from ecfm_uq.chaos.regression.adaptive import (
+    _GrowingDesign,
+    affordable,
+    hyperbolic_indices,
+    largest_affordable,
+)
+from ecfm_uq.chaos.regression.loo import NestedLooRows, loo_nested, nested_loo_rows
 from ecfm_uq.memory import set_memory_budget
 
 
@@ -90,3 +97,90 @@ def test_more_data_not_worse_to_1e5(indices):
     assert errs[1] <= 1.5 * errs[0], errs
     assert errs[2] <= 1.5 * errs[1], errs
     assert math.isfinite(errs[2]) and errs[2] < 1e-5, errs
+
+
+def test_nested_loo_rows_kernel_matches_the_array_form():
+    # the one-pass kernel against the cumulative sums written out in NumPy (two pieces
+    # of columns, carried fitted values and hat diagonals), and inf where 1 - h <= 1e-10
+    rng = np.random.default_rng(5)
+    m, b = 37, 211
+    QT = 0.05 * rng.standard_normal((m, b))
+    z, y = rng.standard_normal(m), rng.standard_normal(b)
+    QT[20, 7] = 1.0  # row 7's hat value passes 1 from column 20 on
+    fitted, h, sums = np.zeros(b), np.zeros(b), np.zeros(m)
+    nested_loo_rows(QT[:15], z[:15], y, fitted, h, sums[:15])
+    nested_loo_rows(QT[15:], z[15:], y, fitted, h, sums[15:])
+    F = np.cumsum(QT.T * z, axis=1)
+    H = np.cumsum(QT.T**2, axis=1)
+    with np.errstate(divide="ignore"):
+        E = np.where(1.0 - H > 1e-10, (y[:, None] - F) / (1.0 - H), np.inf)
+    expected = np.sum(E**2, axis=0)
+    assert np.isinf(expected[20:]).all() and np.isfinite(expected[:20]).all()
+    np.testing.assert_array_equal(np.isinf(sums), np.isinf(expected))
+    np.testing.assert_allclose(sums[:20], expected[:20], rtol=1e-13)
+    np.testing.assert_allclose(fitted, F[:, -1], rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(h, H[:, -1], rtol=1e-13)
+
+
+def test_largest_affordable_is_the_largest_affordable_set():
+    # against a scan of the work and candidate caps (memory aside)
+    previous = set_memory_budget(2.0**40)
+    try:
+        for n in (10, 40, 100, 300, 1000, 3000, 10**5):
+            P = largest_affordable(n)
+            assert affordable(n, P) and not affordable(n, P + 1), n
+    finally:
+        set_memory_budget(previous)
+
+
+def test_growing_design_reserved_or_grown_holds_the_same_columns():
+    # the buffer reserved for all columns at once, grown by half, or grown column set by
+    # column set under a budget too small to reserve: the same design and Gram matrix
+    rng = np.random.default_rng(1)
+    n = 300
+    omega, Y = rng.random((n, 3)), rng.standard_normal((n, 1))
+    designs = [_GrowingDesign([LEGENDRE] * 3, omega, Y, capacity) for capacity in (200, 1)]
+    previous = set_memory_budget(2.0**40)
+    try:
+        for p in (1, 3, 6):
+            for d in designs:
+                d.extend(hyperbolic_indices(3, p, 0.75))
+        set_memory_budget(8.0 * n * 150)  # no room for a spare half
+        tight = _GrowingDesign([LEGENDRE] * 3, omega, Y, 200)
+        for p in (1, 3, 6):
+            tight.extend(hyperbolic_indices(3, p, 0.75))
+        designs.append(tight)
+    finally:
+        set_memory_budget(previous)
+    ref = designs[0]
+    assert ref.B.shape == (n, 1 + len(hyperbolic_indices(3, 6, 0.75)))
+    assert len(ref._rows) == 200 and len(designs[2]._rows) == ref.B.shape[1]
+    # independent: the columns by the basis, the Gram by one product
+    basis = ChaosBasis(6, 3, index_set=ref.alpha)
+    np.testing.assert_allclose(ref.B, basis.evaluate(omega), rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(ref.G, ref.B.T @ ref.B, rtol=1e-12, atol=1e-10)
+    for d in designs[1:]:
+        np.testing.assert_array_equal(d.alpha, ref.alpha)
+        np.testing.assert_array_equal(d.B, ref.B)
+        np.testing.assert_array_equal(d.G, ref.G)
+
+
+def test_growing_design_falls_back_when_the_mapping_is_refused(monkeypatch):
+    # a system that refuses the reserved mapping (strict overcommit): the columns are
+    # held in exact-size arrays instead, the same design
+    rng = np.random.default_rng(2)
+    omega, Y = rng.random((120, 2)), rng.standard_normal((120, 1))
+    ref = _GrowingDesign([LEGENDRE] * 2, omega, Y, 100)
+    for p in (2, 5):
+        ref.extend(hyperbolic_indices(2, p, 1.0))
+
+    def refuse(rows, n):
+        raise MemoryError("refused")
+
+    monkeypatch.setattr(adaptive, "_untouched", refuse)
+    new = _GrowingDesign([LEGENDRE] * 2, omega, Y, 100)
+    for p in (2, 5):
+        new.extend(hyperbolic_indices(2, p, 1.0))
+    assert len(ref._rows) == 100 and len(new._rows) == new.B.shape[1] == 21
+    np.testing.assert_array_equal(new.B, ref.B)
+    np.testing.assert_array_equal(new.G, ref.G)

@@ -15,6 +15,7 @@ candidates per run, memory budget); the result keeps the selected terms only (a
 from __future__ import annotations
 
 import math
+import mmap
 
 import numpy as np
 
@@ -44,6 +45,9 @@ _ADAPTIVE_WORK_RUNS = 1000
 # grows as P^2; small designs still see OpenTURNS' few hundred (q = 0.5, degree 10).
 _ADAPTIVE_PER_RUN = 2
 _ADAPTIVE_MIN_CAP = 500
+# The polynomial tables of the inputs are computed this many degrees beyond the first one
+# needed, and again when a candidate goes past them (a table per input, degree + 1 rows of n).
+_TABLE_AHEAD = 4
 # OMP is the method for exactly sparse models from few runs (P >> n, compressed sensing):
 # it keeps v0.3's ten candidates per run.
 _OMP_PER_RUN = 10
@@ -104,6 +108,38 @@ def affordable(n, P, K=0, solver="lars"):
     )
 
 
+def largest_affordable(n, solver="lars"):
+    """The most candidates of an affordable set from n runs (the work and candidate caps).
+
+    The candidate sets of one q-norm are nested, so a column-wise selection meets at most
+    ``len(_ADAPTIVE_Q)`` times this many columns.
+    """
+    cap = _candidate_cap(n, solver)
+    work = _ADAPTIVE_WORK * max(1.0, n / _ADAPTIVE_WORK_RUNS)
+    if not work < cap * n * n:
+        return cap
+    # P <= n: n P^2 <= work; P > n: n^2 P <= work
+    return min(max(math.isqrt(int(work // n)), int(work // (n * n))), cap)
+
+
+def _untouched(rows, n):
+    """An uninitialised (rows, n) array whose pages are only held once written.
+
+    A private anonymous mapping of 4 KiB pages, not reserved against the swap, where the
+    platform has one: NumPy asks for transparent huge pages for large arrays, whose first
+    touch can cost several times the zeroing (compaction) when the design buffer is
+    reserved for its most columns. Raises MemoryError when the mapping is refused.
+    """
+    flags = getattr(mmap, "MAP_PRIVATE", 0) | getattr(mmap, "MAP_ANONYMOUS", 0)
+    if flags and rows * n:
+        try:
+            pages = mmap.mmap(-1, 8 * rows * n, flags=flags | getattr(mmap, "MAP_NORESERVE", 0))
+        except OSError as err:
+            raise MemoryError(f"no mapping of {8 * rows * n} bytes: {err}") from err
+        return np.frombuffer(pages, dtype=float).reshape(rows, n)
+    return np.empty((rows, n))
+
+
 class _GrowingDesign:
     """The candidate columns met so far, their Gram matrix and correlations, grown in place.
 
@@ -112,17 +148,24 @@ class _GrowingDesign:
     of :math:`G = \\Psi^T\\Psi` and :math:`\\Psi^T Y` it needs, centres and scales them
     (the constant column is column 0) and runs LAR in its Gram form; only the selected
     columns are refitted, by a QR of the design.
+
+    ``capacity``: the most columns the selection may meet (:func:`largest_affordable` per
+    q-chain and output); the buffer is reserved for them at once when the memory budget
+    allows, untouched until written, and otherwise grown by half.
     """
 
-    def __init__(self, germs, omega, Y):
+    def __init__(self, germs, omega, Y, capacity=1):
         self.germs, self.omega, self.Y = germs, omega, Y
         self.n = len(omega)
+        self.capacity = int(capacity)
         self.position = {}
         self.alpha = np.zeros((1, len(germs)), dtype=np.int64)
-        # the columns live in a column-major buffer grown by half (B is a view of its first
-        # ones): appending to a copied array cost a copy of all columns per extension
-        self._buffer = np.ones((self.n, 1), order="F")
-        self.B = self._buffer
+        # the columns are the rows of a C-ordered buffer (B is the column-major view of its
+        # first rows) allocated for all the columns the selection may meet (``capacity``)
+        # when that fits the memory budget: appending to a copied array cost a copy of all
+        # columns per extension, and a buffer grown by half still a copy per growth
+        self._rows = np.ones((1, self.n))
+        self.B = self._rows.T
         self.G = np.array([[float(self.n)]])
         self.XtY = Y.sum(axis=0, keepdims=True)
         self.degree, self.tables, self.unit = -1, None, None
@@ -134,28 +177,33 @@ class _GrowingDesign:
             new_alpha = np.array(new, dtype=np.int64)
             p = int(new_alpha.max())
             if p > self.degree:
-                # transposed, (p + 1, n): a column's values per input are one row to gather
+                # transposed, (p + 1, n): a column's values per input are one row to gather;
+                # _TABLE_AHEAD degrees ahead, as the degree grows one at a time (the values
+                # of a degree do not depend on the highest one: the same three-term steps)
+                p = max(p, self.degree + _TABLE_AHEAD)
                 self.tables = [
                     np.ascontiguousarray(g.table(self.omega[:, d], p).T)
                     for d, g in enumerate(self.germs)
                 ]
                 self.degree = p
                 self.unit = [bool(np.all(t[0] == 1.0)) for t in self.tables]
-            BnT = self.tables[0][new_alpha[:, 0]]
-            for d in range(1, len(self.germs)):
-                if self.unit[d]:
-                    # a zero degree multiplies by exactly 1: only the columns using input d
-                    use = np.flatnonzero(new_alpha[:, d])
-                    BnT[use] *= self.tables[d][new_alpha[use, d]]
-                else:
-                    BnT *= self.tables[d][new_alpha[:, d]]
-            Bn = BnT.T  # (n, new), column-major
             k0, k1 = self.B.shape[1], self.B.shape[1] + len(new)
             check_allocation(
                 8.0 * (self.n * k1 + 2 * k1 * k1),
                 f"the adaptive sparse-regression design of {k1} candidates from n = {self.n} runs",
                 "pass a smaller `order`, or a `q_norm` < 1",
             )
+            if k1 > len(self._rows):
+                self._grow(k1)
+            # each new column evaluated in its row of the buffer: the product over the inputs
+            # in their order, a zero degree of a unit table skipped (it multiplies by 1)
+            BnT = self._rows[k0:k1]
+            for row, a in zip(BnT, new_alpha.tolist(), strict=True):
+                row[:] = self.tables[0][a[0]]
+                for d in range(1, len(a)):
+                    if a[d] or not self.unit[d]:
+                        row *= self.tables[d][a[d]]
+            Bn = BnT.T  # (n, new), column-major
             cross = self.B.T @ Bn
             G = np.empty((k1, k1))
             G[:k0, :k0] = self.G
@@ -164,19 +212,37 @@ class _GrowingDesign:
             G[k0:, k0:] = Bn.T @ Bn
             self.G = G
             self.XtY = np.vstack([self.XtY, Bn.T @ self.Y])
-            if k1 > self._buffer.shape[1]:
-                width = max(k1, 3 * self._buffer.shape[1] // 2)
-                if 8.0 * self.n * (k0 + width) > SELECTION_SHARE * memory_budget():
-                    width = k1  # no room to spare: v0.4's peak, old and new columns once
-                buffer = np.empty((self.n, width), order="F")
-                buffer[:, :k0] = self.B
-                self._buffer = buffer
-            self._buffer[:, k0:k1] = Bn
-            self.B = self._buffer[:, :k1]
+            self.B = self._rows[:k1].T
             self.alpha = np.vstack([self.alpha, new_alpha])
             for k, a in enumerate(new):
                 self.position[a] = k0 + k
         return np.array([self.position[a] for a in map(tuple, alpha.tolist())], dtype=np.int64)
+
+    def _grow(self, k1):
+        """Room for at least k1 columns: ``capacity`` at once, else the rows grown by half.
+
+        The buffer is allocated, not written: its pages are only touched (and held) as
+        columns are evaluated, so a buffer of ``capacity`` columns costs what its used
+        columns cost, with no copy of the held columns as the design grows.
+        """
+        k0 = self.B.shape[1]
+        half = max(k1, 3 * len(self._rows) // 2)
+        # the widest within the budget (old and new columns held once while copied; at k1
+        # none to spare, v0.4's peak) that the system maps: a system that reserves every
+        # mapping against its memory may refuse the capacity
+        widths = [w for w in (max(half, self.capacity), half) if w > k1]
+        widths = [w for w in widths if 8.0 * self.n * (k0 + w) <= SELECTION_SHARE * memory_budget()]
+        for width in widths:
+            try:
+                rows = _untouched(width, self.n)
+                break
+            except MemoryError:
+                continue
+        else:
+            rows = np.empty((k1, self.n))
+        rows[:k0] = self._rows[:k0]
+        self._rows = rows
+        self.B = self._rows[:k0].T
 
     def select(self, j, pos, first_steps):
         """Hybrid LAR on the columns at ``pos`` for output column j: (positions, coef, LOO)."""
@@ -289,7 +355,9 @@ def select_adaptive(germs, omega, Y, early_stop, max_degree, solver):
     """
     n, m = Y.shape
     dim = len(germs)
-    design = _GrowingDesign(germs, omega, Y)
+    design = _GrowingDesign(
+        germs, omega, Y, 1 + len(_ADAPTIVE_Q) * m * largest_affordable(n, solver)
+    )
     picked, info = [], dict(degree=[], q_norm=[], n_terms=[], errors=[], n_candidates=[])
     trace0 = None
     for j in range(m):

@@ -8,17 +8,62 @@ in design form (:func:`loo_nested`), or in Gram form a block of rows at a time
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import scipy.linalg as sla
+from scipy.linalg.blas import dtrmm
 from scipy.linalg.lapack import dpotrf
 
 from .compression import row_blocks
 
-__all__ = ["CHOLESKY_RTOL", "NestedLooRows", "cholesky_prefix", "loo_nested", "loo_nested_rows"]
+__all__ = [
+    "CHOLESKY_RTOL",
+    "NestedLooRows",
+    "cholesky_prefix",
+    "loo_nested",
+    "loo_nested_rows",
+    "nested_loo_rows",
+]
 
 # Gram path: a selected column whose Cholesky pivot falls below this share of its norm is
 # numerically dependent on the earlier ones (the Gram squares the conditioning).
 CHOLESKY_RTOL = 1e-6
+
+
+@numba.njit(cache=True, fastmath={"reassoc"})  # the sums over rows in SIMD lanes
+def nested_loo_rows(QT, z, y, fitted, h, sums):
+    """Add the squared LOO residuals of nested fits, over a block of rows, to ``sums``.
+
+    ``QT`` (m, b) holds the next m columns of :math:`Q = X R^{-1}` at b rows (one column per
+    row of QT), ``z`` their m coefficients :math:`Q^T y`, ``fitted`` and ``h`` the fitted
+    values and hat diagonals of the b rows from the earlier columns (updated in place to
+    include these). For column k the fit's residual :math:`r = y - f^{(k)}` and hat value
+    :math:`h^{(k)}` continue cumulative sums; ``sums[k] += sum_i (r_i / (1 - h_i))^2``, or
+    inf where :math:`1 - h_i \\le 10^{-10}`. One pass over QT instead of a dozen array
+    passes; the sum over the rows may be reassociated (vectorised: three times faster),
+    which changes the sums by rounding only (a few 1e-15 relative); infinities and NaNs
+    propagate as in IEEE arithmetic.
+    """
+    m, b = QT.shape
+    cf = np.zeros(b)
+    ch = np.zeros(b)
+    for k in range(m):
+        zk = z[k]
+        acc = 0.0
+        for i in range(b):
+            q = QT[k, i]
+            cf[i] += q * zk
+            ch[i] += q * q
+            one_h = 1.0 - (ch[i] + h[i])
+            if one_h <= 1e-10:
+                acc += np.inf
+            else:
+                e = (y[i] - (cf[i] + fitted[i])) / one_h
+                acc += e * e
+        sums[k] += acc
+    for i in range(b):
+        fitted[i] += cf[i]
+        h[i] += ch[i]
 
 
 def loo_nested(Q, R, y):
@@ -118,6 +163,7 @@ class NestedLooRows:
 
     def __init__(self, design, y, G, b):
         self.design, self.y, self.G, self.b = design, y, G, b
+        self.columns = design.T  # C-ordered (no copy) for the column-major design
         n = len(y)
         self.h = np.zeros(n)
         self.fitted = np.zeros(n)
@@ -136,27 +182,14 @@ class NestedLooRows:
             W = Rinv[:, k0:]
             new = np.zeros(s - k0)
             for a, b in row_blocks(n, 4 * s):
-                X = self.design[a:b][:, sel]
+                # the block's rows of the selected columns, one column per row (C order):
+                # the nested sums then run along contiguous rows
+                XT = self.columns[sel, a:b]
                 if k0:
-                    Q = X @ W
-                else:  # all columns: the triangular solve, half the products
-                    Q = sla.solve_triangular(R, X.T, trans="T", check_finite=False).T
-                # in place: r = y - fitted and 1 - h of the nested fits, then (r / (1 - h))^2
-                r = Q * z[None, k0:]
-                np.cumsum(r, axis=1, out=r)
-                r += self.fitted[a:b, None]
-                self.fitted[a:b] = r[:, -1]
-                np.subtract(y[a:b, None], r, out=r)
-                np.multiply(Q, Q, out=Q)
-                np.cumsum(Q, axis=1, out=Q)
-                Q += self.h[a:b, None]
-                self.h[a:b] = Q[:, -1]
-                np.subtract(1.0, Q, out=Q)
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    np.divide(r, Q, out=r)
-                r[Q <= 1e-10] = np.inf
-                np.multiply(r, r, out=r)
-                new += np.sum(r, axis=0)
+                    QT = W.T @ XT
+                else:  # all columns: Q = X R^{-1} by a triangular product, half the flops
+                    QT = dtrmm(1.0, Rinv, XT.T, side=1, overwrite_b=1).T
+                nested_loo_rows(QT, z[k0:], y[a:b], self.fitted[a:b], self.h[a:b], new)
             self.sum_e2 = np.concatenate([self.sum_e2, new])
         var = np.var(y) if np.var(y) > 0 else 1.0
         loo = self.sum_e2[:s] / n / var
