@@ -297,6 +297,8 @@ def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options, check=No
     hist_eps, hist_loss, failures = [], [], []
     cache = {}
     counts = {"nfev": 0, "njev": 0}
+    # model evaluations one lazy Jacobian costs (its stencil; counted into nfev)
+    jacobian_cost = getattr(residual, "jacobian_evaluations", 0)
 
     def evaluate(x, with_jacobian=False):
         key = np.asarray(x, dtype=float).tobytes()
@@ -310,6 +312,7 @@ def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options, check=No
                 cache[key] = None
         ev = cache[key]
         if with_jacobian and ev is not None and callable(ev[1]):
+            counts["nfev"] += jacobian_cost
             try:  # a lazy Jacobian (differenced by the problem): only where asked for
                 ev[1] = ev[1]()
             except ConvergenceError as e:
@@ -391,12 +394,14 @@ def _counted(check, counts, known=None):
     """
     jacobian_at = getattr(check, "jacobian_at", None)
     key = None if known is None or jacobian_at is None else known[0].tobytes()
+    cost = getattr(check, "jacobian_evaluations", 0)  # the Jacobian's model evaluations
 
     def judge(eps):
         eps = np.array(eps, dtype=float)
         if key is not None and eps.tobytes() == key:
+            counts["nfev"] += cost
             return known[1], jacobian_at(eps, known[2]), known[2]
-        counts["nfev"] += 1
+        counts["nfev"] += 1 + cost
         r, J, payload = check(eps)
         return r, (J() if callable(J) else J), payload
 
@@ -461,6 +466,8 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     eps0 = np.array(eps0, dtype=float)
     hist_eps, hist_loss, failures = [], [], []
     counts = {"nfev": 0}
+    # model evaluations one lazy Jacobian costs (its stencil; counted into nfev)
+    jacobian_cost = getattr(residual, "jacobian_evaluations", 0)
     # the last point evaluated (MINPACK asks again for the one it just had, e.g. the
     # Jacobian's base): plain closure cells, the cheapest state Python has per call
     last_key, last_ev = None, None
@@ -555,6 +562,7 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
         if ev is None:  # not reached: MINPACK asks for J only at accepted points
             return np.zeros((m, x.size))
         if callable(ev[1]):
+            counts["nfev"] += jacobian_cost
             try:  # a lazy Jacobian (differenced by the problem): only where asked for
                 ev[1] = ev[1]()
             except ConvergenceError as e:
@@ -597,13 +605,14 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
         failures,
         exhausted=ier == 5,
         claimed=ier in (1, 2, 3, 4),
-    )  # fmt: skip (the path's arrays are made once, at the end)
+    )  # fmt: skip
 
     def cached(e):
         ev = evaluate(np.array(e, dtype=float))
         if ev is None:
             raise ConvergenceError(failures[-1])
         if callable(ev[1]):
+            counts["nfev"] += jacobian_cost
             ev[1] = ev[1]()
         return ev
 

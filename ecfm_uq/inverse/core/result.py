@@ -269,7 +269,11 @@ class InverseResult:
     nit : int
         Optimizer iterations (epochs for Adam).
     nfev, njev : int
-        Objective and gradient (or Jacobian) evaluations.
+        Objective and gradient (or Jacobian) evaluations. For a
+        :class:`~ecfm_uq.inverse.problems.model.ModelProblem`, ``nfev`` is every model
+        evaluation, those a Jacobian is differenced from (the status test's too) included
+        (a given ``jac`` is not a model evaluation; the one-time check of complex steps
+        aside), and ``njev`` the optimizer's Jacobians.
     optimality : float or None
         The measured first-order optimality at ``eps`` (unit-free; see
         :mod:`ecfm_uq.inverse.core.convergence`), when measured.

@@ -279,7 +279,9 @@ class ModelProblem(InverseProblem):
         Jacobian as a callable (computed when asked for) and the predictions.
 
         The function's ``jacobian_at(eps, y)`` is the Jacobian alone, at a point whose
-        predictions ``y`` are known (the status test at a driver's last point).
+        predictions ``y`` are known (the status test at a driver's last point); its
+        ``jacobian_evaluations`` the model evaluations one Jacobian costs (the stencil's
+        points; none for a given ``jac``), which the drivers count into ``nfev``.
 
         ``accurate``: one-sided differences (``jac="2-point"``) are replaced by central
         ones (error :math:`O(\\varepsilon^{2/3})` instead of :math:`O(\\varepsilon^{1/2})`
@@ -356,6 +358,11 @@ class ModelProblem(InverseProblem):
 
         residual.jacobian_at = jacobian_at
         residual.plain = plain
+        mode = method or self.jac
+        p = int(np.size(typical)) if typical is not None else 0
+        residual.jacobian_evaluations = (
+            0 if callable(mode) else {"2-point": p, "3-point": 2 * p, "5-point": 4 * p}.get(mode, p)
+        )
         return residual
 
     def check_derivatives(self, eps, *, rtol=1e-4):

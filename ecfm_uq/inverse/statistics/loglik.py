@@ -146,6 +146,8 @@ def remember_last_point(residual):
             last.update(key=key, value=(r, jacobian, payload))
         return last["value"]
 
+    # what one Jacobian costs in model evaluations (counted by the drivers), as told
+    remembered.jacobian_evaluations = getattr(residual, "jacobian_evaluations", 0)
     return remembered
 
 
