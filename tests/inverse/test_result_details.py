@@ -100,6 +100,11 @@ def _model():
     return ModelProblem(lambda e: e[0] + e[1] * x, y)
 
 
+def _steady_case():
+    """The heat rod's steady problem, its start and sigma: one case of every steady row."""
+    return SteadyProblem(HEAT, M_OBS, _steady_data()), [1.0, 1.0], {"sigma": SIGMA}
+
+
 #: one small fit of each FITTERS row: (problem, eps0, keywords) -> its record's type
 CASES = {
     ("model", "standard"): (lambda: (_model(), [0.5, 0.5], {"sigma": 0.01}), ModelDetails),
@@ -112,22 +117,10 @@ CASES = {
         lambda: (_ode()[0], np.array(LV_TRUTH) * 1.02, {"sigma": _ode()[1]}),
         OdeRandomDetails,
     ),
-    ("steady", "standard"): (
-        lambda: (SteadyProblem(HEAT, M_OBS, _steady_data()), [1.0, 1.0], {"sigma": SIGMA}),
-        Details,
-    ),
-    ("steady", "ecfm"): (
-        lambda: (SteadyProblem(HEAT, M_OBS, _steady_data()), [1.0, 1.0], {"sigma": SIGMA}),
-        Details,
-    ),
-    ("steady", "ecfm-random"): (
-        lambda: (SteadyProblem(HEAT, M_OBS, _steady_data()), [1.0, 1.0], {"sigma": SIGMA}),
-        RandomForceDetails,
-    ),
-    ("steady", "noisy-ecfm"): (
-        lambda: (SteadyProblem(HEAT, M_OBS, _steady_data()), [1.0, 1.0], {"sigma": SIGMA}),
-        AllAtOnceDetails,
-    ),
+    ("steady", "standard"): (_steady_case, Details),
+    ("steady", "ecfm"): (_steady_case, Details),
+    ("steady", "ecfm-random"): (_steady_case, RandomForceDetails),
+    ("steady", "noisy-ecfm"): (_steady_case, AllAtOnceDetails),
     ("dynamic", "standard"): (lambda: (_dynamic(), [1.6, 0.8], {"sigma": 1e-3}), DynamicDetails),
     ("dynamic", "ecfm"): (lambda: (_dynamic(), [1.6, 0.8], {"sigma": 1e-3}), DynamicDetails),
     ("replicated", "standard"): (

@@ -90,8 +90,8 @@ def adam(
         If the objective already fails at ``x0`` (there is no iterate to return).
     """
     out = run_adam(
-        fun_and_grad, x0, lr, epochs, betas, eps_hat, label=formulation, callback=callback,
-        gtol=gtol,
+        fun_and_grad, x0, lr=lr, epochs=epochs, betas=betas, eps_hat=eps_hat,
+        label=formulation, callback=callback, gtol=gtol,
     )  # fmt: skip
     return InverseResult(
         eps=out.x,
@@ -110,18 +110,8 @@ def adam(
     )
 
 
-def run_adam(
-    fun_and_grad,
-    x0,
-    lr=1e-2,
-    epochs=250,
-    betas=(0.9, 0.999),
-    eps_hat=1e-8,
-    *,
-    label="adam",
-    callback=None,
-    gtol=1e-10,
-):
+def run_adam(fun_and_grad, x0, *, lr=1e-2, epochs=250, betas=(0.9, 0.999), eps_hat=1e-8,
+             label="adam", callback=None, gtol=1e-10):  # fmt: skip
     """Adam's iterations (the arguments of :func:`adam`; ``label`` names the objective in
     the error raised at ``x0``) and what is measured at the final iterate, as a driver
     reports it: no status.
@@ -135,8 +125,8 @@ def run_adam(
         (:func:`~ecfm_uq.inverse.core.convergence.minimize_optimality`; ``None`` after a
         failed evaluation), ``exhausted`` always (the epochs are a budget),
         ``final_error`` the failed evaluation (the histories stop at the last successful
-        iterate); ``payload`` a :class:`~.details.DynamicDetails` ``(grad, grad_history)`` (the final gradient and every
-        gradient: :func:`adam`'s ``extra``).
+        iterate); ``payload`` a :class:`~.details.DynamicDetails` ``(grad,
+        grad_history)`` (the final gradient and every gradient: :func:`adam`'s ``extra``).
 
     Raises
     ------
