@@ -143,14 +143,20 @@ def test_every_step_is_the_default_problem_bit_for_bit():
         assert z0 == z1 and np.array_equal(g0, g1) and np.array_equal(t0.lam, t1.lam)
 
 
-def test_burgers_with_data_every_fifth_step():
-    model = BurgersModel(n_modes=12, n_steps=20, T=1.0, newton_tol=1e-12)
-    steps = np.arange(5, 21, 5)
+def _at_steps(model, steps):
+    """The model's true data at the given steps (read at their times) and its problem."""
     V = model.true_data(np.array([1.75, 1.0]))[steps]
     prob = DynamicInverseProblem(
         model.system, model.Theta0, model.dt, model.n_steps, model.M_obs, V,
         t=model.dt * steps, solve_tol=1e-12,
     )  # fmt: skip
+    return prob, V
+
+
+def test_burgers_with_data_every_fifth_step():
+    model = BurgersModel(n_modes=12, n_steps=20, T=1.0, newton_tol=1e-12)
+    steps = np.arange(5, 21, 5)
+    prob, V = _at_steps(model, steps)
     x = np.array([1.6, 0.8])
     z, g, traj = prob.ecfm_objective(x)
     assert np.all(np.isfinite(traj.lam)) and np.all(np.isfinite(g)) and z > 0
@@ -210,11 +216,7 @@ def test_stochastic_system_forces_act_on_the_mean():
         n_modes=8, n_steps=10, T=0.5, viscosity_chaos=ChaosBasis(2), viscosity_spread=0.4
     )
     steps = np.arange(2, 11, 2)
-    V = model.true_data(np.array([1.75, 1.0]))[steps]
-    prob = DynamicInverseProblem(
-        model.system, model.Theta0, model.dt, model.n_steps, model.M_obs, V,
-        t=model.dt * steps, solve_tol=1e-12,
-    )  # fmt: skip
+    prob, V = _at_steps(model, steps)
     x = np.array([1.6, 0.8])
     z, g, traj = prob.ecfm_objective(x)
     mean = traj.Theta[steps] @ model.system.E1

@@ -43,7 +43,7 @@ class OdeEcfmFitter(Fitter):
     on a basis, ``options["force_basis"]``); :func:`~.ode_forces.fit_ode_ecfm` returns
     its :class:`Outcome`."""
 
-    kind, formulation, default_method, whitens = "ode", "ecfm", "least-squares", False
+    kind, formulation, default_method = "ode", "ecfm", "least-squares"
 
     def run(self, problem, eps0, settings):
         return fit_ode_ecfm(problem, eps0, settings)
@@ -53,7 +53,7 @@ class OdeRandomFitter(Fitter):
     """``OdeProblem``, ``"ecfm-random"``: random forces, their variance against sigma
     (:func:`~.ode_random.fit_ode_random` returns its :class:`Outcome`)."""
 
-    kind, formulation, default_method, whitens = "ode", "ecfm-random", "least-squares", False
+    kind, formulation, default_method = "ode", "ecfm-random", "least-squares"
 
     def run(self, problem, eps0, settings):
         return fit_ode_random(problem, eps0, settings)

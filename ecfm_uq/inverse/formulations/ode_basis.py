@@ -47,9 +47,10 @@ from ..problems.ode import solve_with_sensitivities
 from ..statistics.loglik import no_likelihood, remember_last_point
 from ..statistics.verdict import check_bounds, no_test
 
-__all__ = ["BasisForces", "fit_ode_basis"]
+__all__ = ["MAX_NEWTON", "BasisForces", "fit_forces", "fit_ode_basis"]
 
-#: Newton iterations on the coefficients before the match is declared failed
+#: Newton iterations before an exact match is declared failed (per data interval for
+#: constant forces, on all the coefficients for a basis)
 MAX_NEWTON = 25
 
 
@@ -182,13 +183,24 @@ class BasisForces:
         return {"lam": L, "r": self.root @ lam, "J": self.root @ dlam, "means": self.means @ L}
 
 
-def fit_ode_basis(problem, eps0, forced, force_basis, settings, options):
-    """The ECFM fit of an :class:`OdeProblem` with ``options["force_basis"]`` a linear or
-    RBF basis (:func:`~.ode_forces.fit_ode_ecfm` dispatches here): the least-squares fit
-    of the residual :math:`R\\lambda(\\epsilon)`; the forces' interval means reported, the
-    uncertainty and verdict not computed (module notes)."""
-    forces = BasisForces(problem, forced, force_basis)
-    bounds = check_bounds(settings.bounds, eps0.size)
+def fit_forces(problem, forces, eps0, settings, options):
+    """The ECFM's least-squares fit of the residual of ``forces`` (an exact-match force
+    model with ``solve(eps) -> {"r", "J", ...}``: :class:`BasisForces`,
+    :class:`~.ode_forces.ExactForces`) by the trust region, and the
+    :class:`~ecfm_uq.inverse.core.fitter.Outcome` fields every such fit shares.
+
+    Returns
+    -------
+    out : drivers' Outcome
+    common : dict
+    """
+    p = eps0.size
+    if problem.n_data < p:
+        raise ValueError(
+            f"`data` has {problem.n_data} readings for {p} parameters: fewer data than "
+            "parameters cannot determine eps"
+        )
+    bounds = check_bounds(settings.bounds, p)
 
     def residual(eps):
         out = forces.solve(eps)
@@ -200,14 +212,24 @@ def fit_ode_basis(problem, eps0, forced, force_basis, settings, options):
         out = least_squares_scaled(residual, eps0, bounds, settings.tol, maxiter, options)
     except ConvergenceError as e:
         raise ConvergenceError(f"fit: {e}") from e
+    common = dict(label="ecfm", method="least-squares", names=problem.names,
+                  likelihood=no_likelihood("ecfm"), nit=out.nit, nfev=out.nfev,
+                  eps_history=out.eps_history, loss_history=out.loss_history,
+                  opt=out.opt, exhausted=out.exhausted, failure=out.final_error,
+                  message=out.message)  # fmt: skip
+    return out, common
+
+
+def fit_ode_basis(problem, eps0, forced, force_basis, settings, options):
+    """The ECFM fit of an :class:`OdeProblem` with ``options["force_basis"]`` a linear or
+    RBF basis (:func:`~.ode_forces.fit_ode_ecfm` dispatches here): the least-squares fit
+    of the residual :math:`R\\lambda(\\epsilon)`; the forces' interval means reported, the
+    uncertainty and verdict not computed (module notes)."""
+    forces = BasisForces(problem, forced, force_basis)
+    out, common = fit_forces(problem, forces, eps0, settings, options)
     why = f"not computed for force_basis={force_basis!r} (built for 'constant')"
-    common = dict(
-        label="ecfm", method="least-squares", names=problem.names,
-        likelihood=no_likelihood("ecfm"), nit=out.nit, nfev=out.nfev,
-        eps_history=out.eps_history, loss_history=out.loss_history,
-        uncertainty=Uncertainty.failed(f"uncertainty {why}"), verdict=no_test(f"verdict {why}"),
-        opt=out.opt, exhausted=out.exhausted, failure=out.final_error, message=out.message,
-    )  # fmt: skip
+    common.update(uncertainty=Uncertainty.failed(f"uncertainty {why}"),
+                  verdict=no_test(f"verdict {why}"))  # fmt: skip
     if out.payload is None:
         return Outcome(eps=out.x, loss=np.inf, extra=OdeEcfmDetails(n_missing=problem.n_missing),
                        **common)  # fmt: skip

@@ -63,22 +63,17 @@ from scipy import special, stats
 from ..._validation import as_finite_array
 from ...errors import ConvergenceError
 from ..core.details import OdeEcfmDetails
-from ..core.drivers import least_squares_scaled
 from ..core.fitter import Outcome
 from ..core.result import Uncertainty
 from ..core.series import ForceSeries, OdeTrajectory
 from ..problems.force_bases import check_force_basis
 from ..problems.noise_model import NoiseModel
 from ..problems.ode import solve_with_sensitivities
-from ..statistics.loglik import no_likelihood, remember_last_point
 from ..statistics.uncertainty import estimate_uncertainty, least_squares_jacobian
-from ..statistics.verdict import check_bounds, decide, no_test
-from .ode_basis import fit_ode_basis
+from ..statistics.verdict import decide, no_test
+from .ode_basis import MAX_NEWTON, fit_forces, fit_ode_basis
 
 __all__ = ["ExactForces", "fit_ode_ecfm"]
-
-#: Newton iterations per interval before the exact match is declared failed
-MAX_NEWTON = 25
 
 
 class ExactForces:
@@ -319,36 +314,9 @@ def fit_ode_ecfm(problem, eps0, s):
     kind = check_force_basis(basis)[0]
     eps0 = problem.check(as_finite_array("eps0", eps0, ndim=1))
     if kind != "constant":  # a basis coupling the intervals: all forces in one solve
-        if problem.n_data < eps0.size:
-            raise ValueError(
-                f"`data` has {problem.n_data} readings for {eps0.size} parameters: fewer "
-                "data than parameters cannot determine eps"
-            )
         return fit_ode_basis(problem, eps0, forced_components(problem), basis, s, options)
     forces = ExactForces(problem, forced_components(problem))
-    p = eps0.size
-    bounds = check_bounds(s.bounds, p)
-    if problem.n_data < p:
-        raise ValueError(
-            f"`data` has {problem.n_data} readings for {p} parameters: fewer data than "
-            "parameters cannot determine eps"
-        )
-
-    def residual(eps):
-        out = forces.solve(eps)
-        return out["r"], out["J"], out
-
-    residual = remember_last_point(residual)
-    maxiter = 2000 if s.maxiter is None else s.maxiter
-    try:
-        out = least_squares_scaled(residual, eps0, bounds, s.tol, maxiter, options)
-    except ConvergenceError as e:
-        raise ConvergenceError(f"fit: {e}") from e
-    common = dict(label="ecfm", method="least-squares", names=problem.names,
-                  likelihood=no_likelihood("ecfm"), nit=out.nit, nfev=out.nfev,
-                  eps_history=out.eps_history, loss_history=out.loss_history,
-                  opt=out.opt, exhausted=out.exhausted, failure=out.final_error,
-                  message=out.message)  # fmt: skip
+    out, common = fit_forces(problem, forces, eps0, s, options)
     if out.payload is None:
         return Outcome(eps=out.x, loss=np.inf, verdict=no_test(out.message),
                        extra=OdeEcfmDetails(n_missing=problem.n_missing), **common)  # fmt: skip

@@ -133,25 +133,12 @@ class ModelProblem(InverseProblem):
         except Exception as e:  # a user callback: report any failure with its call
             raise self._model_error(e, eps, first) from e
         if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == self.shape:
-            # the common output: one copy, one finiteness test
+            # the common output: one copy (a model may reuse its output array), one
+            # finiteness test by an inner product (all_finite's, without its dispatch)
             y = y.copy().ravel()
-            if all_finite(y):
-                return y
-        return self._checked(y, eps, first)
-
-    def _stencil_value(self, eps):
-        """:meth:`predict` for a point of a difference stencil (the same checks, the
-        finiteness test by one inner product; a copy: a model may reuse its output array,
-        and the stencil holds one point's values across the next call)."""
-        try:
-            y = self.model(eps)
-        except Exception as e:  # a user callback: report any failure with its call
-            raise self._model_error(e, eps, False) from e
-        if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == self.shape:
-            y = y.copy().reshape(-1)
             if math.isfinite(y.dot(self._ones)):
                 return y
-        return self._checked(y, eps, False)
+        return self._checked(y, eps, first)
 
     def _model_error(self, e, eps, first):
         """The error to raise for ``model(eps)`` raising ``e`` (see :meth:`predict`)."""
@@ -204,8 +191,7 @@ class ModelProblem(InverseProblem):
                 self._check_analytic(eps, J, typical)
             return J
         return fd_jacobian(
-            self._stencil_value if self.executor is None else self.predict, eps,
-            method=method or self.jac, typical=typical, f0=y,
+            self.predict, eps, method=method or self.jac, typical=typical, f0=y,
             columns=columns,
             map_points=None if self.executor is None else self._map,
         )  # fmt: skip
@@ -300,29 +286,35 @@ class ModelProblem(InverseProblem):
         ones = self._ones
         flat = len(shape) == 1
 
-        def residual(eps):
-            nonlocal first
-            # the first call (at eps0) raises the user's errors: nothing was computed yet
-            at_start, first = first, False
-            # predict(eps) inlined: per call, one copy and one inner product for the common
-            # output (a float64 array of the data's shape), predict's checks otherwise
+        def values(eps, at_start):
+            """``(r, y, fresh)``: the whitened residual and the predictions, ``fresh``
+            whether ``y`` is a new array (else the model's own, which a caller copies
+            before keeping it); predict's checks, the finiteness test by one inner
+            product (r is finite iff y is: v is)."""
             try:
                 y = model(eps)
             except Exception as e:  # a user callback: report any failure with its call
                 raise self._model_error(e, eps, at_start) from e
             if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == shape:
-                y = y.copy().ravel()
+                fresh = False
+                if not flat:
+                    y = y.ravel()
                 r = y - v
-                # r finite iff y is (v is): its sum says so (one inner product, as
-                # all_finite; not the sum of squares, which overflows, with a warning,
-                # for finite values), else predict's test decides (a bad value raises)
-                if not math.isfinite(r.dot(ones)):
+                if not math.isfinite(r.dot(ones)):  # a bad value raises
                     checked(y, eps, at_start)
             else:
+                fresh = True
                 y = checked(y, eps, at_start)
                 r = y - v
-            if whiten is not None:
-                r = whiten(r)
+            return (r if whiten is None else whiten(r)), y, fresh
+
+        def residual(eps):
+            nonlocal first
+            # the first call (at eps0) raises the user's errors: nothing was computed yet
+            at_start, first = first, False
+            r, y, fresh = values(eps, at_start)
+            if not fresh:
+                y = y.copy()
 
             def J():
                 return noise.whiten(self.jacobian(eps, y, typical=typical, method=method))
@@ -335,26 +327,11 @@ class ModelProblem(InverseProblem):
             return noise.whiten(self.jacobian(eps, y, typical=typical, method=method))
 
         def plain(eps):
-            """``(r, r @ r, y)``: the whitened residual, its sum of squares and the
-            predictions (the model's own array, not copied: the caller copies what it
-            keeps), at a point after the first (MINPACK's differencing asks for nothing
-            more): no Jacobian; the sum doubles as the finiteness test."""
-            try:
-                y = model(eps)
-            except Exception as e:  # a user callback: report any failure with its call
-                raise self._model_error(e, eps, False) from e
-            if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == shape:
-                if not flat:
-                    y = y.ravel()
-            else:
-                y = checked(y, eps, False)
-            r = y - v  # a fresh array
-            if whiten is not None:
-                r = whiten(r)
-            ss = r.dot(r)
-            if not math.isfinite(ss):  # a bad value raises; finite ones whose square
-                checked(y, eps, False)  # overflows pass (their loss is inf)
-            return r, ss, y
+            """``(r, None, y)`` at a point after the first, for MINPACK's differencing:
+            no Jacobian closure, ``y`` the model's own array when it is one (the caller
+            copies what it keeps)."""
+            r, y, _ = values(eps, False)
+            return r, None, y
 
         residual.jacobian_at = jacobian_at
         residual.plain = plain
@@ -408,8 +385,6 @@ class ModelFitter(Fitter):
     (:func:`fit_model_problem`)."""
 
     kind, formulation, default_method = "model", "standard", "least-squares"
-    #: ``fit`` does not whiten for it: a ModelProblem takes its noise model itself
-    whitens = False
 
     def run(self, problem, eps0, settings):
         return fit_model_problem(problem, eps0, settings)

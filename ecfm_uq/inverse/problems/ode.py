@@ -673,8 +673,6 @@ class OdeStandardFitter(Fitter):
     (:func:`fit_ode_standard`)."""
 
     kind, formulation, default_method = "ode", "standard", "least-squares"
-    #: ``fit`` does not whiten for it: an OdeProblem takes its noise model itself
-    whitens = False
 
     def run(self, problem, eps0, settings):
         return fit_ode_standard(problem, eps0, settings)
