@@ -38,3 +38,31 @@ def test_a_given_jacobian_is_not_a_model_evaluation():
 
     res = fit(ModelProblem(model, Y, jac=jac), [1.0, 1.0])
     assert res.success and res.nfev == len(calls)
+
+
+GROWTH_X = np.linspace(0.0, 100.0, 30)
+GROWTH_Y = 2.0 * np.exp(0.05 * GROWTH_X) + np.sin(GROWTH_X)
+
+
+def growth(e):
+    return e[0] * np.exp(e[1] * GROWTH_X)
+
+
+@pytest.mark.parametrize("jac", ["2-point", "cs"])
+@pytest.mark.parametrize("method", ["lm", "trf"])
+def test_a_start_where_the_model_blows_up_is_refused_by_name(jac, method):
+    """exp(500 ...) at the start: predictions ~1e217, a residual whose square overflows.
+    A ValueError naming eps0 before any optimizer runs (it was a LinAlgError or an
+    IndexError from the status test's SVD, with overflow warnings)."""
+    with pytest.raises(ValueError, match="`eps0`.*too large to be squared"):
+        fit(ModelProblem(growth, GROWTH_Y, jac=jac), [1.0, 5.0], method=method)
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+@pytest.mark.parametrize("jac", ["2-point", "cs"])
+def test_trials_that_overflow_are_failed_points_without_warnings(jac):
+    """From b = 3.5 (predictions ~1e152) the optimizer's trials overflow the sum of
+    squares: failed points, a status and a message, no warning and no exception."""
+    res = fit(ModelProblem(growth, GROWTH_Y, jac=jac), [1.0, 3.5])
+    assert res.status.name in ("CONVERGED", "STALLED", "MAX_ITERATIONS"), res.message
+    assert np.all(np.isfinite(res.eps))

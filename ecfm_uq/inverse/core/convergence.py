@@ -333,7 +333,11 @@ def scaled_svd(J):
     last_key, last_value = _last_svd[0]
     if key is not None and last_key == key:
         return last_value
-    norms = np.sqrt(np.add.reduce(J * J, axis=0))  # np.linalg.norm(J, axis=0), same bits
+    with np.errstate(over="ignore"):  # squares beyond 1e308: the scaled sums below
+        norms = np.sqrt(np.add.reduce(J * J, axis=0))  # np.linalg.norm(J, axis=0)'s bits
+    if not np.isfinite(norms).all() and all_finite(J):
+        big = np.abs(J).max(axis=0)
+        norms = big * np.sqrt(np.add.reduce((J / np.where(big > 0, big, 1.0)) ** 2, axis=0))
     if (norms > 0).all():
         U, sv, Vt = _thin_svd(J / norms)
     else:
@@ -585,7 +589,10 @@ def polish_least_squares(residual, eps, *, bounds=None, maxiter=20, tol=OFFSET_T
             break
         r, J = ev[0], ev[1]
         cost = float(r @ r)
-        A = J.T @ J
+        with np.errstate(over="ignore"):
+            A = J.T @ J
+        if not np.isfinite(A).all():  # a Jacobian too large to square: no LM step
+            break
         d = np.sqrt(np.maximum(np.diag(A), 1e-300 * max(np.diag(A).max(), 1e-300)))
         improved = False
         for _ in range(12):

@@ -12,6 +12,7 @@ the status from them). An inner solve that fails at a trial point
 
 from __future__ import annotations
 
+import math
 import struct
 import warnings
 from dataclasses import dataclass, field
@@ -250,6 +251,21 @@ def verify_least_squares(out, residual, bounds, exhausted, *, polish, tol=OFFSET
     return out
 
 
+def _squarable_start(r0, eps0):
+    """Refuse a start whose residual cannot be squared in floating point (a model whose
+    predictions there are ~1e154 times the data's or more: a start where the solution
+    blows up), naming ``eps0``; the drivers' later points of that kind are failed
+    points, their overflow unwarned (``np.errstate``)."""
+    with np.errstate(over="ignore"):
+        ss = float(r0 @ r0)
+    if not math.isfinite(ss):
+        raise ValueError(
+            f"`eps0` = {np.asarray(eps0).tolist()}: the residual there is too large to be "
+            f"squared (largest |r| {float(np.abs(r0).max()):.1e}): the model blows up at "
+            "this start; start where its predictions are of the data's size"
+        )
+
+
 def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options, check=None):
     """``scipy.optimize.least_squares`` (trust-region reflective, ``x_scale="jac"``, the
     exact Jacobian) on the residuals divided by their norm at ``eps0``.
@@ -324,6 +340,7 @@ def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options, check=No
     if first is None:
         raise ConvergenceError(f"the model cannot be solved at eps0={eps0}: {failures[0]}")
     r0 = np.asarray(first[0], dtype=float)
+    _squarable_start(r0, eps0)
     scale = float(np.linalg.norm(r0)) or 1.0
     hist_eps.append(np.array(eps0, dtype=float))
     hist_loss.append(0.5 * float(r0 @ r0))
@@ -333,6 +350,9 @@ def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options, check=No
         if ev is None:
             return np.full(r0.size, np.inf)
         z = 0.5 * float(ev[0] @ ev[0])
+        if not math.isfinite(z):  # squares that overflow: a failed point
+            failures.append(f"the sum of squares overflows at eps={np.asarray(x).tolist()}")
+            return np.full(r0.size, np.inf)
         if not hist_loss or z < hist_loss[-1]:
             hist_eps.append(np.array(x, dtype=float))
             hist_loss.append(z)
@@ -348,7 +368,8 @@ def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options, check=No
     lb, ub = bounds_arrays(bounds, len(eps0))
     kw = {"method": "trf", "x_scale": "jac", "ftol": 1e-15, "xtol": 1e-15, "gtol": 1e-15}
     kw.update(options)
-    res = sopt.least_squares(fun, eps0, jac=jac, bounds=(lb, ub), max_nfev=maxiter, **kw)
+    with np.errstate(over="ignore"):  # an overflowing trial is a failed point (fun)
+        res = sopt.least_squares(fun, eps0, jac=jac, bounds=(lb, ub), max_nfev=maxiter, **kw)
     x = np.asarray(res.x)
     ev = evaluate(x, with_jacobian=True)
     nit = int(res.njev or 0)
@@ -489,6 +510,7 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     if first is None:
         raise ConvergenceError(f"the model cannot be solved at eps0={eps0}: {failures[0]}")
     m = np.size(first[0])
+    _squarable_start(np.asarray(first[0], dtype=float), eps0)
     p = eps0.size
     if m < p:
         raise ValueError(f"the residual has {m} entries for {p} parameters: at least {p} needed")
@@ -549,6 +571,9 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
         if r is None:
             return rejected()
         z = 0.5 * float(r.dot(r) if ss is None else ss)
+        if not math.isfinite(z):  # squares that overflow: a failed point, rejected
+            failures.append(f"the sum of squares overflows at eps={x.tolist()}")
+            return rejected()
         if z < best_loss:
             # the best point's evaluation kept (its predictions copied: the model's array)
             best_ev = [r, None, y.copy()] if ev is None else ev
@@ -576,7 +601,9 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     kw.update(options)
     # the budget counts residuals, not the p more of each differenced Jacobian
     maxfev = maxiter * (p + 1) if differences else maxiter
-    x, ier, njev = minpack.lm(fun, eps0, None if differences else jac, maxfev=maxfev, **kw)
+    with np.errstate(over="ignore"):  # an overflowing trial is a failed point (fun)
+        x, ier, njev = minpack.lm(fun, eps0, None if differences else jac, maxfev=maxfev,
+                                  **kw)  # fmt: skip
     nit = fd_njev if differences else njev
     msg = f"Levenberg-Marquardt (MINPACK): {minpack.minpack_message(ier, maxfev=maxfev, **kw)}"
     if failures:
