@@ -335,7 +335,7 @@ def scaled_svd(J):
         return last_value
     with np.errstate(over="ignore"):  # squares beyond 1e308: the scaled sums below
         norms = np.sqrt(np.add.reduce(J * J, axis=0))  # np.linalg.norm(J, axis=0)'s bits
-    if not np.isfinite(norms).all() and all_finite(J):
+    if not all_finite(norms) and all_finite(J):
         big = np.abs(J).max(axis=0)
         norms = big * np.sqrt(np.add.reduce((J / np.where(big > 0, big, 1.0)) ** 2, axis=0))
     if (norms > 0).all():

@@ -251,19 +251,16 @@ def verify_least_squares(out, residual, bounds, exhausted, *, polish, tol=OFFSET
     return out
 
 
-def _squarable_start(r0, eps0):
-    """Refuse a start whose residual cannot be squared in floating point (a model whose
-    predictions there are ~1e154 times the data's or more: a start where the solution
-    blows up), naming ``eps0``; the drivers' later points of that kind are failed
-    points, their overflow unwarned (``np.errstate``)."""
-    with np.errstate(over="ignore"):
-        ss = float(r0 @ r0)
-    if not math.isfinite(ss):
-        raise ValueError(
-            f"`eps0` = {np.asarray(eps0).tolist()}: the residual there is too large to be "
-            f"squared (largest |r| {float(np.abs(r0).max()):.1e}): the model blows up at "
-            "this start; start where its predictions are of the data's size"
-        )
+def _blown_up(r0, eps0):
+    """The error for a start whose residual cannot be squared in floating point (a model
+    whose predictions there are ~1e154 times the data's or more: a start where the
+    solution blows up), naming ``eps0``; the drivers' later points of that kind are
+    failed points, their overflow unwarned (``np.errstate``)."""
+    return ValueError(
+        f"`eps0` = {np.asarray(eps0).tolist()}: the residual there is too large to be "
+        f"squared (largest |r| {float(np.abs(r0).max()):.1e}): the model blows up at this "
+        "start; start where its predictions are of the data's size"
+    )
 
 
 def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options, check=None):
@@ -340,7 +337,9 @@ def least_squares_scaled(residual, eps0, bounds, tol, maxiter, options, check=No
     if first is None:
         raise ConvergenceError(f"the model cannot be solved at eps0={eps0}: {failures[0]}")
     r0 = np.asarray(first[0], dtype=float)
-    _squarable_start(r0, eps0)
+    with np.errstate(over="ignore"):
+        if not math.isfinite(float(r0 @ r0)):
+            raise _blown_up(r0, eps0)
     scale = float(np.linalg.norm(r0)) or 1.0
     hist_eps.append(np.array(eps0, dtype=float))
     hist_loss.append(0.5 * float(r0 @ r0))
@@ -510,7 +509,6 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     if first is None:
         raise ConvergenceError(f"the model cannot be solved at eps0={eps0}: {failures[0]}")
     m = np.size(first[0])
-    _squarable_start(np.asarray(first[0], dtype=float), eps0)
     p = eps0.size
     if m < p:
         raise ValueError(f"the residual has {m} entries for {p} parameters: at least {p} needed")
@@ -532,8 +530,8 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     fd_base, fd_bytes, fd_j, fd_next, fd_njev = None, b"", 0, None, 0
 
     # the residual's values alone where MINPACK differences them (its `plain` when it has
-    # one: with the sum of squares and the uncopied payload, no Jacobian closure; a failed
-    # point raises ConvergenceError)
+    # one: (r, r @ r, payload, fresh), no Jacobian closure; a failed point raises
+    # ConvergenceError)
     values = getattr(residual, "plain", None) if differences else None
     first_key, nfev = eps0.tobytes(), 0
 
@@ -549,7 +547,7 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
         else:
             nfev += 1
             try:
-                r, ss, y = values(x.copy())
+                r, ss, y, _ = values(x.copy())
             except ConvergenceError as e:
                 failures.append(str(e))
                 r = None
@@ -572,6 +570,8 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
             return rejected()
         z = 0.5 * float(r.dot(r) if ss is None else ss)
         if not math.isfinite(z):  # squares that overflow: a failed point, rejected
+            if key == first_key:  # (MINPACK's first call: the start, refused by name)
+                raise _blown_up(r, eps0)
             failures.append(f"the sum of squares overflows at eps={x.tolist()}")
             return rejected()
         if z < best_loss:

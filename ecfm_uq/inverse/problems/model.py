@@ -286,11 +286,12 @@ class ModelProblem(InverseProblem):
         ones = self._ones
         flat = len(shape) == 1
 
-        def values(eps, at_start):
-            """``(r, y, fresh)``: the whitened residual and the predictions, ``fresh``
-            whether ``y`` is a new array (else the model's own, which a caller copies
-            before keeping it); predict's checks, the finiteness test by one inner
-            product (r is finite iff y is: v is)."""
+        def values(eps, at_start, square=False):
+            """``(r, ss, y, fresh)``: the whitened residual, its sum of squares when
+            ``square`` (else ``None``), the predictions and whether ``y`` is a new array
+            (else the model's own, which a caller copies before keeping it); predict's
+            checks, the finiteness test by one inner product (the sum of squares when
+            asked for: its overflow is then the caller's to silence)."""
             try:
                 y = model(eps)
             except Exception as e:  # a user callback: report any failure with its call
@@ -300,19 +301,24 @@ class ModelProblem(InverseProblem):
                 if not flat:
                     y = y.ravel()
                 r = y - v
-                if not math.isfinite(r.dot(ones)):  # a bad value raises
+                if whiten is not None:
+                    r = whiten(r)
+                ss = r.dot(r) if square else None
+                # r finite iff y is (v is): its sum (or squares) say so; a bad value raises
+                if not math.isfinite(r.dot(ones) if ss is None else ss):
                     checked(y, eps, at_start)
-            else:
-                fresh = True
-                y = checked(y, eps, at_start)
-                r = y - v
-            return (r if whiten is None else whiten(r)), y, fresh
+                return r, ss, y, fresh
+            y = checked(y, eps, at_start)
+            r = y - v
+            if whiten is not None:
+                r = whiten(r)
+            return r, (r.dot(r) if square else None), y, True
 
         def residual(eps):
             nonlocal first
             # the first call (at eps0) raises the user's errors: nothing was computed yet
             at_start, first = first, False
-            r, y, fresh = values(eps, at_start)
+            r, _, y, fresh = values(eps, at_start)
             if not fresh:
                 y = y.copy()
 
@@ -326,19 +332,14 @@ class ModelProblem(InverseProblem):
             are known (no model evaluation at ``eps`` itself)."""
             return noise.whiten(self.jacobian(eps, y, typical=typical, method=method))
 
-        def plain(eps):
-            """``(r, None, y)`` at a point after the first, for MINPACK's differencing:
-            no Jacobian closure, ``y`` the model's own array when it is one (the caller
-            copies what it keeps)."""
-            r, y, _ = values(eps, False)
-            return r, None, y
-
         residual.jacobian_at = jacobian_at
-        residual.plain = plain
+        # ``(r, r @ r, y, fresh)`` at a point after the first, for MINPACK's
+        # differencing: no Jacobian closure, ``y`` the model's own array unless ``fresh``
+        # (the caller copies what it keeps); the driver silences the squares' overflow
+        residual.plain = lambda eps: values(eps, False, True)
         mode = method or self.jac
-        p = int(np.size(typical)) if typical is not None else 0
         residual.jacobian_evaluations = (
-            0 if callable(mode) else {"2-point": p, "3-point": 2 * p, "5-point": 4 * p}.get(mode, p)
+            0 if callable(mode) or typical is None else _STENCIL_POINTS[mode] * len(typical)
         )
         return residual
 
@@ -370,6 +371,10 @@ class ModelProblem(InverseProblem):
                 f"{eps.tolist()}: check its sign and its column order"
             )
         return float(err[worst])
+
+
+#: model evaluations per parameter of a Jacobian by each difference mode
+_STENCIL_POINTS = {"2-point": 1, "3-point": 2, "5-point": 4, "cs": 1}
 
 
 def _stalled(out):
