@@ -426,6 +426,8 @@ def model_fit_fields(problem, eps0, s):
     p, n = eps0.size, problem.v.size
     bounds = check_bounds(s.bounds, p)
     options = check_least_squares_options(options, p)
+    if "ftol" not in s.options:
+        del options["ftol"]  # each driver's own round-off level (drivers.LM_FTOL for LM)
     if n < p:
         raise ValueError(
             f"`data` has {n} observations for {p} parameters: fewer data than parameters "
