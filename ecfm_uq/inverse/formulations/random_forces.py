@@ -163,6 +163,7 @@ class RandomForceModel:
         # estimate, the finite-difference stencils around it), and a point's value is a
         # deterministic function of eps (a0 is fixed by the first linearization)
         self._memo = OrderedDict()
+        self._last = None  # (eps bytes, solution, dTheta/deps, dTheta/dlam) of the last solve
 
     def linearize(self, eps, second=False):
         """:class:`Linearization` at ``eps`` (one solve and one multi-right-hand-side
@@ -179,6 +180,8 @@ class RandomForceModel:
         dA = dJ = None
         if second:
             dA, dJ = second_sensitivities(sysm, sol, dTh_e, dTh_l, self.M)
+        # the last solve: its second derivatives when asked for next (tau-hat > 0 there)
+        self._last = (np.asarray(eps, float).tobytes(), sol, dTh_e, dTh_l)
         AA = A @ A.T
         if self.a0 is None:
             self.a0 = float(np.sqrt(max(np.trace(AA) / AA.shape[0], 1e-300)))
@@ -240,13 +243,10 @@ class RandomForceModel:
         return s_hat, self.nll(lin, s_hat)
 
     def tau_strictly_zero(self, eps):
-        """Whether the REML estimate of tau is 0 at ``eps`` with a strict margin: the
-        restricted drop negative at every grid point :math:`s > 0` (what makes
-        :meth:`best_s` return 0) and its slope at :math:`s = 0`,
-        :math:`\\sum_k \\xi_k (q_k - 1)`, negative (the restricted nll increasing in
-        :math:`\\tau^2` at 0). Both are continuous in ``eps`` where :math:`J` keeps its
-        rank, so tau-hat is 0 in a neighbourhood. ``False`` where there are no error
-        contrasts a force moves (tau is not identified there)."""
+        """Whether tau-hat is 0 at ``eps`` with a strict margin: the restricted drop < 0 at
+        every grid point :math:`s > 0` (so :meth:`best_s` returns 0) and its slope at 0,
+        :math:`\\sum_k \\xi_k (q_k - 1)`, < 0; both continuous in ``eps`` while :math:`J`
+        keeps its rank, so tau-hat is 0 in a neighbourhood (``False`` without contrasts)."""
         lin = self._linearization(eps)
         if lin.xi.size == 0 or not np.any(lin.xi > 0):
             return False
@@ -284,15 +284,19 @@ class RandomForceModel:
         (:func:`~ecfm_uq.inverse.formulations.random_force_gradient.profiled_gradient`,
         one solve and two back-substitutions), by central differences only where the
         REML estimate is not differentiable (a rank-deficient :math:`J`)."""
-        lin = self._linearization(eps, second=True)
+        lin = self._linearization(eps)
         g, val = self._variances(lin)
         hit = self._memo.get(lin.eps.tobytes())
         if hit is not None and hit[0] is lin and hit[2] is not None:
             return val, hit[2].copy()  # a point seen before: its gradient remembered
-        s = None
+        s, m = None, lin.J.shape[1]
+        dA, dJ = np.zeros((*lin.A.shape, m)), np.zeros((*lin.J.shape, m))
+        if np.any(g):  # (with g = 0 the dA terms vanish: -J^T S^-1 r, the same bits)
+            lin = self._linearization(eps, second=True)
+            dA, dJ = lin.dA, lin.dJ
         if self.prior == "shared":
             s = float(g[0]) * self.a0**2 / self.sigma**2 if g.size else 0.0
-        grad = profiled_gradient(lin, lin.dA, lin.dJ, self.sigma, g, s, self.a0)
+        grad = profiled_gradient(lin, dA, dJ, self.sigma, g, s, self.a0)
         if grad is None:
             steps = 1e-6 * np.maximum(1.0, np.abs(lin.eps))
             grad = fd_gradient(lambda e: self.profiled(e)[0], lin.eps, steps)
@@ -303,7 +307,7 @@ class RandomForceModel:
 
     def _checked_gradient(self, eps):
         # the profiles' evaluation: refused where a parameter has no effect (profiled_nll)
-        self._refuse_dead(self._linearization(eps, second=True))
+        self._refuse_dead(self._linearization(eps))
         return self.profiled_gradient(eps)
 
     @staticmethod
@@ -332,7 +336,12 @@ class RandomForceModel:
         if hit is not None and (hit[0].dA is not None or not second):
             self._memo.move_to_end(key)
             return hit[0]
-        lin = self.linearize(eps, second)
+        if hit is not None and self._last is not None and self._last[0] == key:
+            _, sol, dTh_e, dTh_l = self._last  # the same solve: no new one
+            dA, dJ = second_sensitivities(self.system, sol, dTh_e, dTh_l, self.M)
+            lin = replace(hit[0], dA=dA, dJ=dJ)
+        else:
+            lin = self.linearize(eps, second)
         # (a point seen without its second derivatives keeps its variances: the same lin)
         self._memo[key] = [lin, None if hit is None else hit[1], None]
         self._memo.move_to_end(key)
@@ -455,10 +464,8 @@ class RandomForceModel:
 
 @functools.lru_cache(maxsize=8)
 def _null_contrasts(n_sim, K):
-    """The restricted test's simulated null contrasts: ``(n_sim, K)`` independent
-    chi2_1 draws from the fixed seed (read-only: shared by every test with ``K`` contrasts).
-    The same numbers as drawing them in chunks of 500 rows from one generator (the
-    chunks are consecutive stretches of one stream)."""
+    """The restricted test's null contrasts, ``(n_sim, K)`` chi2_1 draws from the fixed
+    seed (read-only, shared by every test with ``K`` contrasts)."""
     q = np.random.default_rng(_SIM_SEED).chisquare(1.0, size=(n_sim, K))
     q.flags.writeable = False
     return q
