@@ -1,6 +1,7 @@
 """The random-force ECFM's search at the cost of a standard fit (issue 37 item 5): the
 standard estimate kept where tau-hat is 0 with a margin, the scalar search of one free
-parameter, the Newton finish whose last Hessian is the delta method's, and the restricted
+parameter, BFGS from the Hessian at the standard estimate and the Newton finish whose
+last Hessian is the delta method's, and the restricted
 test's simulation -- each against an independent minimization of the profiled likelihood
 (scipy's bounded scalar minimizer, Nelder-Mead, a grid) or a direct simulation."""
 
@@ -78,13 +79,15 @@ def test_tau_positive_at_the_standard_estimate_is_not_the_fast_path():
     assert res.success, res.message
 
 
-def test_the_newton_finish_reaches_nelder_mead_and_its_hessian_is_the_delta_methods():
-    """tau > 0 (two parameters): the estimate against Nelder-Mead on the profiled
-    likelihood from a fresh model, and the standard errors against central differences
-    of the exact gradient (step 1e-3 standard errors) computed afresh."""
+def test_the_search_with_tau_positive_reaches_nelder_mead_and_the_delta_methods_hessian():
+    """tau > 0 at the standard estimate (two parameters): BFGS from the Hessian there,
+    the Newton finish; the estimate against Nelder-Mead on the profiled likelihood from a
+    fresh model, and the standard errors against central differences of the exact
+    gradient (step 1e-3 standard errors) computed afresh."""
     problem, truth, sigma = rod4(4)
     res = fit(problem, truth, formulation="ecfm-random", sigma=sigma)
     assert res.success and res.extra["tau"] > 0
+    assert "BFGS from the Hessian at the standard estimate" in res.message  # the path
     std = res.extra["standard"]
     scale = std.uncertainty.stderr
     model = RandomForceModel(problem, sigma)

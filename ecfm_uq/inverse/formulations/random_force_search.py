@@ -3,11 +3,14 @@
 :class:`Search` minimizes :math:`p(\\epsilon) = \\ell(\\epsilon, \\hat\\tau(\\epsilon))`
 (:mod:`~ecfm_uq.inverse.formulations.random_forces`) in coordinates scaled by the standard
 fit's standard errors, with the exact gradient
-(:mod:`~ecfm_uq.inverse.formulations.random_force_gradient`): L-BFGS-B with restarts, then,
-where :math:`\\hat\\tau > 0` (a long flat valley where a small gradient does not mean
-close), Newton steps with the Hessian by differences of the gradient until a step
-is below 1e-6 standard errors (shared prior; Nelder-Mead from a wide simplex where they
-do not get there).
+(:mod:`~ecfm_uq.inverse.formulations.random_force_gradient`): L-BFGS-B with restarts (BFGS
+from the Hessian at the start where :math:`\\hat\\tau > 0` there already), then, where
+:math:`\\hat\\tau > 0` (a long flat valley where a small gradient does not mean close),
+Newton steps with the Hessian by differences of the gradient until a step is below 1e-6
+standard errors (shared prior; Nelder-Mead from a wide simplex where they do not get
+there). Cheaper cases (issue 37 item 5, shared prior): the standard estimate itself where
+:math:`\\hat\\tau = 0` there with a margin (:meth:`Search._standard_optimum`), a scalar
+search for one free parameter (:meth:`Search._scalar`).
 
 With a variance per force (:meth:`Search.run_sparse`) the profiled likelihood has local
 minima along that valley, forces switching on and off as eps moves along it: descents
@@ -90,7 +93,9 @@ class Search:
         conditions were measured to hold there; then, where tau-hat is 0 there with a
         strict margin and the measured gradient of the profiled likelihood is below the
         tolerance, ``x0`` is returned after that one evaluation (:meth:`_standard_optimum`).
-        One free parameter (shared prior): a scalar search (:meth:`_scalar`)."""
+        One free parameter (shared prior): a scalar search (:meth:`_scalar`); more,
+        unbounded, with tau-hat > 0 at ``x0``: BFGS from the Hessian there
+        (:meth:`_quasi_newton`) instead of L-BFGS-B, then the Newton finish."""
         if least_squares_optimum:
             res = self._standard_optimum(model, x0)
             if res is not None:
@@ -99,7 +104,10 @@ class Search:
             found = self._scalar(model, x0)
             if found is not None:
                 return found
-        x, res = self._descend(model, x0)
+        found = None
+        if model.prior == "shared" and self.bnds is None and np.size(x0) > 1:
+            found = self._quasi_newton(model, x0)
+        x, res = found if found is not None else self._descend(model, x0)
         tau_positive = np.isfinite(res.fun) and np.any(
             model.profiled(self.eps_std + self.scale * x)[1]
         )
@@ -267,6 +275,61 @@ class Search:
                 width = hi[0] - lo[0]
             prev, cur = cur, new
         return None, np.inf, 60
+
+    def _quasi_newton(self, model, x0):
+        """Where tau-hat > 0 at ``x0`` already: BFGS from the Hessian there (forward
+        differences of the exact gradient, ``x0.size`` solves), Armijo backtracking,
+        until the gradient meets the tolerance: ``(x, res)``, or ``None`` (L-BFGS-B then).
+
+        The profiled likelihood's valley (the discrepancy trading off against eps) is
+        ill-conditioned in standard-error units (Hessian eigenvalues 0.4 and 300 on the
+        reaction rod): L-BFGS-B's unit first step went far up its side and crept back
+        along it (~7 evaluations); from the Hessian at the start the first step is
+        Newton's and the secant updates keep the metric."""
+        eps = self.eps_std + self.scale * x0
+        grad = self.gradient(model)
+        try:
+            val = model.profiled_gradient(eps)[0]
+            if not (np.isfinite(val) and np.any(model.profiled(eps)[1])):
+                return None
+            x = np.array(x0, float)
+            g = grad(x)
+            H = np.column_stack([(grad(x + 1e-4 * e) - g) / 1e-4 for e in np.eye(x.size)])
+        except FAILURES:
+            return None
+        self.nfev += 1 + x.size
+        H = 0.5 * (H + H.T)
+        w = np.linalg.eigvalsh(H)
+        if not (np.all(np.isfinite(w)) and w[0] > 1e-12 * abs(w[-1]) and w[0] > 0):
+            return None
+        Hinv = np.linalg.inv(H)
+        p = self.objective(model, second=True)
+        for k in range(self.maxiter):
+            if self._optimal(g, x):
+                return x, optimize.OptimizeResult(
+                    x=x, fun=val, nit=k, njev=k + 1, success=True,
+                    message=f"BFGS from the Hessian at the standard estimate ({k} steps)",
+                )  # fmt: skip
+            step = -Hinv @ g
+            t = 1.0
+            while True:
+                trial = p(x + t * step)
+                if trial <= val + 1e-4 * t * float(g @ step):
+                    break
+                t *= 0.5
+                if t < 1e-3:
+                    return None
+            try:
+                g_new = grad(x + t * step)  # remembered: no solve
+            except FAILURES:
+                return None
+            sk, yk = t * step, g_new - g
+            if float(sk @ yk) > 1e-12 * float(np.linalg.norm(sk) * np.linalg.norm(yk)):
+                rho = 1.0 / float(sk @ yk)
+                V = np.eye(x.size) - rho * np.outer(sk, yk)
+                Hinv = V @ Hinv @ V.T + rho * np.outer(sk, sk)
+            x, val, g = x + t * step, trial, g_new
+        return None
 
     def _descend(self, model, x0):
         """L-BFGS-B on the exact gradient from ``x0``, restarted after a stalled line
