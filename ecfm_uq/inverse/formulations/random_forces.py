@@ -157,11 +157,11 @@ class RandomForceModel:
         self.a0 = None  # force-to-data scale, fixed at the first linearization
         self.prior = prior
         self.n_solves = 0
-        # the last points evaluated, eps bytes -> [Linearization, (g, nll) or None,
-        # gradient of the profiled nll or None]: the
-        # optimizers and the profiles come back to points they have seen (a restart, the
-        # estimate, the finite-difference stencils around it), and a point's value is a
-        # deterministic function of eps (a0 is fixed by the first linearization)
+        # the last points evaluated, eps bytes -> [Linearization, (g, nll) or None, the
+        # profiled nll's gradient or None]: the optimizers and the profiles come back to
+        # points they have seen (a restart, the estimate, the finite-difference stencils
+        # around it), and a point's value is a deterministic function of eps (a0 is fixed
+        # by the first linearization)
         self._memo = OrderedDict()
         self._last = None  # (eps bytes, solution, dTheta/deps, dTheta/dlam) of the last solve
 
