@@ -162,3 +162,25 @@ def test_the_restricted_tests_p_value_is_the_direct_simulations(K):
         T, p = model.restricted_test(lin)
         T_ref, p_ref = naive_restricted_test(xi, q)
         assert T == T_ref and p == p_ref
+
+
+@pytest.mark.parametrize("seed", [0, 2])  # tau-hat = 0 there, and > 0
+def test_one_solve_per_point_and_the_gradient_against_central_differences(seed):
+    """The gradient needs the state's second derivatives only where a force variance is
+    positive, and then takes them from the point's own solve: one solve per point either
+    way; the gradient against central differences of the profiled likelihood."""
+    problem, truth, sigma = rod4(seed)
+    std = fit(problem, truth, sigma=sigma)
+    eps = std.eps + np.array([0.3, -0.3]) * std.uncertainty.stderr  # off the optimum
+    model = RandomForceModel(problem, sigma)
+    val, grad = model.profiled_gradient(eps)
+    assert model.n_solves == 1
+    assert (model.profiled(eps)[1][0] > 0) == (seed == 2)
+    fresh = RandomForceModel(problem, sigma)
+    h = 1e-6 * np.maximum(1.0, np.abs(eps))
+    ref = [
+        (fresh.profiled_nll(eps + h * e) - fresh.profiled_nll(eps - h * e)) / (2 * h[j])
+        for j, e in enumerate(np.eye(eps.size))
+    ]
+    np.testing.assert_allclose(grad, ref, rtol=1e-5, atol=1e-6 * np.max(np.abs(ref)))
+    assert val == pytest.approx(fresh.profiled_nll(eps), rel=1e-12)  # (a0 set elsewhere)
