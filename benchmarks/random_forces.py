@@ -24,18 +24,30 @@ measured in this run). The per-form lines also give the random-force fits' model
 per data set (``result.extra["n_solves"]``: the shared prior's search and the sparse
 prior's, not the standard fit inside), a count the machine's load does not change.
 
-Run: ``python benchmarks/random_forces.py [--n-datasets 20] [--sparse] [--profiles]``.
+With ``--stages`` the random-force fits' model solves are attributed to where they
+happen: the eps search (``search``), the uncertainty (``uncertainty``: the delta method's
+Hessian, by central differences of the exact gradient at the estimate), the restricted
+test of tau = 0 (``test``) and the rest of the fit (``other``: the estimate's own
+evaluation, the intervals' likelihood); the machine's load averages are printed first and
+last (the times are shared with whatever else runs).
+
+Run: ``python benchmarks/random_forces.py [--n-datasets 20] [--sparse] [--profiles]
+[--stages]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import collections
+import contextlib
+import os
 import time
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from ecfm_uq.inverse import SteadyProblem, fit, profile_likelihood
+from ecfm_uq.inverse.formulations import random_force_search, random_forces
 from ecfm_uq.problems.beam import BeamModel
 from ecfm_uq.problems.reaction import ReactionRod
 from ecfm_uq.system import solve_steady
@@ -61,6 +73,49 @@ def problems():
     return out
 
 
+@contextlib.contextmanager
+def stage_counter():
+    """Counts the random-force model's solves (``RandomForceModel.linearize``) by stage
+    while active: yields the counter (stage -> solves)."""
+    counts = collections.Counter()
+    current = ["other"]
+    model = random_forces.RandomForceModel
+    saved = {
+        "linearize": model.linearize,
+        "restricted_test": model.restricted_test,
+        "run": random_force_search.Search.run,
+        "run_sparse": random_force_search.Search.run_sparse,
+        "_uncertainty": random_forces._uncertainty,
+    }
+
+    def staged(name, f):
+        def wrapper(*args, **kwargs):
+            outer, current[0] = current[0], name
+            try:
+                return f(*args, **kwargs)
+            finally:
+                current[0] = outer
+
+        return wrapper
+
+    def linearize(self, *args, **kwargs):
+        counts[current[0]] += 1
+        return saved["linearize"](self, *args, **kwargs)
+
+    model.linearize = linearize
+    model.restricted_test = staged("test", saved["restricted_test"])
+    random_force_search.Search.run = staged("search", saved["run"])
+    random_force_search.Search.run_sparse = staged("search", saved["run_sparse"])
+    random_forces._uncertainty = staged("uncertainty", saved["_uncertainty"])
+    try:
+        yield counts
+    finally:
+        model.linearize, model.restricted_test = saved["linearize"], saved["restricted_test"]
+        random_force_search.Search.run = saved["run"]
+        random_force_search.Search.run_sparse = saved["run_sparse"]
+        random_forces._uncertainty = saved["_uncertainty"]
+
+
 def main(argv=None):
     # one BLAS thread, as `ecfm-uq reproduce` runs (threaded BLAS on these small dense
     # solves only oversubscribes the cores: a 16 x 16 back-substitution took 8 ms)
@@ -73,7 +128,11 @@ def _main(argv):
     parser.add_argument("--n-datasets", type=int, default=20)
     parser.add_argument("--sparse", action="store_true", help="time the sparse prior too")
     parser.add_argument("--profiles", action="store_true", help="time the profiles too")
+    parser.add_argument(
+        "--stages", action="store_true", help="count the random-force fits' solves by stage"
+    )
     args = parser.parse_args(argv)
+    print(f"load averages at the start: {os.getloadavg()}")
     forms = [("standard", None), ("ecfm-random", None)]
     if args.sparse:
         forms.append(("ecfm-random sparse", {"force_prior": "sparse"}))
@@ -86,6 +145,7 @@ def _main(argv):
         ptimes = {f: 0.0 for f, _ in forms}
         statuses = {f: {} for f, _ in forms}
         solves = {f: 0 for f, _ in forms}
+        stages = {f: collections.Counter() for f, _ in forms}
         for _ in range(args.n_datasets):
             v = source + sigma * rng.standard_normal(source.size)
             for form, options in forms:
@@ -93,6 +153,11 @@ def _main(argv):
                 res = fit(problem.with_data(v), truth, formulation=form.split()[0],
                           sigma=sigma, options=options, **kw)  # fmt: skip
                 times[form] += time.perf_counter() - t
+                if args.stages and form != "standard":
+                    with stage_counter() as counts:  # again, counted (not timed)
+                        fit(problem.with_data(v), truth, formulation=form.split()[0],
+                            sigma=sigma, options=options, **kw)  # fmt: skip
+                    stages[form].update(counts)
                 statuses[form][res.status.name] = statuses[form].get(res.status.name, 0) + 1
                 solves[form] += res.extra.get("n_solves", 0)
                 if args.profiles:
@@ -106,12 +171,16 @@ def _main(argv):
                 extra += f", {solves[form] / R:6.1f} model solves"
             print(f"{name:14s} {form:20s} fit {times[form] / R * 1e3:8.1f} ms per data set"
                   f"{extra}  statuses {statuses[form]}")  # fmt: skip
+            if args.stages and form != "standard":
+                per = {k: round(c / R, 2) for k, c in sorted(stages[form].items())}
+                print(f"{'':14s} {form:20s} model solves per data set by stage: {per}")
         for form, _ in forms[1:]:
             ratio = times[form] / times["standard"]
             ratios.append((name, form, ratio))
             if args.profiles:
                 pr = ptimes[form] / ptimes["standard"]
                 print(f"random_forces {name} {form}/standard profile time ratio: {pr:.2f}")
+    print(f"load averages at the end: {os.getloadavg()}")
     for name, form, ratio in ratios:
         print(f"random_forces {name} {form}/standard fit time ratio: {ratio:.2f}")
 

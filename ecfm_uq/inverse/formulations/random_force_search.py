@@ -3,11 +3,14 @@
 :class:`Search` minimizes :math:`p(\\epsilon) = \\ell(\\epsilon, \\hat\\tau(\\epsilon))`
 (:mod:`~ecfm_uq.inverse.formulations.random_forces`) in coordinates scaled by the standard
 fit's standard errors, with the exact gradient
-(:mod:`~ecfm_uq.inverse.formulations.random_force_gradient`): L-BFGS-B with restarts, then,
-where :math:`\\hat\\tau > 0` (a long flat valley where a small gradient does not mean
-close), Newton steps with the Hessian by differences of the gradient until a step
-is below 1e-6 standard errors (shared prior; Nelder-Mead from a wide simplex where they
-do not get there).
+(:mod:`~ecfm_uq.inverse.formulations.random_force_gradient`): L-BFGS-B with restarts (BFGS
+from the Hessian at the start where :math:`\\hat\\tau > 0` there already), then, where
+:math:`\\hat\\tau > 0` (a long flat valley where a small gradient does not mean close),
+Newton steps with the Hessian by differences of the gradient until a step is below 1e-6
+standard errors (shared prior; Nelder-Mead from a wide simplex where they do not get
+there). Cheaper cases (issue 37 item 5, shared prior): the standard estimate itself where
+:math:`\\hat\\tau = 0` there with a margin (:meth:`Search._standard_optimum`), a scalar
+search for one free parameter (:meth:`Search._scalar`).
 
 With a variance per force (:meth:`Search.run_sparse`) the profiled likelihood has local
 minima along that valley, forces switching on and off as eps moves along it: descents
@@ -26,6 +29,7 @@ from scipy import optimize
 
 from ...errors import ConvergenceError, ModelEvaluationError
 from ..core.convergence import scaled_gradient_optimality
+from ..statistics.diagnostics import fd_hessian
 
 __all__ = ["FAILURES", "Search"]
 
@@ -38,6 +42,11 @@ _VALLEY_ROUNDS = 3  # re-centred on a lower point at most this many times
 _FLOOR_STEPS = 1  # Newton steps across the valley from a probe
 _PROBES_DESCENDED = 2  # probes descended to a minimum, the lowest on the floor
 _DISTINCT = 0.5  # minima farther apart than this (standard errors) are distinct
+_NEWTON_TOL = 1e-6  # a Newton step below this (standard errors) ends the finish
+_CENTRAL = 1e-3  # after a step below this the next Hessian is the uncertainty's (central)
+_HESSIAN_STEP = 1e-3  # the central Hessian's step: the delta method's (_uncertainty)
+_SCALAR_TOL = 1e-6  # the scalar search's root of p' to this (standard errors)
+_BRACKET_STEPS = 30  # expansions (or halvings after a failed solve) looking for a bracket
 
 
 class Search:
@@ -54,11 +63,16 @@ class Search:
     def _optimal(self, g, x):
         return scaled_gradient_optimality(g, x, self.bnds, tol=self.tol).converged
 
-    def objective(self, model, count=True):
+    def objective(self, model, count=True, second=False):
+        """The profiled nll in ``x`` (``inf`` where the model cannot be solved); with
+        ``second`` evaluated with the gradient's second derivatives (a Newton trial point
+        that is accepted is the next step's gradient: one solve, not two)."""
+
         def p(x):
             self.nfev += count
+            eps = self.eps_std + self.scale * x
             try:
-                return model.profiled(self.eps_std + self.scale * x)[0]
+                return model.profiled_gradient(eps)[0] if second else model.profiled(eps)[0]
             except FAILURES:
                 return np.inf
 
@@ -72,9 +86,28 @@ class Search:
 
         return grad
 
-    def run(self, model, x0):
-        """``(x, res)`` from ``x0``; ``res.fun`` the profiled nll at ``x``."""
-        x, res = self._descend(model, x0)
+    def run(self, model, x0, least_squares_optimum=False):
+        """``(x, res)`` from ``x0``; ``res.fun`` the profiled nll at ``x``.
+
+        ``least_squares_optimum``: ``x0`` is the standard fit's estimate and its optimality
+        conditions were measured to hold there; then, where tau-hat is 0 there with a
+        strict margin and the measured gradient of the profiled likelihood is below the
+        tolerance, ``x0`` is returned after that one evaluation (:meth:`_standard_optimum`).
+        One free parameter (shared prior): a scalar search (:meth:`_scalar`); more,
+        unbounded, with tau-hat > 0 at ``x0``: BFGS from the Hessian there
+        (:meth:`_quasi_newton`) instead of L-BFGS-B, then the Newton finish."""
+        if least_squares_optimum:
+            res = self._standard_optimum(model, x0)
+            if res is not None:
+                return np.array(x0, float), res
+        if np.size(x0) == 1 and model.prior == "shared":
+            found = self._scalar(model, x0)
+            if found is not None:
+                return found
+        found = None
+        if model.prior == "shared" and self.bnds is None and np.size(x0) > 1:
+            found = self._quasi_newton(model, x0)
+        x, res = found if found is not None else self._descend(model, x0)
         tau_positive = np.isfinite(res.fun) and np.any(
             model.profiled(self.eps_std + self.scale * x)[1]
         )
@@ -86,7 +119,9 @@ class Search:
             # mean close (a premature stop there made the estimate depend on the
             # equations' units): finish by Newton steps until a step is below 1e-6
             # standard errors, derivative-free where they do not get there
-            x_n, val_n, steps, done = self._newton(p, self.gradient(model), x, res.fun)
+            x_n, val_n, steps, done = self._newton(
+                self.objective(model, second=True), self.gradient(model), x, res.fun
+            )
             res.nit += steps
             if done:
                 res.fun, res.success = val_n, True
@@ -104,6 +139,197 @@ class Search:
                 res.success = bool(nm.success)
             res.nit, res.njev = nit, njev
         return x, res
+
+    def _standard_optimum(self, model, x0):
+        """The standard estimate ``x0`` as the estimate, or ``None`` (search on).
+
+        Where tau-hat is 0 at :math:`\\epsilon_0` with a strict margin -- the restricted
+        likelihood's drop :math:`2(\\ell_R(0) - \\ell_R(s))` negative at every grid point
+        :math:`s > 0` (so ``best_s`` returns 0) and its slope at :math:`s = 0` negative (the
+        restricted nll increasing in :math:`\\tau^2` there) -- the drop is continuous in
+        :math:`\\epsilon` (it is a spectral function of :math:`Q A A^T Q` and of
+        :math:`Q r`, :math:`Q` the projector onto the complement of :math:`J`'s span,
+        continuous while :math:`J` keeps its rank), so it stays negative on the grid in a
+        neighbourhood, tau-hat stays 0 there and the profiled likelihood equals the
+        standard likelihood :math:`\\tfrac12\\|r\\|^2/\\sigma^2` (+ a constant) there.
+        The standard fit measured its optimality conditions to hold at :math:`\\epsilon_0`:
+        a local minimum of that, hence of the profiled likelihood. L-BFGS-B from there
+        would only shuffle within the status tolerance; the status itself still comes from
+        the gradient of the profiled likelihood measured here (and again by the caller)."""
+        try:
+            val, g = model.profiled_gradient(self.eps_std + self.scale * x0)
+            zero = model.tau_strictly_zero(self.eps_std + self.scale * x0)
+        except FAILURES:
+            return None
+        self.nfev += 1
+        if not zero or not self._optimal(g * self.scale, x0):
+            return None
+        return optimize.OptimizeResult(
+            x=np.array(x0, float), fun=val, nit=0, njev=1, success=True,
+            message="tau-hat = 0 with a margin at the standard estimate, a least-squares "
+            "optimum: a local minimum of the profiled likelihood",
+        )  # fmt: skip
+
+    def _scalar(self, model, x0):
+        """One free parameter: ``(x, res)``, or ``None`` where the scalar search cannot
+        tell (a solve failing throughout, no bracket) and the general search takes over.
+
+        The exact derivative :math:`p'` is followed downhill from ``x0`` (the first step
+        by the Gauss-Newton curvature :math:`J^T S^{-1} J`, then secant steps, expanding)
+        until it changes sign, which brackets a minimum, or a bound holds it (a derivative
+        pointing out of the box there: the bound is the optimum); then secant steps on
+        :math:`p'` kept inside the bracket by bisection (:meth:`_root`) until a step is
+        below ``_SCALAR_TOL`` standard errors (superlinear, bracketed: no line search, no
+        quasi-Newton memory, no Hessian by differences). A root whose value is not below the bracket's ends (a maximum
+        between two minima) is refused."""
+        lo, hi = -np.inf, np.inf
+        if self.bnds is not None:
+            lo = -np.inf if self.bnds[0][0] is None else float(self.bnds[0][0])
+            hi = np.inf if self.bnds[0][1] is None else float(self.bnds[0][1])
+        evals = {"n": 0}
+
+        def at(x):
+            self.nfev += 1
+            evals["n"] += 1
+            return model.profiled_gradient(self.eps_std + self.scale * np.array([x]))
+
+        def result(x, val, message):
+            return np.array([x]), optimize.OptimizeResult(
+                x=np.array([x]), fun=val, nit=evals["n"], njev=evals["n"], success=True,
+                message=message,
+            )  # fmt: skip
+
+        a = float(np.ravel(x0)[0])
+        try:
+            va, ga = at(a)
+            _, g_hat, lin = model.profiled(self.eps_std + self.scale * np.array([a]))
+        except FAILURES:
+            return None
+        ga = float(ga[0]) * float(self.scale[0])
+        if ga == 0.0:
+            return result(a, va, "scalar search: p' = 0 at the start")
+        info = float(lin.J[:, 0] @ np.linalg.solve(model.covariance(lin, g_hat), lin.J[:, 0]))
+        curv = info * float(self.scale[0]) ** 2
+        step = -ga / curv if np.isfinite(curv) and curv > 0 else -ga
+        for _ in range(_BRACKET_STEPS):
+            b = float(np.clip(a + step, lo, hi))
+            if b == a:  # at a bound with p' pointing out of the box: the bound holds it
+                return result(a, va, "scalar search: at a bound, p' pointing out")
+            try:
+                vb, gb = at(b)
+            except FAILURES:
+                step *= 0.5  # back towards the last point that solves
+                continue
+            gb = float(gb[0]) * float(self.scale[0])
+            if not np.isfinite(gb):
+                return None
+            if np.sign(gb) != np.sign(ga):
+                break
+            if b in (lo, hi):  # still descending at the bound
+                return result(b, vb, "scalar search: at a bound, p' pointing out")
+            slope = (gb - ga) / (b - a)
+            # secant steps towards the root of p', between 1 and 8 times the last step
+            span = b - a
+            if slope > 0:
+                step = float(np.clip(-gb / slope, min(span, 8 * span), max(span, 8 * span)))
+            else:
+                step = 4.0 * span
+            a, va, ga = b, vb, gb
+        else:
+            return None
+        try:
+            x, val, steps = self._root(at, (a, va, ga), (b, vb, gb))
+        except FAILURES:
+            return None
+        if x is None or not val <= min(va, vb):
+            return None
+        return result(x, val, f"scalar search: p' = 0 bracketed, {steps} secant steps")
+
+    def _root(self, at, one, two):
+        """Root of :math:`p'` between ``one`` and ``two`` (``(x, p, p')`` each, the
+        derivatives of opposite signs): secant steps on the last two points, bisection
+        where a step leaves the bracket or the bracket does not halve in three steps;
+        ``(x, p(x), steps)`` once a step would move less than ``_SCALAR_TOL`` (``x`` is
+        evaluated: its derivative is measured), ``(None, inf, steps)`` after 60."""
+        lo, hi = (one, two) if one[0] < two[0] else (two, one)  # p' differs in sign
+        prev, cur = one, two
+        width, slow = hi[0] - lo[0], 0
+        for k in range(60):
+            if cur[2] == 0.0:
+                return cur[0], cur[1], k
+            x = np.nan
+            if cur[2] != prev[2]:
+                x = cur[0] - cur[2] * (cur[0] - prev[0]) / (cur[2] - prev[2])
+            if not lo[0] < x < hi[0] or slow >= 3:
+                x, slow, width = 0.5 * (lo[0] + hi[0]), 0, hi[0] - lo[0]
+            if abs(x - cur[0]) < _SCALAR_TOL:
+                return cur[0], cur[1], k
+            val, g = at(x)
+            new = (x, val, float(g[0]) * float(self.scale[0]))
+            if np.sign(new[2]) == np.sign(lo[2]):
+                lo = new
+            else:
+                hi = new
+            slow = slow + 1 if hi[0] - lo[0] > 0.5 * width else 0
+            if slow == 0:
+                width = hi[0] - lo[0]
+            prev, cur = cur, new
+        return None, np.inf, 60
+
+    def _quasi_newton(self, model, x0):
+        """Where tau-hat > 0 at ``x0`` already: BFGS from the Hessian there (forward
+        differences of the exact gradient, ``x0.size`` solves), Armijo backtracking,
+        until the gradient meets the tolerance: ``(x, res)``, or ``None`` (L-BFGS-B then).
+
+        The profiled likelihood's valley (the discrepancy trading off against eps) is
+        ill-conditioned in standard-error units (Hessian eigenvalues 0.4 and 300 on the
+        reaction rod): L-BFGS-B's unit first step went far up its side and crept back
+        along it (~7 evaluations); from the Hessian at the start the first step is
+        Newton's and the secant updates keep the metric."""
+        eps = self.eps_std + self.scale * x0
+        grad = self.gradient(model)
+        try:
+            val = model.profiled_gradient(eps)[0]
+            if not (np.isfinite(val) and np.any(model.profiled(eps)[1])):
+                return None
+            x = np.array(x0, float)
+            g = grad(x)
+            H = np.column_stack([(grad(x + 1e-4 * e) - g) / 1e-4 for e in np.eye(x.size)])
+        except FAILURES:
+            return None
+        self.nfev += 1 + x.size
+        H = 0.5 * (H + H.T)
+        w = np.linalg.eigvalsh(H)
+        if not (np.all(np.isfinite(w)) and w[0] > 1e-12 * abs(w[-1]) and w[0] > 0):
+            return None
+        Hinv = np.linalg.inv(H)
+        p = self.objective(model, second=True)
+        for k in range(self.maxiter):
+            if self._optimal(g, x):
+                return x, optimize.OptimizeResult(
+                    x=x, fun=val, nit=k, njev=k + 1, success=True,
+                    message=f"BFGS from the Hessian at the standard estimate ({k} steps)",
+                )  # fmt: skip
+            step = -Hinv @ g
+            t = 1.0
+            while True:
+                trial = p(x + t * step)
+                if trial <= val + 1e-4 * t * float(g @ step):
+                    break
+                t *= 0.5
+                if t < 1e-3:
+                    return None
+            try:
+                g_new = grad(x + t * step)  # remembered: no solve
+            except FAILURES:
+                return None
+            sk, yk = t * step, g_new - g
+            if float(sk @ yk) > 1e-12 * float(np.linalg.norm(sk) * np.linalg.norm(yk)):
+                rho = 1.0 / float(sk @ yk)
+                V = np.eye(x.size) - rho * np.outer(sk, yk)
+                Hinv = V @ Hinv @ V.T + rho * np.outer(sk, sk)
+            x, val, g = x + t * step, trial, g_new
+        return None
 
     def _descend(self, model, x0):
         """L-BFGS-B on the exact gradient from ``x0``, restarted after a stalled line
@@ -206,7 +432,7 @@ class Search:
                 break
         # (res.nit: the iterations of the descent that found the estimate and of its
         # finish, as a single search's; self.nfev counts every evaluation)
-        x_n, val_n, steps, done = self._newton(self.objective(model), grad, x, res.fun)
+        x_n, val_n, steps, done = self._newton(self.objective(model, second=True), grad, x, res.fun)
         res.nit += steps
         if done and val_n <= res.fun:
             x, res.fun, res.success = x_n, val_n, True
@@ -236,27 +462,40 @@ class Search:
         return y, val
 
     def _newton(self, p, grad, x, val):
-        """Newton steps on the exact gradient ``grad``, the Hessian by forward differences
-        of it, with backtracking on ``p``: ``(x, value, steps, converged)``, converged when
-        a step is below 1e-6 (the scaled coordinates: standard errors)."""
+        """Newton steps on the exact gradient ``grad``, the Hessian by differences of it,
+        with backtracking on ``p``: ``(x, value, steps, converged)``, converged when a step
+        is below ``_NEWTON_TOL`` (the scaled coordinates: standard errors). ``x`` is
+        returned without that last step: its gradient is the one measured.
+
+        The Hessian is by forward differences (``x.size`` gradients) while the steps are
+        long; after a step below ``_CENTRAL`` (the next step is likely below the
+        tolerance, Newton converging quadratically) it is the delta method's central
+        differences of step ``_HESSIAN_STEP`` (``2 x.size`` gradients): the model
+        remembers those points, so the uncertainty at the estimate costs no solve."""
         x = np.array(x, float)
+        last = np.inf
         for k in range(_NEWTON_STEPS):
             try:
                 g = grad(x)
-                # forward differences of the exact gradient: the Hessian only steers the
-                # steps (their accuracy sets the convergence rate, not the point reached)
-                H = np.column_stack([(grad(x + 1e-4 * e) - g) / 1e-4 for e in np.eye(x.size)])
+                if last < _CENTRAL:
+                    H = fd_hessian(grad, x, _HESSIAN_STEP)
+                    self.nfev += 2 * x.size
+                else:
+                    # forward differences of the exact gradient: the Hessian only steers
+                    # the steps (their accuracy sets the convergence rate, not the point
+                    # reached)
+                    H = np.column_stack([(grad(x + 1e-4 * e) - g) / 1e-4 for e in np.eye(x.size)])
+                    H = 0.5 * (H + H.T)
+                    self.nfev += x.size
             except FAILURES:
                 return x, val, k, False
-            H = 0.5 * (H + H.T)
-            self.nfev += 1 + x.size
+            self.nfev += 1
             w, V = np.linalg.eigh(H)
             if not (np.all(np.isfinite(w)) and w[0] > 1e-12 * abs(w[-1])):
                 return x, val, k, False  # not a minimum's neighbourhood: no Newton step
             step = -V @ ((V.T @ g) / w)
-            if np.max(np.abs(step)) < 1e-6:
-                trial = p(x + step)
-                return (x + step, trial, k + 1, True) if trial <= val else (x, val, k + 1, True)
+            if np.max(np.abs(step)) < _NEWTON_TOL:
+                return x, val, k + 1, True
             t = 1.0
             while True:
                 trial = p(x + t * step)
@@ -265,5 +504,5 @@ class Search:
                 t *= 0.5
                 if t < 1e-3:
                     return x, val, k + 1, False
-            x, val = x + t * step, trial
+            x, val, last = x + t * step, trial, t * float(np.max(np.abs(step)))
         return x, val, _NEWTON_STEPS, False

@@ -75,6 +75,7 @@ verdict is the same test of :math:`\\tau = 0` at the estimate: one rule for both
 
 from __future__ import annotations
 
+import functools
 from collections import OrderedDict
 from dataclasses import dataclass, replace
 
@@ -156,11 +157,13 @@ class RandomForceModel:
         self.a0 = None  # force-to-data scale, fixed at the first linearization
         self.prior = prior
         self.n_solves = 0
-        # the last points evaluated, eps bytes -> [Linearization, (g, nll) or None]: the
-        # optimizers and the profiles come back to points they have seen (a restart, the
-        # estimate, the finite-difference stencils around it), and a point's value is a
-        # deterministic function of eps (a0 is fixed by the first linearization)
+        # the last points evaluated, eps bytes -> [Linearization, (g, nll) or None, the
+        # profiled nll's gradient or None]: the optimizers and the profiles come back to
+        # points they have seen (a restart, the estimate, the finite-difference stencils
+        # around it), and a point's value is a deterministic function of eps (a0 is fixed
+        # by the first linearization)
         self._memo = OrderedDict()
+        self._last = None  # (eps bytes, solution, dTheta/deps, dTheta/dlam) of the last solve
 
     def linearize(self, eps, second=False):
         """:class:`Linearization` at ``eps`` (one solve and one multi-right-hand-side
@@ -177,6 +180,8 @@ class RandomForceModel:
         dA = dJ = None
         if second:
             dA, dJ = second_sensitivities(sysm, sol, dTh_e, dTh_l, self.M)
+        # the last solve: its second derivatives when asked for next (tau-hat > 0 there)
+        self._last = (np.asarray(eps, float).tobytes(), sol, dTh_e, dTh_l)
         AA = A @ A.T
         if self.a0 is None:
             self.a0 = float(np.sqrt(max(np.trace(AA) / AA.shape[0], 1e-300)))
@@ -237,6 +242,18 @@ class RandomForceModel:
             s_hat = float(res.x) if -res.fun > drop[k] else float(_S_GRID[k])
         return s_hat, self.nll(lin, s_hat)
 
+    def tau_strictly_zero(self, eps):
+        """Whether tau-hat is 0 at ``eps`` with a strict margin: the restricted drop < 0 at
+        every grid point :math:`s > 0` (so :meth:`best_s` returns 0) and its slope at 0,
+        :math:`\\sum_k \\xi_k (q_k - 1)`, < 0; both continuous in ``eps`` while :math:`J`
+        keeps its rank, so tau-hat is 0 in a neighbourhood (``False`` without contrasts)."""
+        lin = self._linearization(eps)
+        if lin.xi.size == 0 or not np.any(lin.xi > 0):
+            return False
+        slope = float(np.sum(lin.xi * (lin.q - 1.0)))
+        drop = self.restricted_drop(lin.q, lin.xi, _S_GRID[1:])
+        return bool(slope < 0.0 and np.all(drop < 0.0))
+
     @staticmethod
     def _restricted_slope(lin):
         """:math:`d/ds` of :meth:`restricted_drop`, a function of scalar ``s``: Python
@@ -267,20 +284,30 @@ class RandomForceModel:
         (:func:`~ecfm_uq.inverse.formulations.random_force_gradient.profiled_gradient`,
         one solve and two back-substitutions), by central differences only where the
         REML estimate is not differentiable (a rank-deficient :math:`J`)."""
-        lin = self._linearization(eps, second=True)
+        lin = self._linearization(eps)
         g, val = self._variances(lin)
-        s = None
+        hit = self._memo.get(lin.eps.tobytes())
+        if hit is not None and hit[0] is lin and hit[2] is not None:
+            return val, hit[2].copy()  # a point seen before: its gradient remembered
+        s, m = None, lin.J.shape[1]
+        dA, dJ = np.zeros((*lin.A.shape, m)), np.zeros((*lin.J.shape, m))
+        if np.any(g):  # (with g = 0 the dA terms vanish: -J^T S^-1 r, the same bits)
+            lin = self._linearization(eps, second=True)
+            dA, dJ = lin.dA, lin.dJ
         if self.prior == "shared":
             s = float(g[0]) * self.a0**2 / self.sigma**2 if g.size else 0.0
-        grad = profiled_gradient(lin, lin.dA, lin.dJ, self.sigma, g, s, self.a0)
+        grad = profiled_gradient(lin, dA, dJ, self.sigma, g, s, self.a0)
         if grad is None:
             steps = 1e-6 * np.maximum(1.0, np.abs(lin.eps))
             grad = fd_gradient(lambda e: self.profiled(e)[0], lin.eps, steps)
+        hit = self._memo.get(lin.eps.tobytes())
+        if hit is not None and hit[0] is lin:
+            hit[2] = np.array(grad, float)
         return val, grad
 
     def _checked_gradient(self, eps):
         # the profiles' evaluation: refused where a parameter has no effect (profiled_nll)
-        self._refuse_dead(self._linearization(eps, second=True))
+        self._refuse_dead(self._linearization(eps))
         return self.profiled_gradient(eps)
 
     @staticmethod
@@ -309,9 +336,14 @@ class RandomForceModel:
         if hit is not None and (hit[0].dA is not None or not second):
             self._memo.move_to_end(key)
             return hit[0]
-        lin = self.linearize(eps, second)
+        if hit is not None and self._last is not None and self._last[0] == key:
+            _, sol, dTh_e, dTh_l = self._last  # the same solve: no new one
+            dA, dJ = second_sensitivities(self.system, sol, dTh_e, dTh_l, self.M)
+            lin = replace(hit[0], dA=dA, dJ=dJ)
+        else:
+            lin = self.linearize(eps, second)
         # (a point seen without its second derivatives keeps its variances: the same lin)
-        self._memo[key] = [lin, None if hit is None else hit[1]]
+        self._memo[key] = [lin, None if hit is None else hit[1], None]
         self._memo.move_to_end(key)
         if len(self._memo) > _MEMO:
             self._memo.popitem(last=False)
@@ -366,14 +398,23 @@ class RandomForceModel:
         if lin.xi.size == 0 or not np.any(lin.xi > 0):
             return 0.0, 1.0
         T = max(float(self.restricted_drop(lin.q, lin.xi, _S_GRID).max()), 0.0)
-        rng = np.random.default_rng(_SIM_SEED)
+        if T == 0.0:
+            return T, 1.0  # every simulation reaches 0: nothing to simulate
+        # the draws depend on (n_sim, K) only (a fixed seed): drawn once, remembered
+        q = _null_contrasts(n_sim, lin.xi.size)
+        threshold = T - 1e-12 * max(T, 1.0)
+        # a simulation's statistic is at most sum_k q_k (the drop is sum_k q_k c_k(s) -
+        # sum_k log(1 + a_k) with 0 <= c_k < 1 and the logs >= 0; rounding is monotone),
+        # so only those whose sum reaches the threshold (less a margin for the order of
+        # the summation's rounding) can exceed it: the count is that of all of them
+        total = q.sum(axis=1)
+        candidates = q[total >= threshold - 1e-9 * max(abs(threshold), 1.0)]
         exceed = 0
-        for start in range(0, n_sim, 500):
-            m = min(500, n_sim - start)
-            q = rng.chisquare(1.0, size=(m, lin.xi.size))
-            sims = np.maximum(self.restricted_drop(q, lin.xi, _S_GRID).max(axis=1), 0.0)
-            exceed += int(np.sum(sims >= T - 1e-12 * max(T, 1.0)))
-        return T, (1 + exceed) / (1 + n_sim) if T > 0 else 1.0
+        for start in range(0, candidates.shape[0], 500):
+            chunk = candidates[start : start + 500]  # chunks: the (m, G) array stays in cache
+            sims = np.maximum(self.restricted_drop(chunk, lin.xi, _S_GRID).max(axis=1), 0.0)
+            exceed += int(np.sum(sims >= threshold))
+        return T, (1 + exceed) / (1 + n_sim)
 
     def conditional_likelihood(self, lin, g):
         """:math:`\\tfrac12 r(\\epsilon)^T S_0^{-1} r(\\epsilon)` with the data covariance
@@ -419,6 +460,15 @@ class RandomForceModel:
         lam = SiAG.T @ lin.r
         var = g - np.einsum("ij,ji->i", GAt, SiAG)
         return lam, np.sqrt(np.maximum(var, 0.0))
+
+
+@functools.lru_cache(maxsize=8)
+def _null_contrasts(n_sim, K):
+    """The restricted test's null contrasts, ``(n_sim, K)`` chi2_1 draws from the fixed
+    seed (read-only, shared by every test with ``K`` contrasts)."""
+    q = np.random.default_rng(_SIM_SEED).chisquare(1.0, size=(n_sim, K))
+    q.flags.writeable = False
+    return q
 
 
 def rms(g):
@@ -477,7 +527,7 @@ def fit_random_force(problem, eps0, s):
         SCALED_GRADIENT_TOL if s.tol is None else s.tol,
     )  # fmt: skip
     model = RandomForceModel(problem, s.sigma, "shared", s.sigma_label)
-    x, res = search.run(model, np.zeros(system.n_eps))
+    x, res = search.run(model, np.zeros(system.n_eps), holds(standard.opt, standard.failure))
     if opts["force_prior"] == "sparse":
         # the sparse prior's profiled likelihood has local minima (forces switching on and
         # off): searched from the standard estimate, from the shared prior's and along the
