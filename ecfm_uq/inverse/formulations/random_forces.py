@@ -351,7 +351,7 @@ class RandomForceModel:
             self._checked_gradient, self.system.n_eps, self.v.size, "random forces",
             f"marginal likelihood, Gaussian noise {self.sigma_label} and random forces, "
             "tau re-estimated (REML) at every eps",
-            exact_gradient=False,
+            exact_gradient=False, nuisance=self.nuisance_at, simulate=self.simulated_likelihood,
         )  # fmt: skip
 
     def restricted_test(self, lin, n_sim=_N_SIM):
@@ -419,6 +419,31 @@ class RandomForceModel:
         lam = SiAG.T @ lin.r
         var = g - np.einsum("ij,ji->i", GAt, SiAG)
         return lam, np.sqrt(np.maximum(var, 0.0))
+
+    def nuisance_at(self, eps):
+        """``(tau, half_logdet)`` at ``eps``: :math:`\\hat\\tau(\\epsilon)`, the
+        root-mean-square force standard deviation re-estimated there (0 where the data
+        show no discrepancy), and :math:`\\tfrac12\\log\\det S` of the data covariance
+        :math:`S = \\sigma^2 I + A\\,\\mathrm{diag}(\\hat g)\\,A^T` (the variance term of
+        :math:`\\ell`)."""
+        _, g, lin = self.profiled(eps)
+        return rms(g), 0.5 * float(np.linalg.slogdet(self.covariance(lin, g))[1])
+
+    def simulated_likelihood(self, eps, rng):
+        """:meth:`profiled_likelihood` of data simulated from the random-force model at
+        ``eps``: :math:`v^* = \\mathcal M\\,\\mathbb E[\\theta(\\epsilon, 0)] + A f +
+        \\sigma z`, :math:`f \\sim N(0, \\mathrm{diag}(\\hat g(\\epsilon)))` with the force
+        variances re-estimated at ``eps`` (:math:`\\hat\\tau(\\epsilon)^2`, 0 where
+        :math:`\\hat\\tau = 0`), :math:`z \\sim N(0, I)`; ``z`` then ``f`` are drawn from
+        ``rng``. The new model keeps this one's force scale ``a0`` and linearizes in
+        :math:`\\lambda` as this one does (exact for a model linear in :math:`\\theta`)."""
+        _, g, lin = self.profiled(eps)
+        z = rng.standard_normal(self.v.size)
+        f = np.sqrt(g) * rng.standard_normal(g.size)
+        sim = RandomForceModel(self.problem, self.sigma, self.prior, self.sigma_label)
+        sim.v = self.v - lin.r + lin.A @ f + self.sigma * z
+        sim.a0 = self.a0
+        return sim.profiled_likelihood()
 
 
 def rms(g):
