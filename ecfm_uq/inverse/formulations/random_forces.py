@@ -429,19 +429,24 @@ class RandomForceModel:
         _, g, lin = self.profiled(eps)
         return rms(g), 0.5 * float(np.linalg.slogdet(self.covariance(lin, g))[1])
 
-    def simulated_likelihood(self, eps, rng):
-        """:meth:`profiled_likelihood` of data simulated from the random-force model at
-        ``eps``: :math:`v^* = \\mathcal M\\,\\mathbb E[\\theta(\\epsilon, 0)] + A f +
-        \\sigma z`, :math:`f \\sim N(0, \\mathrm{diag}(\\hat g(\\epsilon)))` with the force
-        variances re-estimated at ``eps`` (:math:`\\hat\\tau(\\epsilon)^2`, 0 where
-        :math:`\\hat\\tau = 0`), :math:`z \\sim N(0, I)`; ``z`` then ``f`` are drawn from
-        ``rng``. The new model keeps this one's force scale ``a0`` and linearizes in
-        :math:`\\lambda` as this one does (exact for a model linear in :math:`\\theta`)."""
+    def simulated_data(self, eps, rng):
+        """Data simulated from the random-force model at ``eps``:
+        :math:`v^* = \\mathcal M\\,\\mathbb E[\\theta(\\epsilon, 0)] + A f + \\sigma z`,
+        :math:`f \\sim N(0, \\mathrm{diag}(\\hat g(\\epsilon)))` with the force variances
+        re-estimated at ``eps`` (:math:`\\hat\\tau(\\epsilon)^2`, 0 where
+        :math:`\\hat\\tau = 0`), :math:`z \\sim N(0, I)`; ``z`` then ``f`` drawn from
+        ``rng``. Linear in :math:`\\lambda` as the likelihood is (exact for a model linear
+        in :math:`\\theta`)."""
         _, g, lin = self.profiled(eps)
         z = rng.standard_normal(self.v.size)
         f = np.sqrt(g) * rng.standard_normal(g.size)
+        return self.v - lin.r + lin.A @ f + self.sigma * z
+
+    def simulated_likelihood(self, eps, rng):
+        """:meth:`profiled_likelihood` of :meth:`simulated_data` at ``eps`` (a new model
+        with this one's force scale ``a0``)."""
         sim = RandomForceModel(self.problem, self.sigma, self.prior, self.sigma_label)
-        sim.v = self.v - lin.r + lin.A @ f + self.sigma * z
+        sim.v = self.simulated_data(eps, rng)
         sim.a0 = self.a0
         return sim.profiled_likelihood()
 
