@@ -228,7 +228,8 @@ def test_random_force_misses_on_a_ridge_to_a_bound_are_flagged_or_have_a_discrep
     and 0.83 of 120 data sets, docs/calibration.md): every miss of a fit with tau-hat = 0
     (the standard likelihood) is flagged by a bound inside the joint region; the misses
     left unflagged are those with a discrepancy estimated (tau-hat > 0), which pushes the
-    estimate up the ridge, away from the bound."""
+    estimate up the ridge, away from the bound; those are flagged by tau-hat's variance
+    term changing inside the interval (every miss flagged)."""
     B = SineBasis(16)
     xs = np.linspace(0.2, 0.8, 5)
     terms = [LinearTerm(50.5 / np.pi**2 * stiffness(B)), LinearTerm(mass(B),
@@ -254,3 +255,5 @@ def test_random_force_misses_on_a_ridge_to_a_bound_are_flagged_or_have_a_discrep
     for tau, flagged in misses:
         assert flagged or tau > 0, misses
     assert any(flagged and tau == 0 for tau, flagged in misses), misses
+    # and with tau-hat > 0 the variance term along the profile flags them too: every miss
+    assert all(flagged for _, flagged in misses), misses

@@ -495,8 +495,9 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
         threshold simulated at each end (parametric bootstrap from the profiled point,
         :mod:`~.profile_calibration`) where the chi-squared one does not hold: a
         re-optimized parameter at its bound along the profile (a ridge to a bound), a
-        near-singular model. Gaussian least-squares likelihoods only; 2-3 simulated
-        thresholds per end, each ``2 * n_simulations`` small fits.
+        near-singular model. Gaussian least-squares likelihoods and the random-force
+        ECFM's (simulated with the profiled tau); 2-3 simulated thresholds per end, each
+        ``2 * n_simulations`` small fits.
     n_simulations : int
         Simulated data sets per calibrated threshold (at least 20).
     seed : int

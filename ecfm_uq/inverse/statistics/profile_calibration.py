@@ -15,8 +15,8 @@ the statistics :math:`\\ell^*_p(t) - \\hat\\ell^*` (the :math:`\\lceil
 threshold there. The interval's end is where the profile meets it,
 :math:`\\ell_p(t) - \\hat\\ell = c(t)`.
 
-Only a Gaussian least-squares likelihood is simulated (the whitened residual
-:math:`r(\\epsilon)`): data simulated from :math:`\\epsilon_t` have the residual
+A Gaussian least-squares likelihood is simulated through its whitened residual
+:math:`r(\\epsilon)`: data simulated from :math:`\\epsilon_t` have the residual
 :math:`r(\\epsilon) - r(\\epsilon_t) + \\hat\\sigma z`, :math:`z \\sim N(0, I)`
 (:math:`\\hat\\sigma = 1` with the noise known, else the fit's residual estimate), so a
 simulation costs two small Levenberg-Marquardt fits warm-started at :math:`\\epsilon_t` and
@@ -25,6 +25,15 @@ numbers): :math:`c(t)` is then a smooth function of :math:`t` and the end is fou
 fixed-point steps :math:`t_{k+1} = T(c(t_k))`, :math:`T(c)` the profile's crossing of the
 constant level :math:`c` (:func:`~.profile_walk.walk`, no simulation), bisecting where the
 steps overshoot. Typically 2-4 thresholds are simulated per end.
+
+A likelihood that simulates its own data (``like.simulate``: the random-force ECFM's
+marginal likelihood with :math:`\\tau` re-estimated at every :math:`\\epsilon`) is
+simulated by its model instead: at :math:`(t, \\hat\\nu(t))` the forces are drawn with
+the profiled :math:`\\hat\\tau(t)` (the constrained estimate of every nuisance, as a
+parametric bootstrap test does; 0 where :math:`\\hat\\tau(t) = 0`) and the noise with the
+known :math:`\\sigma`, and each data set is refitted by L-BFGS-B on the random-force
+likelihood's gradient (:func:`simulated_threshold_by_model`; the same seeds at every
+:math:`t`).
 """
 
 from __future__ import annotations
