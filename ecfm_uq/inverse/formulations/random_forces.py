@@ -77,6 +77,7 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 from scipy import optimize, stats
@@ -99,6 +100,7 @@ from ..statistics.verdict import decide
 from .random_force_gradient import profiled_gradient, second_sensitivities
 from .random_force_search import FAILURES as _FAILURES
 from .random_force_search import Search
+from .random_force_simulation import nuisance_at, simulated_likelihood
 from .sparse_forces import sparse_force_variances
 from .steady import fit_steady_problem
 
@@ -351,7 +353,8 @@ class RandomForceModel:
             self._checked_gradient, self.system.n_eps, self.v.size, "random forces",
             f"marginal likelihood, Gaussian noise {self.sigma_label} and random forces, "
             "tau re-estimated (REML) at every eps",
-            exact_gradient=False, nuisance=self.nuisance_at, simulate=self.simulated_likelihood,
+            exact_gradient=False, nuisance=partial(nuisance_at, self),
+            simulate=partial(simulated_likelihood, self),
         )  # fmt: skip
 
     def restricted_test(self, lin, n_sim=_N_SIM):
@@ -419,36 +422,6 @@ class RandomForceModel:
         lam = SiAG.T @ lin.r
         var = g - np.einsum("ij,ji->i", GAt, SiAG)
         return lam, np.sqrt(np.maximum(var, 0.0))
-
-    def nuisance_at(self, eps):
-        """``(tau, half_logdet)`` at ``eps``: :math:`\\hat\\tau(\\epsilon)`, the
-        root-mean-square force standard deviation re-estimated there (0 where the data
-        show no discrepancy), and :math:`\\tfrac12\\log\\det S` of the data covariance
-        :math:`S = \\sigma^2 I + A\\,\\mathrm{diag}(\\hat g)\\,A^T` (the variance term of
-        :math:`\\ell`)."""
-        _, g, lin = self.profiled(eps)
-        return rms(g), 0.5 * float(np.linalg.slogdet(self.covariance(lin, g))[1])
-
-    def simulated_data(self, eps, rng):
-        """Data simulated from the random-force model at ``eps``:
-        :math:`v^* = \\mathcal M\\,\\mathbb E[\\theta(\\epsilon, 0)] + A f + \\sigma z`,
-        :math:`f \\sim N(0, \\mathrm{diag}(\\hat g(\\epsilon)))` with the force variances
-        re-estimated at ``eps`` (:math:`\\hat\\tau(\\epsilon)^2`, 0 where
-        :math:`\\hat\\tau = 0`), :math:`z \\sim N(0, I)`; ``z`` then ``f`` drawn from
-        ``rng``. Linear in :math:`\\lambda` as the likelihood is (exact for a model linear
-        in :math:`\\theta`)."""
-        _, g, lin = self.profiled(eps)
-        z = rng.standard_normal(self.v.size)
-        f = np.sqrt(g) * rng.standard_normal(g.size)
-        return self.v - lin.r + lin.A @ f + self.sigma * z
-
-    def simulated_likelihood(self, eps, rng):
-        """:meth:`profiled_likelihood` of :meth:`simulated_data` at ``eps`` (a new model
-        with this one's force scale ``a0``)."""
-        sim = RandomForceModel(self.problem, self.sigma, self.prior, self.sigma_label)
-        sim.v = self.simulated_data(eps, rng)
-        sim.a0 = self.a0
-        return sim.profiled_likelihood()
 
 
 def rms(g):

@@ -496,7 +496,8 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
         :mod:`~.profile_calibration`) where the chi-squared one does not hold: a
         re-optimized parameter at its bound along the profile (a ridge to a bound), a
         near-singular model. Gaussian least-squares likelihoods and the random-force
-        ECFM's (simulated with the profiled tau); 2-3 simulated thresholds per end, each
+        ECFM's (its forces simulated with the profiled tau where the data reject tau = 0,
+        else none); 2-3 simulated thresholds per end, each
         ``2 * n_simulations`` small fits.
     n_simulations : int
         Simulated data sets per calibrated threshold (at least 20).

@@ -29,11 +29,11 @@ steps overshoot. Typically 2-4 thresholds are simulated per end.
 A likelihood that simulates its own data (``like.simulate``: the random-force ECFM's
 marginal likelihood with :math:`\\tau` re-estimated at every :math:`\\epsilon`) is
 simulated by its model instead: at :math:`(t, \\hat\\nu(t))` the forces are drawn with
-the profiled :math:`\\hat\\tau(t)` (the constrained estimate of every nuisance, as a
-parametric bootstrap test does; 0 where :math:`\\hat\\tau(t) = 0`) and the noise with the
-known :math:`\\sigma`, and each data set is refitted by L-BFGS-B on the random-force
-likelihood's gradient (:func:`simulated_threshold_by_model`; the same seeds at every
-:math:`t`).
+the profiled :math:`\\hat\\tau(t)` where the data there reject :math:`\\tau = 0`, else
+with :math:`\\tau = 0` (a nuisance at its bound: ``simulation_variances`` of
+:mod:`ecfm_uq.inverse.formulations.random_force_simulation`), the noise with the known
+:math:`\\sigma`, and each data set is refitted by L-BFGS-B on the random-force likelihood's gradient
+(:func:`simulated_threshold_by_model`; the same seeds at every :math:`t`).
 """
 
 from __future__ import annotations
