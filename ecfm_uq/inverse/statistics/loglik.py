@@ -79,8 +79,8 @@ class LogLikelihood:
     #: force scale tau >= 0): ``nuisance(eps)`` its re-estimate at ``eps`` and the
     #: variance term there (half the log-determinant of the data covariance), and
     #: ``simulate(eps, rng)`` the same likelihood of data simulated from the model at
-    #: ``eps`` (with that re-estimate), so profiles can flag where it reaches its bound
-    #: and calibrate their threshold by simulation
+    #: ``eps``, so profiles can flag where it shapes an interval and calibrate their
+    #: threshold by simulation
     nuisance: Callable | None = None
     simulate: Callable | None = None
 

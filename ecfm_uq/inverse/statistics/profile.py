@@ -497,8 +497,8 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
         re-optimized parameter at its bound along the profile (a ridge to a bound), a
         near-singular model. Gaussian least-squares likelihoods and the random-force
         ECFM's (its forces simulated with the profiled tau where the data reject tau = 0,
-        else none); 2-3 simulated thresholds per end, each
-        ``2 * n_simulations`` small fits.
+        else none); 2-3 simulated thresholds per end, each ``2 * n_simulations`` small
+        fits.
     n_simulations : int
         Simulated data sets per calibrated threshold (at least 20).
     seed : int

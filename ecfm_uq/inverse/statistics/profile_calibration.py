@@ -32,8 +32,9 @@ simulated by its model instead: at :math:`(t, \\hat\\nu(t))` the forces are draw
 the profiled :math:`\\hat\\tau(t)` where the data there reject :math:`\\tau = 0`, else
 with :math:`\\tau = 0` (a nuisance at its bound: ``simulation_variances`` of
 :mod:`ecfm_uq.inverse.formulations.random_force_simulation`), the noise with the known
-:math:`\\sigma`, and each data set is refitted by L-BFGS-B on the random-force likelihood's gradient
-(:func:`simulated_threshold_by_model`; the same seeds at every :math:`t`).
+:math:`\\sigma`, and each data set is refitted by L-BFGS-B on the random-force
+likelihood's gradient (:func:`simulated_threshold_by_model`; the same seeds at every
+:math:`t`).
 """
 
 from __future__ import annotations

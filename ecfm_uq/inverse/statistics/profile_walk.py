@@ -17,14 +17,7 @@ from ...errors import ConvergenceError, ModelEvaluationError
 from ..core.convergence import at_bound as bounds_hit
 from ..core.finite_differences import fd_gradient
 
-__all__ = [
-    "MODEL_FAILURES",
-    "Profiler",
-    "beyond",
-    "bound_touches",
-    "profile_concerns",
-    "walk",
-]
+__all__ = ["MODEL_FAILURES", "Profiler", "beyond", "bound_touches", "profile_concerns", "walk"]
 
 MODEL_FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError)
 #: the likelihood increase standing in for "the model fails here"
