@@ -145,6 +145,81 @@ def test_where_a_nuisance_first_reaches_its_bound_beyond_an_end_is_located():
     assert c.startswith("eps[0] reaches its lower bound -9.7 beyond the lower end")
 
 
+def test_a_nuisance_variance_along_the_profile_is_evidence():
+    """The random-force ECFM's tau-hat re-estimated at each profile point (``nuisance``:
+    tau-hat and the variance term 1/2 log det S): positive inside the interval with the
+    variance term moving by more than half the threshold, or 0 at some points and
+    positive at others, is a concern; tau-hat = 0 throughout, a variance term that moves
+    by less, or points outside the interval are not; a calibrated threshold has none."""
+    values = np.array([-3.0, -2.0, -1.0, 0.0, 1.0, 2.0, 3.0])
+    delta = 0.5 * values**2
+    eps = np.column_stack([values, np.zeros(values.size)])
+    args = (0, values, delta, eps, (-2.0, 2.0), ("crossed", "crossed"), [(-2.0, 2.0)], 1.92,
+            [(-10.0, 10.0), (-10.0, 10.0)])  # fmt: skip
+    none = np.zeros((values.size, 2))
+    assert profile_concerns(*args, nuisance=none) == ()
+    moving = np.column_stack([np.full(values.size, 5.0), 0.6 * values])  # span 2.4 > 0.96
+    (c,) = profile_concerns(*args, nuisance=moving)
+    assert c.startswith("the variance term (1/2 log det of the data covariance, tau-hat up to 5)")
+    assert "changes by 4.8 (in 2*delta) inside the interval of eps[0]" in c
+    assert profile_concerns(*args, nuisance=moving, calibrated=True) == ()
+    still = moving * [1.0, 0.2]  # the variance term moves by 0.48 < 0.96: no concern
+    assert profile_concerns(*args, nuisance=still) == ()
+    kink = still.copy()
+    kink[:3, 0] = 0.0  # tau-hat 0 at t = -3, -2, -1: at its bound inside the interval
+    (c,) = profile_concerns(*args, nuisance=kink)
+    assert c.startswith("the nuisance tau-hat is 0 at part of the interval of eps[0]")
+    outside = still.copy()
+    outside[0, 0] = 0.0  # only at t = -3, outside [-2, 2]
+    assert profile_concerns(*args, nuisance=outside) == ()
+
+
+def _ridge_rod_system():
+    """Issue 37's ridge as a Galerkin rod: -kappa w'' + c w = s, kappa pi^2 = 50.5, read
+    at five points, hat forces there (the slow test below)."""
+    B = SineBasis(16)
+    xs = np.linspace(0.2, 0.8, 5)
+    terms = [LinearTerm(50.5 / np.pi**2 * stiffness(B)), LinearTerm(mass(B),
+             Coefficient.parameter(0)), LoadTerm.scaled(-load(B, np.ones_like),
+             Coefficient.parameter(1))]  # fmt: skip
+    return GalerkinSystem(terms, 2, Gamma=hat_forces(B, xs, 0.05)), sensor_matrix(B, xs)
+
+
+def _ridge_data(system, M, truth, n):
+    """The n-th data set (from 0) of the stream default_rng(1), 2 % noise."""
+    y0 = M @ solve_steady(system, truth, strict=True).Theta[:, 0]
+    sigma = 0.02 * np.abs(y0).mean()
+    rng = np.random.default_rng(1)
+    for _ in range(n + 1):
+        y = y0 + sigma * rng.standard_normal(y0.size)
+    return y, sigma
+
+
+@pytest.mark.parametrize("n, fires", [(5, True), (0, False)])
+def test_a_random_force_interval_shaped_by_tau_is_flagged(n, fires):
+    """Data set 5 of the ridge: tau-hat = 165, the estimate far up the ridge (c = -30.9),
+    c's interval [-48.0, -4.2] misses the truth -50 with the bound outside the joint
+    region (2*delta = 7.3 there: no bound concern) -- the variance term moves by more
+    than the threshold inside it, and the interval is flagged. Data set 0: tau-hat = 0
+    along the whole profile (the standard likelihood): no such concern."""
+    system, M = _ridge_rod_system()
+    truth = np.array([-50.0, 10.0])
+    y, sigma = _ridge_data(system, M, truth, n)
+    res = fit(SteadyProblem(system, M, y), truth, formulation="ecfm-random", sigma=sigma,
+              bounds=[(-50.0, 2000.0), (0.01, 1e5)])  # fmt: skip
+    prof = profile_likelihood(res, which=[0])
+    concerns = prof.profiles[0].concerns
+    assert any(c.startswith("the variance term") for c in concerns) is fires, concerns
+    if fires:
+        assert res.extra["tau"] > 100
+        lo, hi = prof.intervals[0]
+        assert -49 < lo < -46 and -6 < hi < -2  # the miss
+        assert not any("bound" in c for c in concerns), concerns
+        assert "threshold='calibrated'" in prof.message
+    else:
+        assert res.extra["tau"] == 0.0
+
+
 @pytest.mark.slow
 def test_random_force_misses_on_a_ridge_to_a_bound_are_flagged_or_have_a_discrepancy():
     """Issue 37's ridge: -kappa w'' + c w = s read at five points, kappa pi^2 = 50.5, the
@@ -153,7 +228,8 @@ def test_random_force_misses_on_a_ridge_to_a_bound_are_flagged_or_have_a_discrep
     and 0.83 of 120 data sets, docs/calibration.md): every miss of a fit with tau-hat = 0
     (the standard likelihood) is flagged by a bound inside the joint region; the misses
     left unflagged are those with a discrepancy estimated (tau-hat > 0), which pushes the
-    estimate up the ridge, away from the bound."""
+    estimate up the ridge, away from the bound; those are flagged by tau-hat's variance
+    term changing inside the interval (every miss flagged)."""
     B = SineBasis(16)
     xs = np.linspace(0.2, 0.8, 5)
     terms = [LinearTerm(50.5 / np.pi**2 * stiffness(B)), LinearTerm(mass(B),
@@ -179,3 +255,5 @@ def test_random_force_misses_on_a_ridge_to_a_bound_are_flagged_or_have_a_discrep
     for tau, flagged in misses:
         assert flagged or tau > 0, misses
     assert any(flagged and tau == 0 for tau, flagged in misses), misses
+    # and with tau-hat > 0 the variance term along the profile flags them too: every miss
+    assert all(flagged for _, flagged in misses), misses

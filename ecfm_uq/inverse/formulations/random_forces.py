@@ -78,6 +78,7 @@ from __future__ import annotations
 import functools
 from collections import OrderedDict
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 from scipy import optimize, stats
@@ -100,6 +101,7 @@ from ..statistics.verdict import decide
 from .random_force_gradient import profiled_gradient, second_sensitivities
 from .random_force_search import FAILURES as _FAILURES
 from .random_force_search import Search
+from .random_force_simulation import nuisance_at, simulated_likelihood
 from .sparse_forces import sparse_force_variances
 from .steady import fit_steady_problem
 
@@ -383,7 +385,8 @@ class RandomForceModel:
             self._checked_gradient, self.system.n_eps, self.v.size, "random forces",
             f"marginal likelihood, Gaussian noise {self.sigma_label} and random forces, "
             "tau re-estimated (REML) at every eps",
-            exact_gradient=False,
+            exact_gradient=False, nuisance=partial(nuisance_at, self),
+            simulate=partial(simulated_likelihood, self),
         )  # fmt: skip
 
     def restricted_test(self, lin, n_sim=_N_SIM):

@@ -75,6 +75,14 @@ class LogLikelihood:
     residual: Callable | None = None
     residual_jacobian: Callable | None = None
     of_rss: Callable | None = None
+    #: for a likelihood with a variance profiled out inside it (the random-force ECFM's
+    #: force scale tau >= 0): ``nuisance(eps)`` its re-estimate at ``eps`` and the
+    #: variance term there (half the log-determinant of the data covariance), and
+    #: ``simulate(eps, rng)`` the same likelihood of data simulated from the model at
+    #: ``eps``, so profiles can flag where it shapes an interval and calibrate their
+    #: threshold by simulation
+    nuisance: Callable | None = None
+    simulate: Callable | None = None
 
     def __call__(self, eps):
         return self.evaluate(np.asarray(eps, dtype=float))

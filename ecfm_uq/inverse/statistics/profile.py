@@ -455,6 +455,7 @@ def _profiles(prof, which, threshold, z, bnds, max_steps, delta_ci, n_scan, simu
         concerns = profile_concerns(
             i, values, delta, eps, (ends[0], ends[1]), reasons, regions, threshold[i], bnds,
             prof.unconverged, calibration is not None, None if joint is None else joint[i],
+            prof.nuisance_along(eps) if calibration is None else None,
         )  # fmt: skip
         if calibration is not None:
             calibration = Calibration(*calibration, np.array(chi2_ends, dtype=float))
@@ -494,8 +495,10 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
         threshold simulated at each end (parametric bootstrap from the profiled point,
         :mod:`~.profile_calibration`) where the chi-squared one does not hold: a
         re-optimized parameter at its bound along the profile (a ridge to a bound), a
-        near-singular model. Gaussian least-squares likelihoods only; 2-3 simulated
-        thresholds per end, each ``2 * n_simulations`` small fits.
+        near-singular model. Gaussian least-squares likelihoods and the random-force
+        ECFM's (its forces simulated with the profiled tau where the data reject tau = 0,
+        else none); 2-3 simulated thresholds per end, each ``2 * n_simulations`` small
+        fits.
     n_simulations : int
         Simulated data sets per calibrated threshold (at least 20).
     seed : int
@@ -611,7 +614,8 @@ def profile_likelihood(result, level=0.95, *, which=None, bounds=None, max_steps
         if prof_i.concerns:
             notes.append(
                 f"eps[{i}] interval not trusted: " + "; ".join(prof_i.concerns)
-                + ("" if cal is not None or not any("bound" in c for c in prof_i.concerns)
+                + ("" if cal is not None or not any("bound" in c or "tau" in c
+                                                    for c in prof_i.concerns)
                    else "; threshold='calibrated' simulates the threshold at the ends")
             )  # fmt: skip
     regions = {i: list(prof_i.regions) for i, prof_i in profiles.items()}

@@ -15,8 +15,8 @@ the statistics :math:`\\ell^*_p(t) - \\hat\\ell^*` (the :math:`\\lceil
 threshold there. The interval's end is where the profile meets it,
 :math:`\\ell_p(t) - \\hat\\ell = c(t)`.
 
-Only a Gaussian least-squares likelihood is simulated (the whitened residual
-:math:`r(\\epsilon)`): data simulated from :math:`\\epsilon_t` have the residual
+A Gaussian least-squares likelihood is simulated through its whitened residual
+:math:`r(\\epsilon)`: data simulated from :math:`\\epsilon_t` have the residual
 :math:`r(\\epsilon) - r(\\epsilon_t) + \\hat\\sigma z`, :math:`z \\sim N(0, I)`
 (:math:`\\hat\\sigma = 1` with the noise known, else the fit's residual estimate), so a
 simulation costs two small Levenberg-Marquardt fits warm-started at :math:`\\epsilon_t` and
@@ -25,6 +25,16 @@ numbers): :math:`c(t)` is then a smooth function of :math:`t` and the end is fou
 fixed-point steps :math:`t_{k+1} = T(c(t_k))`, :math:`T(c)` the profile's crossing of the
 constant level :math:`c` (:func:`~.profile_walk.walk`, no simulation), bisecting where the
 steps overshoot. Typically 2-4 thresholds are simulated per end.
+
+A likelihood that simulates its own data (``like.simulate``: the random-force ECFM's
+marginal likelihood with :math:`\\tau` re-estimated at every :math:`\\epsilon`) is
+simulated by its model instead: at :math:`(t, \\hat\\nu(t))` the forces are drawn with
+the profiled :math:`\\hat\\tau(t)` where the data there reject :math:`\\tau = 0`, else
+with :math:`\\tau = 0` (a nuisance at its bound: ``simulation_variances`` of
+:mod:`ecfm_uq.inverse.formulations.random_force_simulation`), the noise with the known
+:math:`\\sigma`, and each data set is refitted by L-BFGS-B on the random-force
+likelihood's gradient (:func:`simulated_threshold_by_model`; the same seeds at every
+:math:`t`).
 """
 
 from __future__ import annotations
@@ -32,9 +42,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import optimize
 
 from ...errors import ConvergenceError
-from .profile_walk import MODEL_FAILURES, _levenberg_marquardt, walk
+from .profile_walk import MODEL_FAILURES, WALL, _levenberg_marquardt, walk
 
 __all__ = [
     "Calibration",
@@ -44,6 +55,7 @@ __all__ = [
     "check_calibratable",
     "order_statistic",
     "simulated_threshold",
+    "simulated_threshold_by_model",
 ]
 
 #: fixed-point steps (thresholds simulated) per interval end
@@ -81,19 +93,24 @@ class Calibration:
 
 
 def check_calibratable(like):
-    """Raise ValueError unless ``like`` is a Gaussian least-squares likelihood."""
+    """Raise ValueError unless ``like`` is a Gaussian least-squares likelihood or one that
+    simulates its own data (``like.simulate``: the random-force ECFM's)."""
+    if like.simulate is not None:
+        return
     if like.residual is None or like.noise not in ("known sigma", "profiled sigma"):
         raise ValueError(
-            "threshold='calibrated' simulates data from a Gaussian least-squares likelihood; "
+            "threshold='calibrated' simulates data from a Gaussian least-squares likelihood "
+            "or the random-force ECFM's marginal one; "
             f"this fit's is {like.description!r} ({like.noise}, "
             f"{'no' if like.residual is None else 'a'} residual): use threshold='chi2'"
         )
 
 
 def noise_scale(like, ell_hat):
-    """The simulated noise in the whitened residual's units: 1 with sigma known, else
+    """The simulated noise in the whitened residual's units: 1 with sigma known (or a
+    likelihood that simulates its own data), else
     :math:`\\sqrt{S(\\hat\\epsilon)/(n - p)}`."""
-    if like.noise == "known sigma":
+    if like.noise != "profiled sigma":
         return 1.0
     rss = float(np.exp(2.0 * ell_hat / like.n_data))  # ell = n/2 log S
     return float(np.sqrt(rss / (like.n_data - like.n_eps)))
@@ -239,15 +256,80 @@ def _nearest(prof, i, t):
     return prof.visited[int(np.argmin(np.abs(v - t)))]
 
 
+def _minimize(like, start, free, scale, bounds):
+    """(value, eps): ``like`` minimized over ``eps[free]`` from ``start`` by L-BFGS-B on
+    its gradient (the inner fits of a likelihood without a residual)."""
+    s = scale[free]
+    box = [((bounds[j][0] - start[j]) / scale[j], (bounds[j][1] - start[j]) / scale[j])
+           for j in free]  # fmt: skip
+
+    def point(x):
+        e = np.array(start, dtype=float)
+        e[free] = start[free] + s * x
+        return e
+
+    def fun(x):
+        try:
+            val, g = like(point(x))
+        except MODEL_FAILURES:
+            return WALL, np.zeros(free.size)
+        if not np.isfinite(val):
+            return WALL, np.zeros(free.size)
+        return val, g[free] * s
+
+    res = optimize.minimize(fun, np.zeros(free.size), jac=True, method="L-BFGS-B", bounds=box,
+                            options={"ftol": 1e-12, "gtol": 1e-6, "maxiter": 500})  # fmt: skip
+    return float(res.fun), point(res.x)
+
+
+def simulated_threshold_by_model(like, i, eps_t, seeds, level, scale, bounds, memory=None):
+    """:func:`simulated_threshold` of a likelihood that simulates its own data
+    (``like.simulate(eps, rng)``, the random-force ECFM's: noise and forces drawn at
+    ``eps_t`` with the nuisance re-estimated there), one data set per seed; each is
+    fitted with and without ``eps[i] = eps_t[i]`` by L-BFGS-B (the full fit from the
+    constrained optimum or this seed's previous full optimum, the lower)."""
+    memory = {} if memory is None else memory
+    n = like.n_eps
+    others = np.setdiff1d(np.arange(n), [i])
+    stat = np.empty(len(seeds))
+    for k, sd in enumerate(seeds):
+        sim = like.simulate(eps_t, np.random.default_rng(sd))
+        if others.size:
+            v_con, e_con = _minimize(sim, eps_t, others, scale, bounds)
+        else:
+            v_con, e_con = sim.value(eps_t), eps_t
+        start, v_start = e_con, v_con
+        if k in memory:
+            try:
+                v_mem = sim.value(memory[k])
+                if v_mem < v_start:
+                    start, v_start = memory[k], v_mem
+            except MODEL_FAILURES:
+                pass
+        v_full, e_full = _minimize(sim, start, np.arange(n), scale, bounds)
+        memory[k] = e_full
+        stat[k] = v_con - min(v_full, v_start, v_con)
+    return bootstrap_quantile(stat, level)
+
+
 def simulator(like, i, level, scale, bounds, sigma, n_simulations, seed):
     """``simulate(t, eps_t)`` for parameter ``i`` with common random numbers."""
-    Z = sigma * np.random.default_rng([seed, i]).standard_normal((n_simulations, like.n_data))
-
     memory = {}
+    if like.simulate is not None:
+        # the model draws its own noise and forces: the same seeds at every t
+        seeds = [[seed, i, k] for k in range(n_simulations)]
+
+        def threshold(eps_t):
+            return simulated_threshold_by_model(like, i, eps_t, seeds, level, scale, bounds,
+                                                memory)  # fmt: skip
+    else:
+        Z = sigma * np.random.default_rng([seed, i]).standard_normal((n_simulations, like.n_data))
+
+        def threshold(eps_t):
+            return simulated_threshold(like, i, eps_t, Z, level, scale, bounds, memory)
 
     def simulate(t, eps_t):
-        c = simulated_threshold(like, i, np.asarray(eps_t, dtype=float), Z, level, scale,
-                                bounds, memory)  # fmt: skip
+        c = threshold(np.asarray(eps_t, dtype=float))
         if not np.isfinite(c):
             raise ConvergenceError(
                 f"the simulated likelihood-ratio statistics at eps[{i}]={t:.6g} are not finite"

@@ -125,6 +125,20 @@ class Profiler:
         self.visited.append(eps.copy())
         return float(res.fun) - self.ell_hat, eps
 
+    def nuisance_along(self, eps):
+        """(k, 2) array of ``like.nuisance`` (the re-estimated nuisance and the variance
+        term) at each row of ``eps``, NaN where the model cannot be solved; None for a
+        likelihood without one."""
+        if self.like.nuisance is None:
+            return None
+        out = np.full((len(eps), 2), np.nan)
+        for k, e in enumerate(eps):
+            try:
+                out[k] = self.like.nuisance(e)
+            except MODEL_FAILURES:
+                pass
+        return out
+
     def _least_squares(self, point, free, s, x_start, bnds):
         """The inner problem of a Gaussian likelihood by trust-region least squares on its
         residual (the Jacobian's free columns only: a differenced model pays for those)."""
@@ -420,8 +434,41 @@ def bound_touches(prof, i, pts, ends, bounds):
 MONOTONE_RTOL = 0.01
 
 
+#: a change of the variance term (half the log-determinant of the data covariance) inside
+#: an interval larger than this fraction of the threshold: the interval rests on the
+#: re-estimated nuisance variance
+NUISANCE_FRACTION = 0.5
+
+
+def _nuisance_concerns(i, nuisance, inside, threshold):
+    """A nuisance variance (tau >= 0) re-estimated along the profile: at its bound in part
+    of the interval, or shaping it through the variance term."""
+    if nuisance is None or not inside.any():
+        return []
+    tau, half_logdet = nuisance[inside, 0], nuisance[inside, 1]
+    tau, half_logdet = tau[np.isfinite(tau)], half_logdet[np.isfinite(half_logdet)]
+    out = []
+    if np.any(tau == 0) and np.any(tau > 0):
+        out.append(
+            f"the nuisance tau-hat is 0 at part of the interval of eps[{i}] and positive at "
+            "another (a nuisance at its bound, a kink in the profile): the chi-squared "
+            "threshold does not hold there"
+        )
+    if np.any(tau > 0) and half_logdet.size:
+        span = float(np.max(half_logdet) - np.min(half_logdet))
+        if span > NUISANCE_FRACTION * threshold:
+            out.append(
+                f"the variance term (1/2 log det of the data covariance, tau-hat up to "
+                f"{np.max(tau):.3g}) changes by {2 * span:.3g} (in 2*delta) inside the "
+                f"interval of eps[{i}], more than {NUISANCE_FRACTION:g} of the threshold: "
+                "the interval rests on tau re-estimated from the few error contrasts, and "
+                "the chi-squared threshold need not hold"
+            )
+    return out
+
+
 def profile_concerns(i, values, delta, eps, main, reasons, regions, threshold, bounds,
-                     unconverged=(), calibrated=False, joint=None):  # fmt: skip
+                     unconverged=(), calibrated=False, joint=None, nuisance=None):  # fmt: skip
     """The profile's own evidence against the interval of parameter ``i``.
 
     An interval from the chi-squared (or profile-t) threshold is what it says only where
@@ -457,6 +504,14 @@ def profile_concerns(i, values, delta, eps, main, reasons, regions, threshold, b
         below this: the bound is then inside the region of parameters the data do not
         exclude, and the chi-squared threshold, which assumes an interior optimum with
         room around it, need not hold (a likelihood ridge running to a bound).
+    nuisance : (k, 2) ndarray, optional
+        A nuisance variance re-estimated at each point (:meth:`Profiler.nuisance_along`: the
+        random-force ECFM's :math:`\\hat\\tau` and half the log-determinant of the data
+        covariance). Inside the interval, :math:`\\hat\\tau` at its bound 0 at some points
+        and positive at others (a kink), or positive with the variance term changing by
+        more than ``NUISANCE_FRACTION`` of ``threshold`` (the interval is then shaped by
+        the variance model, whose :math:`\\tau` rests on a few error contrasts), is
+        evidence against a chi-squared interval.
     """
     concerns = [
         f"{side} end open" for side, r in zip(("lower", "upper"), reasons, strict=True)
@@ -500,6 +555,8 @@ def profile_concerns(i, values, delta, eps, main, reasons, regions, threshold, b
                         "need not hold so near a bound"
                     )
                 break
+    if not calibrated:
+        concerns += _nuisance_concerns(i, nuisance, inside, threshold)
     bad = [v[0] for f, v in unconverged if f == (i,) and lo <= v[0] <= hi]
     if bad:
         concerns.append(f"{len(bad)} inner fit(s) inside the interval did not converge")
