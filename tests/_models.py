@@ -4,6 +4,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ecfm_uq.chaos import ChaosBasis, weighted_gram
+from ecfm_uq.spectral import SineBasis, hat_forces, load, mass, sensor_matrix, stiffness
 from ecfm_uq.system import (
     Coefficient,
     GalerkinSystem,
@@ -11,6 +12,7 @@ from ecfm_uq.system import (
     LoadTerm,
     NonlinearTerm,
     QuadraticTerm,
+    solve_steady,
 )
 
 
@@ -152,3 +154,26 @@ def borehole_indices(nodes=(10, 100, 5, 2, 8, 2, 8, 8)):
             cond = np.tensordot(cond, ws[others[k]], axes=([k], [0]))
         T[i] = cond / V
     return S, T
+
+
+def ridge_rod():
+    """Issue 37's ridge as a Galerkin rod: -kappa w'' + c w = s, kappa pi^2 = 50.5 (the
+    operator singular at c = -50.5), 16 sine modes, read at five points in [0.2, 0.8] with
+    hat forces there: ``(system, M)``."""
+    B = SineBasis(16)
+    xs = np.linspace(0.2, 0.8, 5)
+    terms = [LinearTerm(50.5 / np.pi**2 * stiffness(B)), LinearTerm(mass(B),
+             Coefficient.parameter(0)), LoadTerm.scaled(-load(B, np.ones_like),
+             Coefficient.parameter(1))]  # fmt: skip
+    return GalerkinSystem(terms, 2, Gamma=hat_forces(B, xs, 0.05)), sensor_matrix(B, xs)
+
+
+def ridge_data(system, M, truth, n, seed=1):
+    """The ``n``-th data set (from 0) of the stream ``default_rng(seed)``, 2 % noise:
+    ``(y, sigma)``."""
+    y0 = M @ solve_steady(system, truth, strict=True).Theta[:, 0]
+    sigma = 0.02 * np.abs(y0).mean()
+    rng = np.random.default_rng(seed)
+    for _ in range(n + 1):
+        y = y0 + sigma * rng.standard_normal(y0.size)
+    return y, sigma

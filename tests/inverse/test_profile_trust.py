@@ -6,11 +6,10 @@ the parameter's bound."""
 
 import numpy as np
 import pytest
+from _models import ridge_data, ridge_rod
 
 from ecfm_uq.inverse import ModelProblem, SteadyProblem, fit, profile_likelihood
 from ecfm_uq.inverse.statistics.profile import profile_concerns
-from ecfm_uq.spectral import SineBasis, hat_forces, load, mass, sensor_matrix, stiffness
-from ecfm_uq.system import Coefficient, GalerkinSystem, LinearTerm, LoadTerm, solve_steady
 
 S = np.array([0.02, 0.02, 0.06, 0.06, 0.11, 0.11, 0.22, 0.22, 0.56, 0.56, 1.10, 1.10])
 RATE = np.array([76, 47, 97, 107, 123, 139, 159, 152, 191, 201, 207, 200], dtype=float)
@@ -174,27 +173,6 @@ def test_a_nuisance_variance_along_the_profile_is_evidence():
     assert profile_concerns(*args, nuisance=outside) == ()
 
 
-def _ridge_rod_system():
-    """Issue 37's ridge as a Galerkin rod: -kappa w'' + c w = s, kappa pi^2 = 50.5, read
-    at five points, hat forces there (the slow test below)."""
-    B = SineBasis(16)
-    xs = np.linspace(0.2, 0.8, 5)
-    terms = [LinearTerm(50.5 / np.pi**2 * stiffness(B)), LinearTerm(mass(B),
-             Coefficient.parameter(0)), LoadTerm.scaled(-load(B, np.ones_like),
-             Coefficient.parameter(1))]  # fmt: skip
-    return GalerkinSystem(terms, 2, Gamma=hat_forces(B, xs, 0.05)), sensor_matrix(B, xs)
-
-
-def _ridge_data(system, M, truth, n):
-    """The n-th data set (from 0) of the stream default_rng(1), 2 % noise."""
-    y0 = M @ solve_steady(system, truth, strict=True).Theta[:, 0]
-    sigma = 0.02 * np.abs(y0).mean()
-    rng = np.random.default_rng(1)
-    for _ in range(n + 1):
-        y = y0 + sigma * rng.standard_normal(y0.size)
-    return y, sigma
-
-
 @pytest.mark.parametrize("n, fires", [(5, True), (0, False)])
 def test_a_random_force_interval_shaped_by_tau_is_flagged(n, fires):
     """Data set 5 of the ridge: tau-hat = 165, the estimate far up the ridge (c = -30.9),
@@ -202,9 +180,9 @@ def test_a_random_force_interval_shaped_by_tau_is_flagged(n, fires):
     region (2*delta = 7.3 there: no bound concern) -- the variance term moves by more
     than the threshold inside it, and the interval is flagged. Data set 0: tau-hat = 0
     along the whole profile (the standard likelihood): no such concern."""
-    system, M = _ridge_rod_system()
+    system, M = ridge_rod()
     truth = np.array([-50.0, 10.0])
-    y, sigma = _ridge_data(system, M, truth, n)
+    y, sigma = ridge_data(system, M, truth, n)
     res = fit(SteadyProblem(system, M, y), truth, formulation="ecfm-random", sigma=sigma,
               bounds=[(-50.0, 2000.0), (0.01, 1e5)])  # fmt: skip
     prof = profile_likelihood(res, which=[0])
@@ -230,20 +208,11 @@ def test_random_force_misses_on_a_ridge_to_a_bound_are_flagged_or_have_a_discrep
     left unflagged are those with a discrepancy estimated (tau-hat > 0), which pushes the
     estimate up the ridge, away from the bound; those are flagged by tau-hat's variance
     term changing inside the interval (every miss flagged)."""
-    B = SineBasis(16)
-    xs = np.linspace(0.2, 0.8, 5)
-    terms = [LinearTerm(50.5 / np.pi**2 * stiffness(B)), LinearTerm(mass(B),
-             Coefficient.parameter(0)), LoadTerm.scaled(-load(B, np.ones_like),
-             Coefficient.parameter(1))]  # fmt: skip
-    system = GalerkinSystem(terms, 2, Gamma=hat_forces(B, xs, 0.05))
-    M = sensor_matrix(B, xs)
+    system, M = ridge_rod()
     truth = np.array([-50.0, 10.0])
-    y0 = M @ solve_steady(system, truth, strict=True).Theta[:, 0]
-    sigma = 0.02 * np.abs(y0).mean()
-    rng = np.random.default_rng(1)
     misses = []
-    for _ in range(20):
-        y = y0 + sigma * rng.standard_normal(y0.size)
+    for n in range(20):
+        y, sigma = ridge_data(system, M, truth, n)
         res = fit(SteadyProblem(system, M, y), truth, formulation="ecfm-random", sigma=sigma,
                   bounds=[(-50.0, 2000.0), (0.01, 1e5)])  # fmt: skip
         prof = profile_likelihood(res)

@@ -4,6 +4,7 @@ refitted by the random-force likelihood with and without the profiled value."""
 
 import numpy as np
 import pytest
+from _models import ridge_data, ridge_rod
 
 from ecfm_uq.inverse import SteadyProblem, fit, likelihood_ratio_test, profile_likelihood
 from ecfm_uq.inverse.formulations.random_force_simulation import (
@@ -13,29 +14,16 @@ from ecfm_uq.inverse.formulations.random_force_simulation import (
 from ecfm_uq.inverse.formulations.random_forces import RandomForceModel
 from ecfm_uq.inverse.statistics.profile import _scales
 from ecfm_uq.inverse.statistics.profile_calibration import simulated_threshold_by_model
-from ecfm_uq.spectral import SineBasis, hat_forces, load, mass, sensor_matrix, stiffness
-from ecfm_uq.system import Coefficient, GalerkinSystem, LinearTerm, LoadTerm, solve_steady
+from ecfm_uq.system import solve_steady
 
 TRUTH = np.array([-50.0, 10.0])
 BOUNDS = [(-50.0, 2000.0), (0.01, 1e5)]
 
 
 def _ridge(n):
-    """Issue 37's ridge (tests/inverse/test_profile_trust.py): -kappa w'' + c w = s,
-    kappa pi^2 = 50.5, five sensors with hat forces; data set n of default_rng(1)."""
-    B = SineBasis(16)
-    xs = np.linspace(0.2, 0.8, 5)
-    terms = [LinearTerm(50.5 / np.pi**2 * stiffness(B)), LinearTerm(mass(B),
-             Coefficient.parameter(0)), LoadTerm.scaled(-load(B, np.ones_like),
-             Coefficient.parameter(1))]  # fmt: skip
-    system = GalerkinSystem(terms, 2, Gamma=hat_forces(B, xs, 0.05))
-    M = sensor_matrix(B, xs)
-    y0 = M @ solve_steady(system, TRUTH, strict=True).Theta[:, 0]
-    sigma = 0.02 * np.abs(y0).mean()
-    rng = np.random.default_rng(1)
-    for _ in range(n + 1):
-        y = y0 + sigma * rng.standard_normal(y0.size)
-    return system, M, y, sigma
+    """Issue 37's ridge (``_models.ridge_rod``), data set n of default_rng(1)."""
+    system, M = ridge_rod()
+    return (system, M, *ridge_data(system, M, TRUTH, n))
 
 
 def test_simulated_data_have_the_random_force_models_distribution():

@@ -49,6 +49,20 @@ _SCALAR_TOL = 1e-6  # the scalar search's root of p' to this (standard errors)
 _BRACKET_STEPS = 30  # expansions (or halvings after a failed solve) looking for a bracket
 
 
+def _armijo(p, x, step, val, slope):
+    """Backtracking from the full ``step``: ``(t, p(x + t step))`` at the first halving
+    where ``p`` falls by 1e-4 of the linear prediction ``t * slope`` below ``val``, or
+    ``None`` once ``t`` is below 1e-3."""
+    t = 1.0
+    while True:
+        trial = p(x + t * step)
+        if trial <= val + 1e-4 * t * slope:
+            return t, trial
+        t *= 0.5
+        if t < 1e-3:
+            return None
+
+
 class Search:
     """Minimizes the profiled marginal likelihood over eps in scaled coordinates
     ``x = (eps - eps_std) / scale``: L-BFGS-B with its exact gradient and restarts,
@@ -311,14 +325,10 @@ class Search:
                     message=f"BFGS from the Hessian at the standard estimate ({k} steps)",
                 )  # fmt: skip
             step = -Hinv @ g
-            t = 1.0
-            while True:
-                trial = p(x + t * step)
-                if trial <= val + 1e-4 * t * float(g @ step):
-                    break
-                t *= 0.5
-                if t < 1e-3:
-                    return None
+            found = _armijo(p, x, step, val, float(g @ step))
+            if found is None:
+                return None
+            t, trial = found
             try:
                 g_new = grad(x + t * step)  # remembered: no solve
             except FAILURES:
@@ -496,13 +506,9 @@ class Search:
             step = -V @ ((V.T @ g) / w)
             if np.max(np.abs(step)) < _NEWTON_TOL:
                 return x, val, k + 1, True
-            t = 1.0
-            while True:
-                trial = p(x + t * step)
-                if trial <= val + 1e-4 * t * float(g @ step):
-                    break
-                t *= 0.5
-                if t < 1e-3:
-                    return x, val, k + 1, False
+            found = _armijo(p, x, step, val, float(g @ step))
+            if found is None:
+                return x, val, k + 1, False
+            t, trial = found
             x, val, last = x + t * step, trial, t * float(np.max(np.abs(step)))
         return x, val, _NEWTON_STEPS, False
