@@ -14,6 +14,8 @@ the threshold calibrated by simulation
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 __all__ = ["nuisance_at", "simulated_data", "simulated_likelihood", "simulation_variances"]
@@ -21,6 +23,11 @@ __all__ = ["nuisance_at", "simulated_data", "simulated_likelihood", "simulation_
 #: the level of the test of tau = 0 above which data are simulated with the re-estimated
 #: force variances (:func:`simulation_variances`)
 SIMULATION_ALPHA = 0.05
+
+
+#: simulation_variances per model and point (the model's own state left alone; a model
+#: no longer used drops its entries)
+_SIMULATION_VARIANCES = weakref.WeakKeyDictionary()
 
 
 def _rms(g):
@@ -49,7 +56,7 @@ def simulation_variances(model, eps):
     ridge, 30-200 with the truth 0), and data simulated with it carry a discrepancy many
     times the readings. Remembered per point on the model.
     """
-    memo = model.__dict__.setdefault("_simulation_variances", {})
+    memo = _SIMULATION_VARIANCES.setdefault(model, {})
     key = np.asarray(eps, dtype=float).tobytes()
     if key not in memo:
         _, g, lin = model.profiled(eps)

@@ -78,7 +78,6 @@ from __future__ import annotations
 import functools
 from collections import OrderedDict
 from dataclasses import dataclass, replace
-from functools import partial
 
 import numpy as np
 from scipy import optimize, stats
@@ -385,8 +384,8 @@ class RandomForceModel:
             self._checked_gradient, self.system.n_eps, self.v.size, "random forces",
             f"marginal likelihood, Gaussian noise {self.sigma_label} and random forces, "
             "tau re-estimated (REML) at every eps",
-            exact_gradient=False, nuisance=partial(nuisance_at, self),
-            simulate=partial(simulated_likelihood, self),
+            exact_gradient=False, nuisance=functools.partial(nuisance_at, self),
+            simulate=functools.partial(simulated_likelihood, self),
         )  # fmt: skip
 
     def restricted_test(self, lin, n_sim=_N_SIM):
