@@ -60,7 +60,8 @@ imports :mod:`.fitting`:
                     ``Fitter``'s steps and the ``Outcome`` it measures),
                     ``convergence`` (the one status decision),
                     ``drivers`` and ``optimizers`` (the optimizer calls), ``minpack``
-                    (MINPACK's Levenberg-Marquardt called directly), ``gradients``,
+                    (MINPACK's Levenberg-Marquardt called directly) and
+                    ``levenberg_marquardt`` (the driver around it), ``gradients``,
                     ``finite_differences``; the types handed around: ``settings`` (the
                     validated arguments), ``result`` (the one frozen result),
                     ``details`` (each formulation's typed ``result.extra``), ``series``

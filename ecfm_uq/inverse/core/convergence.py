@@ -146,6 +146,9 @@ class Optimality:
     test: str
     tol: float
     message: str
+    #: the least-squares test's Gauss-Newton step, relative to the parameters (the
+    #: distance to the optimum to first order; ``nan`` for the other tests)
+    step: float = math.nan
 
 
 def at_bound(eps, bounds, rtol=AT_BOUND_RTOL):
@@ -264,13 +267,13 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
         step = float((np.abs(delta) / ref).max())  # the method: np.max without its wrapper
     if offset <= tol and rank_ok:
         return Optimality(True, offset, "relative offset", tol,
-                          f"relative offset {offset:.1e} <= {tol:.0e}")  # fmt: skip
+                          f"relative offset {offset:.1e} <= {tol:.0e}", step)  # fmt: skip
     if step <= xtol:
         # on exactly parallel (scaled) columns this is a point of a whole set of optima:
         # first-order optimal, not unique; the uncertainty names the free combination
         note = "" if rank_ok else " (the Jacobian is rank-deficient: not a unique optimum)"
         return Optimality(True, step, "gauss-newton step", xtol,
-                          f"Gauss-Newton step {step:.1e} <= {xtol:.0e} relative{note}")  # fmt: skip
+                          f"Gauss-Newton step {step:.1e} <= {xtol:.0e} relative{note}", step)  # fmt: skip
     if np.isfinite(offset):
         value, test, t = offset, "relative offset", tol
         msg = (
@@ -290,7 +293,7 @@ def least_squares_optimality(r, J, eps, *, bounds=None, tol=OFFSET_TOL, xtol=XTO
             " (the Gauss-Newton step is over 1000 times the parameters: the minimum may lie at "
             "infinity, where the model flattens out)"
         )
-    return Optimality(False, value, test, t, msg)
+    return Optimality(False, value, test, t, msg, step)
 
 
 #: the last scaled SVD, ``(key, value)`` in one slot (replaced whole: thread-safe)
@@ -555,9 +558,11 @@ def decide_status(opt, exhausted, failure=None):
     return FitStatus.MAX_ITERATIONS if exhausted else FitStatus.STALLED
 
 
-def polish_least_squares(residual, eps, *, bounds=None, maxiter=20, tol=OFFSET_TOL, xtol=XTOL):
+def polish_least_squares(residual, eps, *, bounds=None, maxiter=20, tol=OFFSET_TOL, xtol=XTOL,
+                         step_tol=math.inf, first=None):  # fmt: skip
     """A few Levenberg-Marquardt steps from ``eps`` until :func:`least_squares_optimality`
-    holds (or they stop decreasing the sum of squares).
+    holds and its Gauss-Newton step is at most ``step_tol`` relative to the parameters (or
+    they stop decreasing the sum of squares).
 
     Parameters
     ----------
@@ -568,6 +573,11 @@ def polish_least_squares(residual, eps, *, bounds=None, maxiter=20, tol=OFFSET_T
     bounds : list of (lo, hi) or None
         Steps are clipped into the box.
     maxiter : int
+    step_tol : float
+        Steps go on where the test holds but its Gauss-Newton step is larger than this
+        (an estimate as accurate as the data's, not only statistically optimal).
+    first : tuple, optional
+        ``residual(eps)``, when the caller has it.
 
     Returns
     -------
@@ -580,12 +590,11 @@ def polish_least_squares(residual, eps, *, bounds=None, maxiter=20, tol=OFFSET_T
     """
     x = np.asarray(eps, dtype=float).copy()
     lo, hi = bounds_arrays(bounds, x.size)
-    ev = residual(x)
-    nfev = 1
+    ev, nfev = (residual(x), 1) if first is None else (first, 0)
     opt = least_squares_optimality(ev[0], ev[1], x, bounds=bounds, tol=tol, xtol=xtol)
     mu = 0.0  # a pure Gauss-Newton step first (quadratic convergence near the optimum)
     for _ in range(maxiter):
-        if opt.converged:
+        if opt.converged and not opt.step > step_tol:
             break
         r, J = ev[0], ev[1]
         cost = float(r @ r)

@@ -13,7 +13,6 @@ the status from them). An inner solve that fails at a trial point
 from __future__ import annotations
 
 import math
-import struct
 import warnings
 from dataclasses import dataclass, field
 
@@ -21,7 +20,6 @@ import numpy as np
 import scipy.optimize as sopt
 
 from ...errors import ConvergenceError
-from . import minpack
 from .convergence import (
     OFFSET_TOL,
     bounds_arrays,
@@ -34,16 +32,11 @@ __all__ = [
     "MINIMIZE_METHODS",
     "Outcome",
     "check_minimize_method",
-    "least_squares_lm",
     "least_squares_scaled",
     "minimize_scaled",
     "verify_least_squares",
 ]
 
-#: a float as the 8 bytes of a native float64 array element (``x.tobytes()``'s slots)
-_pack_double = struct.Struct("=d").pack
-#: MINPACK's relative difference step, sqrt(machine epsilon)
-_ROOT_EPS = float(np.sqrt(np.finfo(float).eps))
 
 #: gradient methods of scipy.optimize.minimize the reduced fits accept by name
 MINIMIZE_METHODS = ("BFGS", "CG", "L-BFGS-B", "TNC", "SLSQP", "Newton-CG", "trust-constr")
@@ -213,13 +206,17 @@ def minimize_scaled(evaluate, eps0, method, bounds, gtol, maxiter, options):
                    exhausted=exhausted, claimed=opt.converged)  # fmt: skip
 
 
-def verify_least_squares(out, residual, bounds, exhausted, *, polish, tol=OFFSET_TOL):
+def verify_least_squares(out, residual, bounds, exhausted, *, polish, tol=OFFSET_TOL,
+                         step_tol=math.inf):  # fmt: skip
     """Measure the least-squares optimality conditions at ``out.x``
     (:mod:`~ecfm_uq.inverse.core.convergence`), whatever the optimizer said.
 
     ``residual(eps) -> (r, J, payload)``. When the conditions do not hold and ``polish``
     is set and the optimizer stopped on its own (not ``exhausted`` its budget), a few
-    Levenberg-Marquardt steps are taken from ``out.x`` first. The returned
+    Levenberg-Marquardt steps are taken from ``out.x`` first; likewise where they hold
+    but the Gauss-Newton step is larger than ``step_tol`` relative to the parameters (an
+    optimizer stopped on a relative decrease of the sum of squares, the estimate then
+    brought to that accuracy). The returned
     :class:`Outcome` carries the measured optimality; its message keeps the optimizer's
     and adds the test's sentence when the two disagree (or after a polish).
     """
@@ -236,8 +233,10 @@ def verify_least_squares(out, residual, bounds, exhausted, *, polish, tol=OFFSET
     out.nfev += 1
     opt = least_squares_optimality(r, J, out.x, bounds=bounds, tol=tol)
     msg = out.message
-    if not opt.converged and polish and not exhausted:
-        x, (r, J, payload), opt2, n = polish_least_squares(residual, out.x, bounds=bounds, tol=tol)
+    if (not opt.converged or opt.step > step_tol) and polish and not exhausted:
+        x, (r, J, payload), opt2, n = polish_least_squares(
+            residual, out.x, bounds=bounds, tol=tol, step_tol=step_tol, first=(r, J, payload)
+        )
         out.nfev += n
         if float(r @ r) <= 2 * out.loss or opt2.converged:
             out.x, out.loss, out.payload, opt = np.asarray(x), 0.5 * float(r @ r), payload, opt2
@@ -426,236 +425,3 @@ def _counted(check, counts, known=None):
         return r, (J() if callable(J) else J), payload
 
     return judge
-
-
-#: options of the Levenberg-Marquardt driver (MINPACK's lmdif/lmder: :mod:`.minpack`)
-LM_KEYWORDS = ("polish", "ftol", "xtol", "gtol", "x_scale")
-#: MINPACK's default ``ftol`` here: the relative decrease of the sum of squares at its
-#: round-off level. With 1e-15 (below it) lmdif's last iterations hunt in rounding noise
-#: until ``xtol`` stops them: 7 of Michaelis-Menten's 29 evaluations, 24 of 91 of a
-#: saturating exponential's; with 1e-14 every NIST StRD problem still ends CONVERGED at
-#: its certified values (1e-6) from both starts, the estimates within 1e-6 standard
-#: errors of the 1e-15 run's (9e-7 relative at most, ENSO).
-LM_FTOL = 1e-14
-
-
-def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differences=False):
-    """MINPACK's Levenberg-Marquardt (:func:`~.minpack.lm`: scipy's compiled lmder with the
-    Jacobian from ``residual``, or lmdif differencing it), then the status test of
-    :func:`verify_least_squares`.
-
-    The unbounded fit of :func:`least_squares_scaled` at the speed of
-    ``scipy.optimize.curve_fit``: MINPACK scales the parameters by the column norms of
-    the Jacobian (``x_scale="jac"``) and takes the same kind of step; its own
-    stopping message is kept, and the status is decided after it, from the optimality
-    measured at its final point (with ``check``'s Jacobian when given), never from
-    MINPACK's ``info``.
-
-    Parameters
-    ----------
-    residual : callable
-        ``eps -> (r (n,), J (n, p) or a callable of no argument, payload)``; may raise
-        ConvergenceError (the trial point is rejected: the damping grows).
-    eps0 : (p,) ndarray
-    tol : float or None
-        Relative-offset tolerance of the status test.
-    maxiter : int
-        Residual evaluations allowed (MINPACK's ``maxfev``).
-    options : dict
-        ``polish`` (default True), ``ftol``, ``xtol``, ``gtol`` (MINPACK's; defaults
-        :data:`LM_FTOL`, 1e-15, 1e-15: run to round-off, the status test judges), ``x_scale`` (only ``"jac"``).
-    check : callable, optional
-        The residual of the status test and the polish (see :func:`least_squares_scaled`).
-    differences : bool
-        MINPACK differences the residual itself (lmdif: one-sided, step
-        :math:`\\sqrt{\\varepsilon}\\,|\\epsilon_j|`, in compiled code) instead of
-        asking ``residual`` for its Jacobian: the steering Jacobian of a one-sided
-        difference mode, at ``curve_fit``'s cost. The status test's Jacobian is then
-        ``check``'s (required).
-
-    Returns
-    -------
-    Outcome
-
-    Raises
-    ------
-    ConvergenceError
-        When the model cannot be solved at ``eps0``.
-    """
-    options = dict(options)
-    polish = bool(options.pop("polish", True))
-    if options.pop("x_scale", "jac") != "jac":
-        raise ValueError("least_squares_lm scales by the Jacobian only (x_scale='jac')")
-    unknown = sorted(set(options) - set(LM_KEYWORDS))
-    if unknown:
-        raise TypeError(f"`options` {unknown} are not options of Levenberg-Marquardt")
-    tol = OFFSET_TOL if tol is None else tol
-    eps0 = np.array(eps0, dtype=float)
-    hist_eps, hist_loss, failures = [], [], []
-    counts = {"nfev": 0}
-    # model evaluations one lazy Jacobian costs (its stencil; counted into nfev)
-    jacobian_cost = getattr(residual, "jacobian_evaluations", 0)
-    # the last point evaluated (MINPACK asks again for the one it just had, e.g. the
-    # Jacobian's base): plain closure cells, the cheapest state Python has per call
-    last_key, last_ev = None, None
-
-    def evaluate(x, key=None):
-        nonlocal last_key, last_ev
-        key = x.tobytes() if key is None else key
-        if key != last_key:
-            counts["nfev"] += 1
-            try:
-                ev = list(residual(x.copy()))
-            except ConvergenceError as e:
-                failures.append(str(e))
-                ev = None
-            last_key, last_ev = key, ev
-        return last_ev
-
-    first = evaluate(eps0)
-    if first is None:
-        raise ConvergenceError(f"the model cannot be solved at eps0={eps0}: {failures[0]}")
-    m = np.size(first[0])
-    p = eps0.size
-    if m < p:
-        raise ValueError(f"the residual has {m} entries for {p} parameters: at least {p} needed")
-
-    # a rejected trial point: a residual far above any other (MINPACK then shrinks the
-    # step; inf would turn its norms into nan), made when one is
-    def rejected():
-        return np.full(m, 1e150)
-
-    # the best point so far (MINPACK returns it: it accepts only steps that lower the sum
-    # of squares), kept with its evaluation: the final point costs no model call
-    best_loss, best_key, best_ev = np.inf, None, None
-    # MINPACK's differencing (lmdif's fdjac2): column j at base + h_j e_j, h_j =
-    # sqrt(machine eps) |base_j| (sqrt(eps) at 0), right after each iterate; recognized
-    # bit for bit, they count as one Jacobian per iterate and stay out of the path. The
-    # expected point's bytes are spliced from the base's (Python floats are IEEE doubles:
-    # the same sum as MINPACK's), one 8-byte slot per column, without an array copy.
-    root_eps = _ROOT_EPS
-    fd_base, fd_bytes, fd_j, fd_next, fd_njev = None, b"", 0, None, 0
-
-    # the residual's values alone where MINPACK differences them (its `plain` when it has
-    # one: (r, r @ r, payload, fresh), no Jacobian closure; a failed point raises
-    # ConvergenceError)
-    values = getattr(residual, "plain", None) if differences else None
-    first_key, nfev = eps0.tobytes(), 0
-
-    def fun(x):
-        nonlocal best_loss, best_key, best_ev, fd_base, fd_bytes, fd_j, fd_njev, fd_next, nfev
-        key = x.tobytes()
-        ss = None
-        if values is None:
-            ev = evaluate(x, key)
-            r = None if ev is None else ev[0]
-        elif key == first_key:
-            ev, r = first, first[0]
-        else:
-            nfev += 1
-            try:
-                r, ss, y, _ = values(x.copy())
-            except ConvergenceError as e:
-                failures.append(str(e))
-                r = None
-            ev = None
-        if differences:
-            if key == fd_next:  # a column of MINPACK's Jacobian
-                fd_j += 1
-                if fd_j < p:  # the point of the next column
-                    bj = fd_base[fd_j]
-                    e = _pack_double(bj + (root_eps * abs(bj) or root_eps))
-                    fd_next = fd_bytes[: 8 * fd_j] + e + fd_bytes[8 * fd_j + 8 :]
-                else:
-                    fd_njev += 1
-                    fd_next = None
-                return rejected() if r is None else r
-            fd_base, fd_bytes, fd_j = x.tolist(), key, 0
-            bj = fd_base[0]
-            fd_next = _pack_double(bj + (root_eps * abs(bj) or root_eps)) + key[8:]
-        if r is None:
-            return rejected()
-        z = 0.5 * float(r.dot(r) if ss is None else ss)
-        if not math.isfinite(z):  # squares that overflow: a failed point, rejected
-            if key == first_key:  # (MINPACK's first call: the start, refused by name)
-                raise _blown_up(r, eps0)
-            failures.append(f"the sum of squares overflows at eps={x.tolist()}")
-            return rejected()
-        if z < best_loss:
-            # the best point's evaluation kept (its predictions copied: the model's array)
-            best_ev = [r, None, y.copy()] if ev is None else ev
-            best_loss, best_key = z, key
-            hist_eps.append(x.copy())
-            hist_loss.append(z)
-        return r
-
-    def jac(x):
-        ev = evaluate(x)
-        if ev is None:  # not reached: MINPACK asks for J only at accepted points
-            return np.zeros((m, x.size))
-        if callable(ev[1]):
-            counts["nfev"] += jacobian_cost
-            try:  # a lazy Jacobian (differenced by the problem): only where asked for
-                ev[1] = ev[1]()
-            except ConvergenceError as e:
-                failures.append(str(e))
-                return np.zeros((m, x.size))
-        return ev[1]
-
-    if differences and check is None:
-        raise ValueError("differences=True needs `check`, the status test's Jacobian")
-    kw = {"ftol": LM_FTOL, "xtol": 1e-15, "gtol": 1e-15}
-    kw.update(options)
-    # the budget counts residuals, not the p more of each differenced Jacobian
-    maxfev = maxiter * (p + 1) if differences else maxiter
-    with np.errstate(over="ignore"):  # an overflowing trial is a failed point (fun)
-        x, ier, njev = minpack.lm(fun, eps0, None if differences else jac, maxfev=maxfev,
-                                  **kw)  # fmt: skip
-    nit = fd_njev if differences else njev
-    msg = f"Levenberg-Marquardt (MINPACK): {minpack.minpack_message(ier, maxfev=maxfev, **kw)}"
-    if failures:
-        msg += f" ({len(failures)} model evaluations failed; first: {failures[0]})"
-    counts["nfev"] += nfev
-    key = x.tobytes()
-    if key == best_key:  # MINPACK's point, the best one: evaluated
-        last_key, last_ev = best_key, best_ev
-    ev = evaluate(x, key)
-    if ev is None:
-        e = ConvergenceError(failures[-1])
-        return Outcome(x, np.inf, None, None, msg, nit, counts["nfev"], np.array(hist_eps),
-                       np.array(hist_loss), failures, e)  # fmt: skip
-    r = ev[0]
-    # verify_least_squares measures the optimality (the status is decided from it)
-    out = Outcome(
-        x,
-        0.5 * float(r @ r),
-        None,
-        ev[2],
-        msg,
-        nit,
-        counts["nfev"],
-        None,
-        None,
-        failures,
-        exhausted=ier == 5,
-        claimed=ier in (1, 2, 3, 4),
-    )  # fmt: skip
-
-    def cached(e):
-        ev = evaluate(np.array(e, dtype=float))
-        if ev is None:
-            raise ConvergenceError(failures[-1])
-        if callable(ev[1]):
-            counts["nfev"] += jacobian_cost
-            ev[1] = ev[1]()
-        return ev
-
-    judge = cached if check is None else _counted(check, counts, (x, r, ev[2]))
-    out = verify_least_squares(out, judge, None, out.exhausted, polish=polish, tol=tol)
-    out.grad = None if out.jacobian is None else out.jacobian.T @ out.residual
-    out.nfev = counts["nfev"]
-    if out.loss < best_loss:
-        hist_eps.append(np.array(out.x))
-        hist_loss.append(out.loss)
-    out.eps_history, out.loss_history = np.array(hist_eps), np.array(hist_loss)
-    return out

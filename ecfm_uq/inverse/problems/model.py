@@ -31,9 +31,10 @@ from ...errors import ConvergenceError, ModelEvaluationError
 from ...executor import evaluate_samples
 from ...threads import NO_DENSE
 from ..core.details import ModelDetails
-from ..core.drivers import least_squares_lm, least_squares_scaled
+from ..core.drivers import least_squares_scaled
 from ..core.finite_differences import fd_jacobian
 from ..core.fitter import Fitter, Outcome, holds
+from ..core.levenberg_marquardt import least_squares_lm
 from ..core.result import Uncertainty
 from ..core.settings import check_least_squares_options
 from ..statistics.loglik import gaussian_likelihood, remember_last_point
@@ -286,39 +287,35 @@ class ModelProblem(InverseProblem):
         ones = self._ones
         flat = len(shape) == 1
 
-        def values(eps, at_start, square=False):
-            """``(r, ss, y, fresh)``: the whitened residual, its sum of squares when
-            ``square`` (else ``None``), the predictions and whether ``y`` is a new array
-            (else the model's own, which a caller copies before keeping it); predict's
-            checks, the finiteness test by one inner product (the sum of squares when
-            asked for: its overflow is then the caller's to silence)."""
+        def values(eps, at_start):
+            """``(r, y, fresh)``: the whitened residual, the predictions and whether ``y``
+            is a new array (else the model's own, which a caller copies before keeping
+            it); predict's checks, the finiteness test by one inner product."""
             try:
                 y = model(eps)
             except Exception as e:  # a user callback: report any failure with its call
                 raise self._model_error(e, eps, at_start) from e
             if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == shape:
-                fresh = False
                 if not flat:
                     y = y.ravel()
                 r = y - v
                 if whiten is not None:
                     r = whiten(r)
-                ss = r.dot(r) if square else None
-                # r finite iff y is (v is): its sum (or squares) say so; a bad value raises
-                if not math.isfinite(r.dot(ones) if ss is None else ss):
+                # r finite iff y is (v is): its sum says so; a bad value raises
+                if not math.isfinite(r.dot(ones)):
                     checked(y, eps, at_start)
-                return r, ss, y, fresh
+                return r, y, False
             y = checked(y, eps, at_start)
             r = y - v
             if whiten is not None:
                 r = whiten(r)
-            return r, (r.dot(r) if square else None), y, True
+            return r, y, True
 
         def residual(eps):
             nonlocal first
             # the first call (at eps0) raises the user's errors: nothing was computed yet
             at_start, first = first, False
-            r, _, y, fresh = values(eps, at_start)
+            r, y, fresh = values(eps, at_start)
             if not fresh:
                 y = y.copy()
 
@@ -332,11 +329,33 @@ class ModelProblem(InverseProblem):
             are known (no model evaluation at ``eps`` itself)."""
             return noise.whiten(self.jacobian(eps, y, typical=typical, method=method))
 
+        def plain(eps):
+            """``(r, r @ r, y)`` at a point after the first, for MINPACK's differencing:
+            no Jacobian closure, ``y`` possibly the model's own array (the caller copies
+            what it keeps); :func:`values`' common case inline (one call per MINPACK
+            evaluation); the driver silences the squares' overflow."""
+            try:
+                y = model(eps)
+            except Exception as e:  # a user callback: report any failure with its call
+                raise self._model_error(e, eps, False) from e
+            if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == shape:
+                if not flat:
+                    y = y.ravel()
+                r = y - v
+                if whiten is not None:
+                    r = whiten(r)
+                ss = r.dot(r)
+                if not math.isfinite(ss):  # a bad value raises; an overflow passes
+                    checked(y, eps, False)
+                return r, ss, y
+            y = checked(y, eps, False)
+            r = y - v
+            if whiten is not None:
+                r = whiten(r)
+            return r, r.dot(r), y
+
         residual.jacobian_at = jacobian_at
-        # ``(r, r @ r, y, fresh)`` at a point after the first, for MINPACK's
-        # differencing: no Jacobian closure, ``y`` the model's own array unless ``fresh``
-        # (the caller copies what it keeps); the driver silences the squares' overflow
-        residual.plain = lambda eps: values(eps, False, True)
+        residual.plain = plain
         mode = method or self.jac
         residual.jacobian_evaluations = (
             0 if callable(mode) or typical is None else _STENCIL_POINTS[mode] * len(typical)
