@@ -27,14 +27,12 @@ from __future__ import annotations
 import numpy as np
 from scipy import optimize
 
-from ...errors import ConvergenceError, ModelEvaluationError
 from ..core.convergence import scaled_gradient_optimality
 from ..statistics.diagnostics import fd_hessian
+from .random_force_scoring import FAILURES, score
 
 __all__ = ["FAILURES", "Search"]
 
-# the model cannot be solved there (ValueError: non-finite parameters after an overflow)
-FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError, ValueError)
 _RESTARTS = 5  # L-BFGS-B restarts of the eps search after a stalled line search
 _NEWTON_STEPS = 20  # Newton steps finishing the eps search where tau > 0
 _VALLEY_STEPS = (2.0, -2.0, 5.0, -5.0)  # shifts along the valley, standard errors
@@ -118,9 +116,13 @@ class Search:
             found = self._scalar(model, x0)
             if found is not None:
                 return found
-        found = None
+        found, last = None, np.inf
         if model.prior == "shared" and self.bnds is None and np.size(x0) > 1:
-            found = self._quasi_newton(model, x0)
+            scored = score(self, model, x0, _armijo)
+            if scored is not None:
+                found, last = scored[:2], scored[2]
+            else:
+                found = self._quasi_newton(model, x0)
         x, res = found if found is not None else self._descend(model, x0)
         tau_positive = np.isfinite(res.fun) and np.any(
             model.profiled(self.eps_std + self.scale * x)[1]
@@ -134,7 +136,7 @@ class Search:
             # equations' units): finish by Newton steps until a step is below 1e-6
             # standard errors, derivative-free where they do not get there
             x_n, val_n, steps, done = self._newton(
-                self.objective(model, second=True), self.gradient(model), x, res.fun
+                self.objective(model, second=True), self.gradient(model), x, res.fun, last
             )
             res.nit += steps
             if done:
@@ -471,7 +473,7 @@ class Search:
             y = y - Q @ ((Q.T @ (g * self.scale)) / wq)
         return y, val
 
-    def _newton(self, p, grad, x, val):
+    def _newton(self, p, grad, x, val, last=np.inf):
         """Newton steps on the exact gradient ``grad``, the Hessian by differences of it,
         with backtracking on ``p``: ``(x, value, steps, converged)``, converged when a step
         is below ``_NEWTON_TOL`` (the scaled coordinates: standard errors). ``x`` is
@@ -481,9 +483,10 @@ class Search:
         long; after a step below ``_CENTRAL`` (the next step is likely below the
         tolerance, Newton converging quadratically) it is the delta method's central
         differences of step ``_HESSIAN_STEP`` (``2 x.size`` gradients): the model
-        remembers those points, so the uncertainty at the estimate costs no solve."""
+        remembers those points, so the uncertainty at the estimate costs no solve.
+        ``last``: the length of the step that reached ``x`` (a search's last, below
+        ``_CENTRAL``: the first Hessian is the central one)."""
         x = np.array(x, float)
-        last = np.inf
         for k in range(_NEWTON_STEPS):
             try:
                 g = grad(x)
