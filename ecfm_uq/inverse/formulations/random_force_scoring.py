@@ -36,12 +36,12 @@ from scipy import linalg, optimize
 
 from ...errors import ConvergenceError, ModelEvaluationError
 
-__all__ = ["FAILURES", "profiled_information", "score"]
+__all__ = ["FAILURES", "gauss_newton_information", "profiled_information", "score", "singular"]
 
 # the model cannot be solved there (ValueError: non-finite parameters after an overflow)
 FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError, ValueError)
 
-_SCORE_STEP = 1e-5  # scoring continues until a step is below this (standard errors)
+_SCORE_STEP = 1e-6  # scoring ends where its next step would be below this (standard errors)
 _CONDITION = 1e12  # a metric worse conditioned than this is refused (the previous path)
 
 
@@ -84,6 +84,20 @@ def profiled_information(lin, sigma, t):
     return 0.5 * (F + F.T)
 
 
+def gauss_newton_information(model, lin, g_hat):
+    """:math:`J^T S^{-1} J` with :math:`S = \\sigma^2 I + A\\,\\mathrm{diag}(\\hat g)\\,A^T`,
+    symmetrized."""
+    F = lin.J.T @ np.linalg.solve(model.covariance(lin, g_hat), lin.J)
+    return 0.5 * (F + F.T)
+
+
+def singular(F):
+    """Whether the information ``F`` is singular (smallest eigenvalue at most 1e-12 of
+    the largest): a parameter combination the readings do not depend on."""
+    w = np.linalg.eigvalsh(F)
+    return not w[0] > 1e-12 * max(w[-1], 0.0)
+
+
 def score(search, model, x0, armijo):
     """Fisher scoring: descent of the profiled likelihood in its expected information.
 
@@ -110,7 +124,7 @@ def score(search, model, x0, armijo):
     x = np.array(x0, float)
     grad = search.gradient(model)
     p = search.objective(model, second=True)
-    val, last = p(x), np.inf
+    val = p(x)
     for k in range(search.maxiter):
         try:
             eps = search.eps_std + search.scale * x
@@ -122,19 +136,20 @@ def score(search, model, x0, armijo):
             F = profiled_information(lin, model.sigma, float(g_hat[0]))
         except FAILURES:
             return None
-        if search._optimal(g, x) and last < _SCORE_STEP:
-            return x, optimize.OptimizeResult(
-                x=x, fun=val, nit=k, njev=k + 1, success=True,
-                message=f"Fisher scoring from the standard estimate ({k} steps)",
-            ), last  # fmt: skip
         F = F * np.outer(search.scale, search.scale)
         w, V = np.linalg.eigh(F)
         if not (np.all(np.isfinite(w)) and w[0] > 0 and w[-1] < _CONDITION * w[0]):
             return None
         step = -V @ ((V.T @ g) / w)
+        size = float(np.max(np.abs(step)))
+        if search._optimal(g, x) and size < _SCORE_STEP:
+            return x, optimize.OptimizeResult(
+                x=x, fun=val, nit=k, njev=k + 1, success=True,
+                message=f"Fisher scoring from the standard estimate ({k} steps)",
+            ), size  # fmt: skip
         found = armijo(p, x, step, val, float(g @ step))
         if found is None:
             return None
         t, val = found
-        x, last = x + t * step, t * float(np.max(np.abs(step)))
+        x = x + t * step
     return None
