@@ -123,7 +123,9 @@ def score(search, model, x0, armijo):
     """
     x = np.array(x0, float)
     grad = search.gradient(model)
-    p = search.objective(model, second=True)
+    # trial points by value only: an accepted one gets its second derivatives from the
+    # same solve (the model keeps its last), a rejected one costs no back-substitution
+    p = search.objective(model)
     val = p(x)
     for k in range(search.maxiter):
         try:
