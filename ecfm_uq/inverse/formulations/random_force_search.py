@@ -3,14 +3,21 @@
 :class:`Search` minimizes :math:`p(\\epsilon) = \\ell(\\epsilon, \\hat\\tau(\\epsilon))`
 (:mod:`~ecfm_uq.inverse.formulations.random_forces`) in coordinates scaled by the standard
 fit's standard errors, with the exact gradient
-(:mod:`~ecfm_uq.inverse.formulations.random_force_gradient`): L-BFGS-B with restarts (BFGS
-from the Hessian at the start where :math:`\\hat\\tau > 0` there already), then, where
-:math:`\\hat\\tau > 0` (a long flat valley where a small gradient does not mean close),
-Newton steps with the Hessian by differences of the gradient until a step is below 1e-6
-standard errors (shared prior; Nelder-Mead from a wide simplex where they do not get
-there). Cheaper cases (issue 37 item 5, shared prior): the standard estimate itself where
-:math:`\\hat\\tau = 0` there with a margin (:meth:`Search._standard_optimum`), a scalar
-search for one free parameter (:meth:`Search._scalar`).
+(:mod:`~ecfm_uq.inverse.formulations.random_force_gradient`): where :math:`\\hat\\tau > 0`
+at the start already (shared prior, more than one free parameter, no bounds), Fisher
+scoring -- steps in the profiled expected information, recomputed at every point from what
+the gradient's solve already has, no Hessian by differences
+(:mod:`~ecfm_uq.inverse.formulations.random_force_scoring`) -- until its next step is
+below 1e-6 standard errors; where scoring does not descend, BFGS from the Hessian at the
+start, else L-BFGS-B with restarts. Then, where :math:`\\hat\\tau > 0` (a long flat valley
+where a small gradient does not mean close), Newton steps with the Hessian by differences
+of the gradient until a step is below 1e-6 standard errors (after scoring: one check with
+the delta method's central Hessian, which the uncertainty reuses); Nelder-Mead from a wide
+simplex where they do not get there, unless the Gauss-Newton information is singular there
+(a minimum at infinity, reported so by the fit: the simplex would only walk along the flat
+direction). Cheaper cases (issue 37 item 5, shared prior): the standard estimate itself
+where :math:`\\hat\\tau = 0` there with a margin (:meth:`Search._standard_optimum`), a
+scalar search for one free parameter (:meth:`Search._scalar`).
 
 With a variance per force (:meth:`Search.run_sparse`) the profiled likelihood has local
 minima along that valley, forces switching on and off as eps moves along it: descents
@@ -106,8 +113,10 @@ class Search:
         strict margin and the measured gradient of the profiled likelihood is below the
         tolerance, ``x0`` is returned after that one evaluation (:meth:`_standard_optimum`).
         One free parameter (shared prior): a scalar search (:meth:`_scalar`); more,
-        unbounded, with tau-hat > 0 at ``x0``: BFGS from the Hessian there
-        (:meth:`_quasi_newton`) instead of L-BFGS-B, then the Newton finish."""
+        unbounded, with tau-hat > 0 at ``x0``: Fisher scoring
+        (:func:`~ecfm_uq.inverse.formulations.random_force_scoring.score`), where it does
+        not descend BFGS from the Hessian there (:meth:`_quasi_newton`), instead of
+        L-BFGS-B, then the Newton finish."""
         if least_squares_optimum:
             res = self._standard_optimum(model, x0)
             if res is not None:
