@@ -262,3 +262,46 @@ def test_one_solve_per_point_and_the_gradient_against_central_differences(seed):
     ]
     np.testing.assert_allclose(grad, ref, rtol=1e-5, atol=1e-6 * np.max(np.abs(ref)))
     assert val == pytest.approx(fresh.profiled_nll(eps), rel=1e-12)  # (a0 set elsewhere)
+
+
+def test_the_profiled_expected_information_is_the_kl_divergences_curvature():
+    """Independent of the formula: the Fisher information of (eps, t = tau^2) is the
+    Hessian at theta' = theta of KL(N(mu(theta), S(theta)) || N(mu(theta'), S(theta'))),
+    closed form for Gaussians, here by central differences over fresh linearizations
+    (one solve each); its Schur complement, t profiled out, against
+    ``profiled_information`` at a tau-hat > 0 point."""
+    problem, truth, sigma = rod6_source(0)
+    res = fit(problem, truth, formulation="ecfm-random", sigma=sigma)
+    t = res.extra["tau"] ** 2
+    assert t > 0
+    model = RandomForceModel(problem, sigma)
+    lin0 = model.linearize(res.eps, second=True)
+    C = lin0.r.size
+
+    def moments(theta):
+        lin = model.linearize(theta[:-1])
+        return problem.v - lin.r, sigma**2 * np.eye(C) + theta[-1] * lin.A @ lin.A.T
+
+    mu, S = moments(np.append(res.eps, t))
+
+    def kl(theta):
+        mu2, S2 = moments(theta)
+        d = mu2 - mu
+        return 0.5 * (np.trace(np.linalg.solve(S2, S)) + d @ np.linalg.solve(S2, d) - C
+                      + np.linalg.slogdet(S2)[1] - np.linalg.slogdet(S)[1])  # fmt: skip
+
+    theta = np.append(res.eps, t)
+    h = 1e-3 * np.append(res.uncertainty.stderr, t)
+    n = theta.size
+    info = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            e_i, e_j = np.eye(n)[i] * h[i], np.eye(n)[j] * h[j]
+            info[i, j] = (kl(theta + e_i + e_j) - kl(theta + e_i - e_j) - kl(theta - e_i + e_j)
+                          + kl(theta - e_i - e_j)) / (4 * h[i] * h[j])  # fmt: skip
+    F_ref = info[:-1, :-1] - np.outer(info[:-1, -1], info[-1, :-1]) / info[-1, -1]
+    F = profiled_information(lin0, sigma, t)
+    scale = np.outer(res.uncertainty.stderr, res.uncertainty.stderr)
+    np.testing.assert_allclose(
+        F * scale, F_ref * scale, rtol=1e-4, atol=1e-6 * np.abs(F * scale).max()
+    )
