@@ -17,7 +17,9 @@ load from favouring either side); the times are summed over the data sets. One B
 thread, as ``ecfm-uq reproduce`` runs. With
 ``--profiles`` the profile-likelihood intervals of both fits are timed as well. The
 random-force fit minimizes its profiled marginal likelihood with its exact gradient
-(:mod:`ecfm_uq.inverse.formulations.random_force_gradient`).
+(:mod:`ecfm_uq.inverse.formulations.random_force_gradient`), by Fisher scoring where
+tau-hat > 0 at the standard estimate
+(:mod:`ecfm_uq.inverse.formulations.random_force_scoring`).
 
 Last lines: ``random_forces <problem> ecfm-random/standard fit time ratio: <float>`` (all
 measured in this run). The per-form lines also give the random-force fits' model solves

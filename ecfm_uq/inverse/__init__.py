@@ -37,8 +37,8 @@ imports :mod:`.fitting`:
                     (standard and exact ECFM, reduced), ``all_at_once`` and
                     ``noise_bounds`` (all at once, the paper's noise bounds),
                     ``random_forces``, ``random_force_gradient``,
-                    ``random_force_search``, ``random_force_simulation`` and
-                    ``sparse_forces`` (random-force ECFM),
+                    ``random_force_search``, ``random_force_scoring``,
+                    ``random_force_simulation`` and ``sparse_forces`` (random-force ECFM),
                     ``dynamic_fit``, ``replicated``, ``replicated_status`` and
                     ``forces`` (pseudo-likelihood), ``ode_forces``, ``ode_basis`` and
                     ``ode_random`` (exact-match and random-force ECFM of an ODE);

@@ -3,14 +3,21 @@
 :class:`Search` minimizes :math:`p(\\epsilon) = \\ell(\\epsilon, \\hat\\tau(\\epsilon))`
 (:mod:`~ecfm_uq.inverse.formulations.random_forces`) in coordinates scaled by the standard
 fit's standard errors, with the exact gradient
-(:mod:`~ecfm_uq.inverse.formulations.random_force_gradient`): L-BFGS-B with restarts (BFGS
-from the Hessian at the start where :math:`\\hat\\tau > 0` there already), then, where
-:math:`\\hat\\tau > 0` (a long flat valley where a small gradient does not mean close),
-Newton steps with the Hessian by differences of the gradient until a step is below 1e-6
-standard errors (shared prior; Nelder-Mead from a wide simplex where they do not get
-there). Cheaper cases (issue 37 item 5, shared prior): the standard estimate itself where
-:math:`\\hat\\tau = 0` there with a margin (:meth:`Search._standard_optimum`), a scalar
-search for one free parameter (:meth:`Search._scalar`).
+(:mod:`~ecfm_uq.inverse.formulations.random_force_gradient`): where :math:`\\hat\\tau > 0`
+at the start already (shared prior, more than one free parameter, no bounds), Fisher
+scoring -- steps in the profiled expected information, recomputed at every point from what
+the gradient's solve already has, no Hessian by differences
+(:mod:`~ecfm_uq.inverse.formulations.random_force_scoring`) -- until its next step is
+below 1e-6 standard errors; where scoring does not descend, BFGS from the Hessian at the
+start, else L-BFGS-B with restarts. Then, where :math:`\\hat\\tau > 0` (a long flat valley
+where a small gradient does not mean close), Newton steps with the Hessian by differences
+of the gradient until a step is below 1e-6 standard errors (after scoring: one check with
+the delta method's central Hessian, which the uncertainty reuses); Nelder-Mead from a wide
+simplex where they do not get there, unless the Gauss-Newton information is singular there
+(a minimum at infinity, reported so by the fit: the simplex would only walk along the flat
+direction). Cheaper cases (issue 37 item 5, shared prior): the standard estimate itself
+where :math:`\\hat\\tau = 0` there with a margin (:meth:`Search._standard_optimum`), a
+scalar search for one free parameter (:meth:`Search._scalar`).
 
 With a variance per force (:meth:`Search.run_sparse`) the profiled likelihood has local
 minima along that valley, forces switching on and off as eps moves along it: descents
@@ -27,14 +34,12 @@ from __future__ import annotations
 import numpy as np
 from scipy import optimize
 
-from ...errors import ConvergenceError, ModelEvaluationError
 from ..core.convergence import scaled_gradient_optimality
 from ..statistics.diagnostics import fd_hessian
+from .random_force_scoring import FAILURES, gauss_newton_information, score, singular
 
 __all__ = ["FAILURES", "Search"]
 
-# the model cannot be solved there (ValueError: non-finite parameters after an overflow)
-FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError, ValueError)
 _RESTARTS = 5  # L-BFGS-B restarts of the eps search after a stalled line search
 _NEWTON_STEPS = 20  # Newton steps finishing the eps search where tau > 0
 _VALLEY_STEPS = (2.0, -2.0, 5.0, -5.0)  # shifts along the valley, standard errors
@@ -108,8 +113,10 @@ class Search:
         strict margin and the measured gradient of the profiled likelihood is below the
         tolerance, ``x0`` is returned after that one evaluation (:meth:`_standard_optimum`).
         One free parameter (shared prior): a scalar search (:meth:`_scalar`); more,
-        unbounded, with tau-hat > 0 at ``x0``: BFGS from the Hessian there
-        (:meth:`_quasi_newton`) instead of L-BFGS-B, then the Newton finish."""
+        unbounded, with tau-hat > 0 at ``x0``: Fisher scoring
+        (:func:`~ecfm_uq.inverse.formulations.random_force_scoring.score`), where it does
+        not descend BFGS from the Hessian there (:meth:`_quasi_newton`), instead of
+        L-BFGS-B, then the Newton finish."""
         if least_squares_optimum:
             res = self._standard_optimum(model, x0)
             if res is not None:
@@ -118,9 +125,13 @@ class Search:
             found = self._scalar(model, x0)
             if found is not None:
                 return found
-        found = None
+        found, last = None, np.inf
         if model.prior == "shared" and self.bnds is None and np.size(x0) > 1:
-            found = self._quasi_newton(model, x0)
+            scored = score(self, model, x0, _armijo)
+            if scored is not None:
+                found, last = scored[:2], scored[2]
+            else:
+                found = self._quasi_newton(model, x0)
         x, res = found if found is not None else self._descend(model, x0)
         tau_positive = np.isfinite(res.fun) and np.any(
             model.profiled(self.eps_std + self.scale * x)[1]
@@ -134,12 +145,18 @@ class Search:
             # equations' units): finish by Newton steps until a step is below 1e-6
             # standard errors, derivative-free where they do not get there
             x_n, val_n, steps, done = self._newton(
-                self.objective(model, second=True), self.gradient(model), x, res.fun
+                self.objective(model, second=True), self.gradient(model), x, res.fun, last
             )
             res.nit += steps
             if done:
                 res.fun, res.success = val_n, True
                 return x_n, res
+        if finish and np.isfinite(res.fun) and self._flat(model, x):
+            # the readings do not depend on some parameter combination here (the fit's own
+            # test of a minimum at infinity, which then reports it not converged): a
+            # simplex only walks along that flat direction (the reaction rod: 186
+            # evaluations for a drop of 1e-14, rounding, 1e-14 standard errors away)
+            return x, res
         if finish:
             simplex = x + np.vstack([np.zeros(x.size), 10.0 * np.eye(x.size)])
             nm = optimize.minimize(
@@ -153,6 +170,15 @@ class Search:
                 res.success = bool(nm.success)
             res.nit, res.njev = nit, njev
         return x, res
+
+    def _flat(self, model, x):
+        """Whether the Gauss-Newton information :math:`J^T S^{-1} J` is singular at ``x``
+        (:func:`~ecfm_uq.inverse.formulations.random_force_scoring.singular`)."""
+        try:
+            _, g_hat, lin = model.profiled(self.eps_std + self.scale * x)
+            return singular(gauss_newton_information(model, lin, g_hat))
+        except FAILURES:
+            return False
 
     def _standard_optimum(self, model, x0):
         """The standard estimate ``x0`` as the estimate, or ``None`` (search on).
@@ -471,7 +497,7 @@ class Search:
             y = y - Q @ ((Q.T @ (g * self.scale)) / wq)
         return y, val
 
-    def _newton(self, p, grad, x, val):
+    def _newton(self, p, grad, x, val, last=np.inf):
         """Newton steps on the exact gradient ``grad``, the Hessian by differences of it,
         with backtracking on ``p``: ``(x, value, steps, converged)``, converged when a step
         is below ``_NEWTON_TOL`` (the scaled coordinates: standard errors). ``x`` is
@@ -481,9 +507,10 @@ class Search:
         long; after a step below ``_CENTRAL`` (the next step is likely below the
         tolerance, Newton converging quadratically) it is the delta method's central
         differences of step ``_HESSIAN_STEP`` (``2 x.size`` gradients): the model
-        remembers those points, so the uncertainty at the estimate costs no solve."""
+        remembers those points, so the uncertainty at the estimate costs no solve.
+        ``last``: the length of the step that reached ``x`` (a search's last, below
+        ``_CENTRAL``: the first Hessian is the central one)."""
         x = np.array(x, float)
-        last = np.inf
         for k in range(_NEWTON_STEPS):
             try:
                 g = grad(x)

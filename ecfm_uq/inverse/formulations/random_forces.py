@@ -98,6 +98,8 @@ from ..statistics.diagnostics import fd_hessian
 from ..statistics.loglik import LogLikelihood
 from ..statistics.verdict import decide
 from .random_force_gradient import profiled_gradient, second_sensitivities
+from .random_force_scoring import gauss_newton_information as _gauss_newton_information
+from .random_force_scoring import singular as _singular
 from .random_force_search import FAILURES as _FAILURES
 from .random_force_search import Search
 from .random_force_simulation import nuisance_at, simulated_likelihood
@@ -668,18 +670,6 @@ def _uncertainty(grad, x, scale, standard, g_hat, model, lin):
         cov, se, np.column_stack([eps - z * se, eps + z * se]), 0.95,
         "gauss-newton-held-tau", "known",
     )  # fmt: skip
-
-
-def _gauss_newton_information(model, lin, g_hat):
-    """:math:`J^T S^{-1} J` with :math:`S = \\sigma^2 I + A\\,\\mathrm{diag}(\\hat g)\\,A^T`,
-    symmetrized."""
-    F = lin.J.T @ np.linalg.solve(model.covariance(lin, g_hat), lin.J)
-    return 0.5 * (F + F.T)
-
-
-def _singular(F):
-    w = np.linalg.eigvalsh(F)
-    return not w[0] > 1e-12 * max(w[-1], 0.0)
 
 
 def _verdict(T, p, g_hat, lam, lam_sd, alpha, at_bound):

@@ -1,0 +1,161 @@
+"""Fisher scoring for the random-force ECFM's eps search (shared force prior).
+
+The data are Gaussian, :math:`v \\sim N(f(\\epsilon), S)` with
+:math:`S = \\sigma^2 I + t\\,AA^T`, :math:`t = \\tau^2`
+(:mod:`~ecfm_uq.inverse.formulations.random_forces`), so the expected (Fisher) information
+of :math:`\\theta = (\\epsilon, t)` is known in closed form from what every evaluation of the
+exact gradient already has (:math:`J`, :math:`A` and :math:`\\partial A/\\partial\\epsilon`,
+:mod:`~ecfm_uq.inverse.formulations.random_force_gradient`):
+
+.. math::
+
+    I_{\\epsilon_i\\epsilon_j} = J_i^T S^{-1} J_j
+    + \\tfrac12\\mathrm{tr}(S^{-1}\\partial_i S\\,S^{-1}\\partial_j S),\\quad
+    I_{\\epsilon_i t} = \\tfrac12\\mathrm{tr}(S^{-1}\\partial_i S\\,S^{-1}AA^T),\\quad
+    I_{tt} = \\tfrac12\\mathrm{tr}(S^{-1}AA^T S^{-1}AA^T),
+
+:math:`\\partial_i S = t(\\partial_i A\\,A^T + A\\,\\partial_i A^T)`. With :math:`t` profiled
+out the information of :math:`\\epsilon` is the Schur complement
+:math:`F = I_{\\epsilon\\epsilon} - I_{\\epsilon t} I_{tt}^{-1} I_{t\\epsilon}`
+(:func:`profiled_information`): the flat valley where the discrepancy trades off against
+:math:`\\epsilon` is flat in :math:`F` too (at the optimum of the reaction rods of
+``benchmarks/random_forces.py``, :math:`F^{-1}H` has eigenvalues 0.97-1.04 for the observed
+information :math:`H`, whose own are 0.1-0.5 and 9-400 in standard-error units).
+:func:`score` minimizes the profiled likelihood :math:`p(\\epsilon)` by scoring steps
+:math:`-F^{-1}\\nabla p`, :math:`F` recomputed at every point (no Hessian by differences of
+the gradient: no solve), with Armijo backtracking on the exact value of :math:`p`, until the
+gradient meets the status tolerance and the next step would be below ``_SCORE_STEP``
+standard errors (3-7 steps from the standard estimate there). The Newton finish of
+:class:`~ecfm_uq.inverse.formulations.random_force_search.Search` then checks the point with
+the delta method's central Hessian (which the uncertainty reuses), so the estimate is the
+same point as before to its tolerance; where scoring does not descend the previous path
+runs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import linalg, optimize
+
+from ...errors import ConvergenceError, ModelEvaluationError
+
+__all__ = ["FAILURES", "gauss_newton_information", "profiled_information", "score", "singular"]
+
+# the model cannot be solved there (ValueError: non-finite parameters after an overflow)
+FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError, ValueError)
+
+_SCORE_STEP = 1e-6  # scoring ends where its next step would be below this (standard errors)
+_CONDITION = 1e12  # a metric worse conditioned than this is refused (the previous path)
+
+
+def profiled_information(lin, sigma, t):
+    """The expected information of :math:`\\epsilon` with :math:`t = \\tau^2` profiled out.
+
+    Parameters
+    ----------
+    lin : Linearization
+        At the point, with ``dA`` (``second=True``) where ``t > 0``.
+    sigma : float
+        The noise standard deviation.
+    t : float
+        The shared force variance :math:`\\hat\\tau^2` at the point.
+
+    Returns
+    -------
+    (n_eps, n_eps) ndarray
+        :math:`F = I_{\\epsilon\\epsilon} - I_{\\epsilon t} I_{tt}^{-1} I_{t\\epsilon}`
+        (module docstring), symmetric; :math:`J^T J/\\sigma^2` where ``t`` is 0.
+    """
+    A, J = lin.A, lin.J
+    S = sigma**2 * np.eye(A.shape[0]) + t * (A @ A.T)
+    chol = linalg.cho_factor(S)
+    F = J.T @ linalg.cho_solve(chol, J)
+    if t > 0.0 and lin.dA is not None:
+        m = J.shape[1]
+        SiAA = linalg.cho_solve(chol, A @ A.T)
+        SidS = []
+        for i in range(m):
+            dAi = lin.dA[:, :, i]
+            SidS.append(linalg.cho_solve(chol, t * (dAi @ A.T + A @ dAi.T)))
+        I_et = np.array([0.5 * np.sum(SidS[i] * SiAA.T) for i in range(m)])
+        I_tt = 0.5 * np.sum(SiAA * SiAA.T)
+        for i in range(m):
+            for j in range(m):
+                F[i, j] += 0.5 * np.sum(SidS[i] * SidS[j].T)
+        if I_tt > 0.0:
+            F = F - np.outer(I_et, I_et) / I_tt
+    return 0.5 * (F + F.T)
+
+
+def gauss_newton_information(model, lin, g_hat):
+    """:math:`J^T S^{-1} J` with :math:`S = \\sigma^2 I + A\\,\\mathrm{diag}(\\hat g)\\,A^T`,
+    symmetrized."""
+    F = lin.J.T @ np.linalg.solve(model.covariance(lin, g_hat), lin.J)
+    return 0.5 * (F + F.T)
+
+
+def singular(F):
+    """Whether the information ``F`` is singular (smallest eigenvalue at most 1e-12 of
+    the largest): a parameter combination the readings do not depend on."""
+    w = np.linalg.eigvalsh(F)
+    return not w[0] > 1e-12 * max(w[-1], 0.0)
+
+
+def score(search, model, x0, armijo):
+    """Fisher scoring: descent of the profiled likelihood in its expected information.
+
+    Parameters
+    ----------
+    search : Search
+        Its coordinates (``eps_std``, ``scale``: standard errors), budget, tolerance and
+        evaluation count (``nfev``).
+    model : RandomForceModel
+        Shared prior, with :math:`\\hat\\tau > 0` at ``x0`` (else ``None`` is returned).
+    x0 : (n_eps,) ndarray
+        The start, scaled coordinates.
+    armijo : callable
+        The backtracking line search ``armijo(p, x, step, val, slope)`` of the search.
+
+    Returns
+    -------
+    tuple or None
+        ``(x, res, size)``: the point, an ``OptimizeResult`` (``fun`` the profiled nll
+        there) and the length of the scoring step at ``x`` (standard errors, below
+        ``_SCORE_STEP``: not taken); ``None`` where
+        :math:`\\hat\\tau` is 0 at a point, the metric is not positive definite or a line
+        search fails (the previous path runs).
+    """
+    x = np.array(x0, float)
+    grad = search.gradient(model)
+    # trial points by value only: an accepted one gets its second derivatives from the
+    # same solve (the model keeps its last), a rejected one costs no back-substitution
+    p = search.objective(model)
+    val = p(x)
+    for k in range(search.maxiter):
+        try:
+            eps = search.eps_std + search.scale * x
+            g_hat = model.profiled(eps)[1]
+            if not (np.isfinite(val) and np.any(g_hat)):
+                return None
+            g = grad(x)  # with its second derivatives: dA, no solve
+            lin = model._linearization(eps, second=True)
+            F = profiled_information(lin, model.sigma, float(g_hat[0]))
+        except FAILURES:
+            return None
+        F = F * np.outer(search.scale, search.scale)
+        w, V = np.linalg.eigh(F)
+        if not (np.all(np.isfinite(w)) and w[0] > 0 and w[-1] < _CONDITION * w[0]):
+            return None
+        step = -V @ ((V.T @ g) / w)
+        size = float(np.max(np.abs(step)))
+        if search._optimal(g, x) and size < _SCORE_STEP:
+            return x, optimize.OptimizeResult(
+                x=x, fun=val, nit=k, njev=k + 1, success=True,
+                message=f"Fisher scoring from the standard estimate ({k} steps)",
+            ), size  # fmt: skip
+        found = armijo(p, x, step, val, float(g @ step))
+        if found is None:
+            return None
+        t, val = found
+        x = x + t * step
+    return None
