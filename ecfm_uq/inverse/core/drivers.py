@@ -233,17 +233,26 @@ def verify_least_squares(out, residual, bounds, exhausted, *, polish, tol=OFFSET
     out.nfev += 1
     opt = least_squares_optimality(r, J, out.x, bounds=bounds, tol=tol)
     msg = out.message
+    stepped = False
     if (not opt.converged or opt.step > step_tol) and polish and not exhausted:
+        # a point that is not an optimum, or one whose estimate is not yet as accurate as
+        # asked (the test holds, the Gauss-Newton step is larger than step_tol)
+        refine, step = opt.converged, opt.step
         x, (r, J, payload), opt2, n = polish_least_squares(
             residual, out.x, bounds=bounds, tol=tol, step_tol=step_tol, first=(r, J, payload)
         )
         out.nfev += n
         if float(r @ r) <= 2 * out.loss or opt2.converged:
             out.x, out.loss, out.payload, opt = np.asarray(x), 0.5 * float(r @ r), payload, opt2
-            msg += f"; polished by Levenberg-Marquardt steps ({n} evaluations)"
+            stepped = True
+            if refine:
+                msg += (f"; its Gauss-Newton step ({step:.1e} of a parameter) brought below "
+                        f"{step_tol:.0e} by Levenberg-Marquardt steps ({n} trial points)")  # fmt: skip
+            else:
+                msg += f"; polished by Levenberg-Marquardt steps ({n} evaluations)"
     said = out.claimed
     out.exhausted = exhausted
-    if opt.converged != said or not opt.converged or "polished" in msg:
+    if opt.converged != said or not opt.converged or stepped:
         msg += f" [{'converged' if opt.converged else 'NOT converged'}: {opt.message}]"
     out.message, out.opt = msg, opt
     out.residual, out.jacobian = r, J
