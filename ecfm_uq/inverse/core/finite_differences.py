@@ -128,7 +128,8 @@ def fd_jacobian(fun, x, *, method="2-point", steps=None, typical=None, f0=None, 
         for c, j in enumerate(cols.tolist()):
             e = x.copy()
             e[j] = xs[j] + 1.0 * hs[j]
-            up = np.asarray(fun(e), dtype=float).ravel()
+            # a copy: ``fun`` may hand back one array it rewrites at the next call
+            up = np.array(fun(e), dtype=float).ravel()
             e = x.copy()
             e[j] = xs[j] + -1.0 * hs[j]
             down = np.asarray(fun(e), dtype=float).ravel()
