@@ -47,7 +47,7 @@ def test_gradient_at_tau_zero_is_the_least_squares_gradient():
     model = rod_model("shared", 0.0, 0)
     eps = TRUE + np.array([0.05, -0.5])
     _, grad = model.profiled_gradient(eps)
-    lin = model._linearization(eps)
+    lin = model.linearization(eps)
     if np.any(model.profiled(eps)[1]):
         pytest.skip("tau-hat > 0 on this draw")  # pragma: no cover
     # tau = 0: l = |r|^2 / (2 sigma^2) + const, dr/deps = -J

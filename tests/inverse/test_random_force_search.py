@@ -153,7 +153,7 @@ def test_fisher_scoring_reaches_the_profiled_minimum_in_a_few_solves(seed):
     fresh = RandomForceModel(problem, sigma)
     _, g_hat, _ = fresh.profiled(res.eps)
     fresh.profiled_gradient(res.eps)
-    F = profiled_information(fresh._linearization(res.eps, second=True), sigma, g_hat[0])
+    F = profiled_information(fresh.linearization(res.eps, second=True), sigma, g_hat[0])
     H = fd_hessian(lambda z: fresh.profiled_gradient(res.eps + se * z)[1] * se, 0 * se, 1e-3)
     F = F * np.outer(se, se)
     np.testing.assert_allclose(np.linalg.eigvals(np.linalg.solve(F, H)).real, 1.0, atol=0.05)

@@ -138,7 +138,7 @@ def score(search, model, x0, armijo):
             if not (np.isfinite(val) and np.any(g_hat)):
                 return None
             g = grad(x)  # with its second derivatives: dA, no solve
-            lin = model._linearization(eps, second=True)
+            lin = model.linearization(eps, second=True)
             F = profiled_information(lin, model.sigma, float(g_hat[0]))
         except FAILURES:
             return None
@@ -148,7 +148,7 @@ def score(search, model, x0, armijo):
             return None
         step = -V @ ((V.T @ g) / w)
         size = float(np.max(np.abs(step)))
-        if search._optimal(g, x) and size < _SCORE_STEP:
+        if search.optimal(g, x) and size < _SCORE_STEP:
             return x, optimize.OptimizeResult(
                 x=x, fun=val, nit=k, njev=k + 1, success=True,
                 message=f"Fisher scoring from the standard estimate ({k} steps)",

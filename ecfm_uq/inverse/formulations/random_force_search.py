@@ -79,7 +79,9 @@ class Search:
         self.maxiter, self.tol, self.nfev = maxiter, tol, 0
         self.winner = None  # where run_sparse's estimate came from
 
-    def _optimal(self, g, x):
+    def optimal(self, g, x):
+        """Whether the gradient ``g`` at the scaled point ``x`` meets the status test
+        (:func:`~ecfm_uq.inverse.core.convergence.scaled_gradient_optimality`)."""
         return scaled_gradient_optimality(g, x, self.bnds, tol=self.tol).converged
 
     def objective(self, model, count=True, second=False):
@@ -202,7 +204,7 @@ class Search:
         except FAILURES:
             return None
         self.nfev += 1
-        if not zero or not self._optimal(g * self.scale, x0):
+        if not zero or not self.optimal(g * self.scale, x0):
             return None
         return optimize.OptimizeResult(
             x=np.array(x0, float), fun=val, nit=0, njev=1, success=True,
@@ -345,7 +347,7 @@ class Search:
         Hinv = np.linalg.inv(H)
         p = self.objective(model, second=True)
         for k in range(self.maxiter):
-            if self._optimal(g, x):
+            if self.optimal(g, x):
                 return x, optimize.OptimizeResult(
                     x=x, fun=val, nit=k, njev=k + 1, success=True,
                     message=f"BFGS from the Hessian at the standard estimate ({k} steps)",
@@ -392,7 +394,7 @@ class Search:
             # standard-error units (convergence.scaled_gradient_optimality) leaves eps
             # within that fraction of a standard error
             g = last["g"]
-            if g is not None and g.size and self._optimal(g, intermediate_result.x):
+            if g is not None and g.size and self.optimal(g, intermediate_result.x):
                 raise StopIteration
 
         nit, njev, maxiter = 0, 0, self.maxiter
@@ -405,7 +407,7 @@ class Search:
                 callback=stop_when_optimal,
                 options={"maxiter": maxiter - nit, "ftol": 1e-10, "gtol": 1e-6},
             )  # fmt: skip
-            if last["g"] is not None and self._optimal(last["g"], res.x):
+            if last["g"] is not None and self.optimal(last["g"], res.x):
                 res.success = True
             moved = np.max(np.abs(res.x - x)) if x.size else 0.0
             nit, njev = nit + res.nit, njev + res.njev

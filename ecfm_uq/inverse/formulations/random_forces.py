@@ -250,7 +250,7 @@ class RandomForceModel:
         every grid point :math:`s > 0` (so :meth:`best_s` returns 0) and its slope at 0,
         :math:`\\sum_k \\xi_k (q_k - 1)`, < 0; both continuous in ``eps`` while :math:`J`
         keeps its rank, so tau-hat is 0 in a neighbourhood (``False`` without contrasts)."""
-        lin = self._linearization(eps)
+        lin = self.linearization(eps)
         if lin.xi.size == 0 or not np.any(lin.xi > 0):
             return False
         slope = float(np.sum(lin.xi * (lin.q - 1.0)))
@@ -278,7 +278,7 @@ class RandomForceModel:
         """:math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))`: the marginal likelihood with
         :math:`\\tau` re-estimated (REML) at ``eps`` -- the function the estimate minimizes
         (one solve); raises the model's error where it cannot be solved."""
-        lin = self._linearization(eps)
+        lin = self.linearization(eps)
         self._refuse_dead(lin)
         return self._variances(lin)[1]
 
@@ -287,7 +287,7 @@ class RandomForceModel:
         (:func:`~ecfm_uq.inverse.formulations.random_force_gradient.profiled_gradient`,
         one solve and two back-substitutions), by central differences only where the
         REML estimate is not differentiable (a rank-deficient :math:`J`)."""
-        lin = self._linearization(eps)
+        lin = self.linearization(eps)
         g, val = self._variances(lin)
         hit = self._memo.get(lin.eps.tobytes())
         if hit is not None and hit[0] is lin and hit[2] is not None:
@@ -295,7 +295,7 @@ class RandomForceModel:
         s, m = None, lin.J.shape[1]
         dA, dJ = np.zeros((*lin.A.shape, m)), np.zeros((*lin.J.shape, m))
         if np.any(g):  # (with g = 0 the dA terms vanish: -J^T S^-1 r, the same bits)
-            lin = self._linearization(eps, second=True)
+            lin = self.linearization(eps, second=True)
             dA, dJ = lin.dA, lin.dJ
         if self.prior == "shared":
             s = float(g[0]) * self.a0**2 / self.sigma**2 if g.size else 0.0
@@ -310,7 +310,7 @@ class RandomForceModel:
 
     def _checked_gradient(self, eps):
         # the profiles' evaluation: refused where a parameter has no effect (profiled_nll)
-        self._refuse_dead(self._linearization(eps))
+        self._refuse_dead(self.linearization(eps))
         return self.profiled_gradient(eps)
 
     @staticmethod
@@ -329,11 +329,14 @@ class RandomForceModel:
     def profiled(self, eps):
         """``(nll, g, lin)`` at ``eps``: :meth:`linearize` and :meth:`variances`,
         remembered for the last points evaluated."""
-        lin = self._linearization(eps)
+        lin = self.linearization(eps)
         g, val = self._variances(lin)
         return val, g, lin
 
-    def _linearization(self, eps, second=False):
+    def linearization(self, eps, second=False):
+        """The :class:`Linearization` at ``eps`` (remembered per point; with ``second``
+        its second derivatives ``dA``, ``dJ`` too, from the last solve when it was
+        there)."""
         key = np.asarray(eps, dtype=float).tobytes()
         hit = self._memo.get(key)
         if hit is not None and (hit[0].dA is not None or not second):
