@@ -175,10 +175,16 @@ def test_a_flat_direction_ends_the_search_without_a_simplex():
         v = clean + sigma * rng.standard_normal(clean.size)
     res = fit(SteadyProblem(rod.system, rod.M_obs, v), truth, formulation="ecfm-random",
               sigma=sigma)  # fmt: skip
-    assert not res.success and "singular" in res.message
-    assert res.extra["n_solves"] <= 15
+    # the standard fit's end along the flat direction is the machine's last bits: eps0
+    # -14.6 here, -14.2 under OPENBLAS_CORETYPE=Prescott (the descent from it 11 and 21
+    # solves: a few, against the simplex's 186), -2e8 under Haswell and Zen (tau-hat 0
+    # there: the standard fit's own rank-deficient Jacobian says it); not converged on all
+    assert not res.success
+    assert "singular" in res.message or "rank-deficient" in res.message, res.message
+    assert res.extra["n_solves"] <= 40
     model = RandomForceModel(SteadyProblem(rod.system, rod.M_obs, v), sigma)
-    values = [model.profiled_nll(res.eps + [d, 0.0]) for d in (-10.0, 0.0)]
+    # (at eps0 = -14 and -24: the end itself may lie where the rate underflows)
+    values = [model.profiled_nll(np.array([e0, res.eps[1]])) for e0 in (-24.0, -14.0)]
     assert abs(values[0] - values[1]) <= 1e-10 * abs(values[1])
 
 
