@@ -66,8 +66,9 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     maxiter : int
         Residual evaluations allowed (MINPACK's ``maxfev``).
     options : dict
-        ``polish`` (default True), ``ftol``, ``xtol``, ``gtol`` (MINPACK's; defaults
-        :data:`LM_FTOL`, 1e-15, 1e-15: run to round-off, the status test judges), ``x_scale`` (only ``"jac"``).
+        ``polish`` (default True: also the steps to :data:`LM_STEP_TOL`), ``ftol``,
+        ``xtol``, ``gtol`` (MINPACK's; defaults :data:`LM_FTOL`, 1e-15, 1e-15; the status
+        test judges), ``x_scale`` (only ``"jac"``).
     check : callable, optional
         The residual of the status test and the polish (see :func:`least_squares_scaled`).
     differences : bool
@@ -141,14 +142,14 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     fd_base, fd_bytes, fd_j, fd_next, fd_njev = None, b"", 0, None, 0
 
     # the residual's values alone where MINPACK differences them (its `plain` when it has
-    # one: (r, r @ r, y) with y possibly the model's own array, no Jacobian closure; a
-    # failed point raises ConvergenceError)
+    # one: (r, r @ r, y, fresh) with y possibly the model's own array, no Jacobian
+    # closure; a failed point raises ConvergenceError)
     values = getattr(residual, "plain", None)
     if values is None:
 
         def values(e):
             r, _, y = residual(e)
-            return r, r.dot(r), y
+            return r, r.dot(r), y, True
 
     first_key, nfev = eps0.tobytes(), 0
 
@@ -205,7 +206,7 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
         else:
             nfev += 1
             try:
-                r, ss, y = values(x.copy())
+                r, ss, y, _ = values(x.copy())
             except ConvergenceError as e:
                 failures.append(str(e))
                 return rejected()

@@ -22,6 +22,7 @@ point reached).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -306,10 +307,12 @@ class ModelProblem(InverseProblem):
         ones = self._ones
         flat = len(shape) == 1
 
-        def values(eps, at_start):
-            """``(r, y, fresh)``: the whitened residual, the predictions and whether ``y``
-            is a new array (else the model's own, which a caller copies before keeping
-            it); predict's checks, the finiteness test by one inner product."""
+        def values(eps, at_start, square=False):
+            """``(r, ss, y, fresh)``: the whitened residual, its sum of squares when
+            ``square`` (else ``None``), the predictions and whether ``y`` is a new array
+            (else the model's own, which a caller copies before keeping it); predict's
+            checks, the finiteness test by one inner product (the sum of squares when
+            asked for: its overflow is then the caller's to silence)."""
             try:
                 y = model(eps)
             except Exception as e:  # a user callback: report any failure with its call
@@ -320,21 +323,22 @@ class ModelProblem(InverseProblem):
                 r = y - v
                 if whiten is not None:
                     r = whiten(r)
-                # r finite iff y is (v is): its sum says so; a bad value raises
-                if not math.isfinite(r.dot(ones)):
+                ss = r.dot(r) if square else None
+                # r finite iff y is (v is): its sum (or squares) say so; a bad value raises
+                if not math.isfinite(r.dot(ones) if ss is None else ss):
                     checked(y, eps, at_start)
-                return r, y, False
+                return r, ss, y, False
             y = checked(y, eps, at_start)
             r = y - v
             if whiten is not None:
                 r = whiten(r)
-            return r, y, True
+            return r, (r.dot(r) if square else None), y, True
 
         def residual(eps):
             nonlocal first
             # the first call (at eps0) raises the user's errors: nothing was computed yet
             at_start, first = first, False
-            r, y, fresh = values(eps, at_start)
+            r, _, y, fresh = values(eps, at_start)
             if not fresh:
                 y = y.copy()
 
@@ -348,33 +352,10 @@ class ModelProblem(InverseProblem):
             are known (no model evaluation at ``eps`` itself)."""
             return noise.whiten(self.jacobian(eps, y, typical=typical, method=method))
 
-        def plain(eps):
-            """``(r, r @ r, y)`` at a point after the first, for MINPACK's differencing:
-            no Jacobian closure, ``y`` possibly the model's own array (the caller copies
-            what it keeps); :func:`values`' common case inline (one call per MINPACK
-            evaluation); the driver silences the squares' overflow."""
-            try:
-                y = model(eps)
-            except Exception as e:  # a user callback: report any failure with its call
-                raise self._model_error(e, eps, False) from e
-            if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == shape:
-                if not flat:
-                    y = y.ravel()
-                r = y - v
-                if whiten is not None:
-                    r = whiten(r)
-                ss = r.dot(r)
-                if not math.isfinite(ss):  # a bad value raises; an overflow passes
-                    checked(y, eps, False)
-                return r, ss, y
-            y = checked(y, eps, False)
-            r = y - v
-            if whiten is not None:
-                r = whiten(r)
-            return r, r.dot(r), y
-
         residual.jacobian_at = jacobian_at
-        residual.plain = plain
+        # ``(r, r @ r, y, fresh)`` at a point after the first, for MINPACK's
+        # differencing: no Jacobian closure (the driver silences the squares' overflow)
+        residual.plain = functools.partial(values, at_start=False, square=True)
         mode = method or self.jac
         residual.jacobian_evaluations = (
             0 if callable(mode) or typical is None else _STENCIL_POINTS[mode] * len(typical)
@@ -456,8 +437,9 @@ def model_fit_fields(problem, eps0, s):
             "default: Levenberg-Marquardt without bounds, trust-region reflective with "
             "them), 'lm' or 'trf'"
         )
-    # run to round-off (scipy's 1e-8 stops ENSO and MGH09 at 1e-6 of NIST's values);
-    # whether the end is an optimum is the relative-offset test's say
+    # the trust region runs to round-off (scipy's 1e-8 stops ENSO and MGH09 at 1e-6 of
+    # NIST's values), LM to its own LM_FTOL; whether the end is an optimum is the
+    # relative-offset test's say
     options = s.take({"polish": True, "x_scale": "jac", "ftol": 1e-15, "xtol": 1e-15,
                       "gtol": 1e-15})  # fmt: skip
     eps0 = as_finite_array("eps0", eps0, ndim=1)
