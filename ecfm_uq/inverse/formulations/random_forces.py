@@ -534,7 +534,8 @@ def fit_random_force(problem, eps0, s):
         SCALED_GRADIENT_TOL if s.tol is None else s.tol,
     )  # fmt: skip
     model = RandomForceModel(problem, s.sigma, "shared", s.sigma_label)
-    x, res = search.run(model, np.zeros(system.n_eps), holds(standard.opt, standard.failure))
+    x, res = search.run(model, np.zeros(system.n_eps), holds(standard.opt, standard.failure),
+                        also=(np.asarray(eps0, float) - eps_std) / scale)  # fmt: skip
     if opts["force_prior"] == "sparse":
         # the sparse prior's profiled likelihood has local minima (forces switching on and
         # off): searched from the standard estimate, from the shared prior's and along the
