@@ -130,17 +130,27 @@ class ModelProblem(InverseProblem):
         ModelEvaluationError
             Later: the same, as a failed evaluation the optimizer backs off from.
         """
+        y, own = self._output(eps, first)
+        if not own:
+            return y
+        # the common output: one copy (a model may reuse its output array), one
+        # finiteness test by an inner product (all_finite's, without its dispatch)
+        y = y.copy().ravel()
+        if math.isfinite(y.dot(self._ones)):
+            return y
+        return self._checked(y, eps, first)
+
+    def _output(self, eps, first=False):
+        """``(y, own)``: ``model(eps)``, the model's own array with its values unchecked
+        when it is the common output (``own``), else :meth:`_checked`'s fresh one; a
+        model that raises, reported with its call (see :meth:`predict`)."""
         try:
             y = self.model(eps)
         except Exception as e:  # a user callback: report any failure with its call
             raise self._model_error(e, eps, first) from e
         if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == self.shape:
-            # the common output: one copy (a model may reuse its output array), one
-            # finiteness test by an inner product (all_finite's, without its dispatch)
-            y = y.copy().ravel()
-            if math.isfinite(y.dot(self._ones)):
-                return y
-        return self._checked(y, eps, first)
+            return y, True
+        return self._checked(y, eps, first), False
 
     def _model_error(self, e, eps, first):
         """The error to raise for ``model(eps)`` raising ``e`` (see :meth:`predict`)."""
@@ -206,16 +216,9 @@ class ModelProblem(InverseProblem):
         )  # fmt: skip
 
     def _stencil_point(self, eps):
-        """``model(eps)`` at a central-difference stencil's point: the model's own array
-        when it is the common output (the stencil copies what it keeps), else
-        :meth:`predict`'s checked one; a model that raises, as in :meth:`predict`."""
-        try:
-            y = self.model(eps)
-        except Exception as e:  # a user callback: report any failure with its call
-            raise self._model_error(e, eps, False) from e
-        if type(y) is np.ndarray and y.dtype is _FLOAT64 and y.shape == self.shape:
-            return y
-        return self._checked(y, eps, False)
+        """``model(eps)`` at a central-difference stencil's point (:meth:`_output`: the
+        stencil copies what it keeps and tests the Jacobian whole)."""
+        return self._output(eps)[0]
 
     def _complex_model(self, z):
         try:
