@@ -125,3 +125,24 @@ def test_minpacks_stop_is_brought_to_the_certified_values(name, start):
     err = np.max(np.abs(res.eps / P.certified - 1))
     raw_err = np.max(np.abs(raw.eps / P.certified - 1))
     assert err <= LM_STEP_TOL < 3e-7 < raw_err, (err, raw_err)
+
+
+def test_a_model_in_pascals_ends_where_minpack_run_to_round_off_does():
+    """A model built apart from ours, from the docs alone: a creep law in SI units,
+    strain = (F/E)(1 - exp(-t/tau)), E ~ 2.1e11 Pa, readings ~2e-8 with 1 % noise,
+    one-sided differences. MINPACK stops at ``LM_FTOL`` = 1e-10 and the status test
+    judges (and refines where needed): the estimate equals scipy's ``curve_fit`` run to
+    round-off (ftol = xtol = gtol = 1e-15) within ``LM_STEP_TOL``, and the standard
+    errors its covariance's within 1e-6."""
+    t = np.linspace(0.5, 20.0, 25)
+
+    def law(t, E, tau):
+        return (5.0e3 / E) * (1.0 - np.exp(-t / tau))
+
+    y = law(t, 2.1e11, 3.0) * (1 + 0.01 * np.random.default_rng(7).standard_normal(t.size))
+    res = fit(ModelProblem(lambda e: law(t, *e), y), [1.5e11, 5.0])
+    ref, cov = optimize.curve_fit(law, t, y, p0=[1.5e11, 5.0], ftol=1e-15, xtol=1e-15,
+                                  gtol=1e-15)  # fmt: skip
+    assert res.status is FitStatus.CONVERGED, res.message
+    np.testing.assert_allclose(res.eps, ref, rtol=LM_STEP_TOL)
+    np.testing.assert_allclose(res.uncertainty.stderr, np.sqrt(np.diag(cov)), rtol=1e-6)
