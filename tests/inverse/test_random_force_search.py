@@ -90,10 +90,11 @@ def test_the_search_with_tau_positive_reaches_nelder_mead_and_the_delta_methods_
     path, monkeypatch
 ):
     """tau > 0 at the standard estimate (two parameters): Fisher scoring (or, where it
-    does not descend, BFGS from the Hessian there: forced here), the Newton finish; the
-    estimate against Nelder-Mead on the profiled likelihood from a fresh model, and the
-    standard errors against central differences of the exact gradient (step 1e-3
-    standard errors) computed afresh."""
+    does not descend, BFGS from the Hessian there: forced here, then the Newton finish);
+    the estimate against Nelder-Mead on the profiled likelihood from a fresh model, and
+    the standard errors against, computed afresh, the profiled expected information at
+    the estimate (the scoring path) or central differences of the exact gradient (step
+    1e-3 standard errors: the Newton finish's path)."""
     if path.startswith("BFGS"):
         monkeypatch.setattr(random_force_search, "score", lambda *args: None)
     problem, truth, sigma = rod4(4)
@@ -111,8 +112,16 @@ def test_the_search_with_tau_positive_reaches_nelder_mead_and_the_delta_methods_
     assert res.loss <= nm.fun + 1e-12 * abs(nm.fun)
     x = (res.eps - std.eps) / scale
     fresh = RandomForceModel(problem, sigma)
-    H = fd_hessian(lambda z: fresh.profiled_gradient(std.eps + scale * z)[1] * scale, x, 1e-3)
-    cov = np.linalg.inv(H) * np.outer(scale, scale)
+    if path.startswith("Fisher"):
+        assert res.uncertainty.method == "marginal-likelihood-expected"
+        fresh.profiled_gradient(res.eps)
+        g_hat = fresh.profiled(res.eps)[1]
+        lin = fresh.linearization(res.eps, second=True)
+        cov = np.linalg.inv(profiled_information(lin, sigma, g_hat[0]))
+    else:
+        assert res.uncertainty.method == "marginal-likelihood"
+        H = fd_hessian(lambda z: fresh.profiled_gradient(std.eps + scale * z)[1] * scale, x, 1e-3)
+        cov = np.linalg.inv(H) * np.outer(scale, scale)
     np.testing.assert_allclose(res.uncertainty.stderr, np.sqrt(np.diag(cov)), rtol=1e-8)
 
 
