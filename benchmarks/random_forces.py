@@ -28,7 +28,8 @@ prior's, not the standard fit inside), a count the machine's load does not chang
 
 With ``--stages`` the random-force fits' model solves are attributed to where they
 happen: the eps search (``search``), the uncertainty (``uncertainty``: the delta method's
-Hessian, by central differences of the exact gradient at the estimate), the restricted
+Hessian, by central differences of the exact gradient at the estimate, where it is the
+observed information; none after Fisher scoring: the expected information), the restricted
 test of tau = 0 (``test``) and the rest of the fit (``other``: the estimate's own
 evaluation, the intervals' likelihood); the machine's load averages are printed first and
 last (the times are shared with whatever else runs).

@@ -1,7 +1,8 @@
 """The random-force ECFM's search at the cost of a standard fit (issue 37 item 5): the
 standard estimate kept where tau-hat is 0 with a margin, the scalar search of one free
-parameter, Fisher scoring from the standard estimate (and its fallback, BFGS from the
-Hessian there) and the Newton finish whose last Hessian is the delta method's, and the
+parameter, Fisher scoring from the standard estimate (whose expected information is then
+the delta method's) and its fallback, BFGS from the Hessian there, with the Newton finish
+whose last Hessian is the delta method's, and the
 restricted
 test's simulation -- each against an independent minimization of the profiled likelihood
 (scipy's bounded scalar minimizer, Nelder-Mead, a grid) or a direct simulation."""
@@ -90,10 +91,11 @@ def test_the_search_with_tau_positive_reaches_nelder_mead_and_the_delta_methods_
     path, monkeypatch
 ):
     """tau > 0 at the standard estimate (two parameters): Fisher scoring (or, where it
-    does not descend, BFGS from the Hessian there: forced here), the Newton finish; the
-    estimate against Nelder-Mead on the profiled likelihood from a fresh model, and the
-    standard errors against central differences of the exact gradient (step 1e-3
-    standard errors) computed afresh."""
+    does not descend, BFGS from the Hessian there: forced here, then the Newton finish);
+    the estimate against Nelder-Mead on the profiled likelihood from a fresh model, and
+    the standard errors against, computed afresh, the profiled expected information at
+    the estimate (the scoring path) or central differences of the exact gradient (step
+    1e-3 standard errors: the Newton finish's path)."""
     if path.startswith("BFGS"):
         monkeypatch.setattr(random_force_search, "score", lambda *args: None)
     problem, truth, sigma = rod4(4)
@@ -111,8 +113,16 @@ def test_the_search_with_tau_positive_reaches_nelder_mead_and_the_delta_methods_
     assert res.loss <= nm.fun + 1e-12 * abs(nm.fun)
     x = (res.eps - std.eps) / scale
     fresh = RandomForceModel(problem, sigma)
-    H = fd_hessian(lambda z: fresh.profiled_gradient(std.eps + scale * z)[1] * scale, x, 1e-3)
-    cov = np.linalg.inv(H) * np.outer(scale, scale)
+    if path.startswith("Fisher"):
+        assert res.uncertainty.method == "marginal-likelihood-expected"
+        fresh.profiled_gradient(res.eps)
+        g_hat = fresh.profiled(res.eps)[1]
+        lin = fresh.linearization(res.eps, second=True)
+        cov = np.linalg.inv(profiled_information(lin, sigma, g_hat[0]))
+    else:
+        assert res.uncertainty.method == "marginal-likelihood"
+        H = fd_hessian(lambda z: fresh.profiled_gradient(std.eps + scale * z)[1] * scale, x, 1e-3)
+        cov = np.linalg.inv(H) * np.outer(scale, scale)
     np.testing.assert_allclose(res.uncertainty.stderr, np.sqrt(np.diag(cov)), rtol=1e-8)
 
 
@@ -129,8 +139,9 @@ def rod6_source(seed):
 
 @pytest.mark.parametrize("seed", [0, 5])
 def test_fisher_scoring_reaches_the_profiled_minimum_in_a_few_solves(seed):
-    """tau-hat > 0: the scoring path, its solves (the standard estimate's, the scoring
-    steps', the central Hessian's 2p shared with the uncertainty) at most 10, and the
+    """tau-hat > 0: the scoring path, its solves (the standard estimate's and the scoring
+    steps'; no central Hessian: the uncertainty is the expected information) at most 6
+    (10 while the Newton finish checked the point with the central Hessian), and the
     estimate at the minimum of the profiled likelihood found independently: Nelder-Mead
     on p(eps) of a fresh model to 1e-9 standard errors from a start 0.5 standard errors
     off, and the profiled expected information against the observed (central
@@ -139,7 +150,8 @@ def test_fisher_scoring_reaches_the_profiled_minimum_in_a_few_solves(seed):
     res = fit(problem, truth, formulation="ecfm-random", sigma=sigma)
     assert res.success and res.extra["tau"] > 0
     assert "Fisher scoring from the standard estimate" in res.message  # the path
-    assert res.extra["n_solves"] <= 10
+    assert res.extra["n_solves"] <= 6
+    assert res.uncertainty.method == "marginal-likelihood-expected"
     se = res.uncertainty.stderr
     model = RandomForceModel(problem, sigma)
     nm = optimize.minimize(

@@ -25,21 +25,39 @@ information :math:`H`, whose own are 0.1-0.5 and 9-400 in standard-error units).
 :math:`-F^{-1}\\nabla p`, :math:`F` recomputed at every point (no Hessian by differences of
 the gradient: no solve), with Armijo backtracking on the exact value of :math:`p`, until the
 gradient meets the status tolerance and the next step would be below ``_SCORE_STEP``
-standard errors (3-7 steps from the standard estimate there). The Newton finish of
-:class:`~ecfm_uq.inverse.formulations.random_force_search.Search` then checks the point with
-the delta method's central Hessian (which the uncertainty reuses), so the estimate is the
-same point as before to its tolerance; where scoring does not descend the previous path
-runs.
+standard errors (3-7 steps from the standard estimate there); where scoring does not
+descend the previous path runs.
+
+Where scoring ends at its tolerance the estimate's delta-method covariance is
+:math:`F^{-1}` at the estimate (:func:`expected_uncertainty`: no solve), not the inverse
+of the observed information :math:`H` by central differences of the exact gradient
+(:math:`2p` solves, which the Newton finish of
+:class:`~ecfm_uq.inverse.formulations.random_force_search.Search` computed to check the
+point). Both are asymptotic covariances; over 200 seeded data sets per row (the coverage
+study's random-force rows, a rod with 8 sensors and 1 % noise, and data drawn from the
+random-force model itself) their standard errors differed by at most 6 % (median 0.3-1 %)
+where :math:`\\hat\\tau > 0`, the 95 % intervals covered the truth in the same data sets,
+and both standard errors stood in the same ratio to the empirical spread of the estimates
+(``docs/calibration.md``). Elsewhere (the scalar search, the sparse prior, :math:`F` not
+positive definite) the observed information is kept.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy import linalg, optimize
+from scipy import linalg, optimize, stats
 
 from ...errors import ConvergenceError, ModelEvaluationError
+from ..core.result import Uncertainty
 
-__all__ = ["FAILURES", "gauss_newton_information", "profiled_information", "score", "singular"]
+__all__ = [
+    "FAILURES",
+    "expected_uncertainty",
+    "gauss_newton_information",
+    "profiled_information",
+    "score",
+    "singular",
+]
 
 # the model cannot be solved there (ValueError: non-finite parameters after an overflow)
 FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError, ValueError)
@@ -85,6 +103,55 @@ def profiled_information(lin, sigma, t):
         if I_tt > 0.0:
             F = F - np.outer(I_et, I_et) / I_tt
     return 0.5 * (F + F.T)
+
+
+def expected_uncertainty(model, eps, scale, g_hat, level=0.95):
+    """The delta method from the profiled expected information at the estimate.
+
+    Parameters
+    ----------
+    model : RandomForceModel
+        Shared prior; its linearization at ``eps`` with second derivatives is remembered
+        from the gradient measured there (no solve).
+    eps : (n_eps,) ndarray
+        The estimate.
+    scale : (n_eps,) ndarray
+        The search's coordinates (standard errors of the standard fit): ``F`` is checked
+        and inverted in them.
+    g_hat : ndarray
+        The force variances at ``eps`` (all :math:`\\hat\\tau^2 > 0`).
+    level : float
+        Of the normal intervals.
+
+    Returns
+    -------
+    Uncertainty or None
+        :math:`F^{-1}` (:func:`profiled_information`), ``method``
+        ``"marginal-likelihood-expected"``; ``None`` where :math:`\\hat\\tau` is 0, the
+        linearization fails, or ``F`` in the scaled coordinates is not positive definite
+        or is conditioned worse than ``_CONDITION`` (the caller keeps the observed
+        information).
+    """
+    if not np.any(g_hat):
+        return None
+    try:
+        lin = model.linearization(eps, second=True)
+        F = profiled_information(lin, model.sigma, float(np.ravel(g_hat)[0]))
+    except FAILURES:
+        return None
+    Fs = F * np.outer(scale, scale)
+    w = np.linalg.eigvalsh(Fs)
+    if not (np.all(np.isfinite(w)) and w[0] > 0 and w[-1] < _CONDITION * w[0]):
+        return None
+    cov = np.linalg.inv(Fs) * np.outer(scale, scale)
+    cov = 0.5 * (cov + cov.T)
+    se = np.sqrt(np.diag(cov))
+    z = stats.norm.ppf(0.5 + 0.5 * level)
+    return Uncertainty(
+        True, "expected information of the marginal likelihood (tau profiled out)", cov, se,
+        np.column_stack([eps - z * se, eps + z * se]), level, "marginal-likelihood-expected",
+        "known",
+    )  # fmt: skip
 
 
 def gauss_newton_information(model, lin, g_hat):

@@ -11,8 +11,10 @@ the gradient's solve already has, no Hessian by differences
 below 1e-6 standard errors; where scoring does not descend, BFGS from the Hessian at the
 start, else L-BFGS-B with restarts. Then, where :math:`\\hat\\tau > 0` (a long flat valley
 where a small gradient does not mean close), Newton steps with the Hessian by differences
-of the gradient until a step is below 1e-6 standard errors (after scoring: one check with
-the delta method's central Hessian, which the uncertainty reuses); Nelder-Mead from a wide
+of the gradient until a step is below 1e-6 standard errors (not after scoring ended at its
+tolerance: its own steps are Newton's in the expected information, which then gives the
+uncertainty, :func:`~ecfm_uq.inverse.formulations.random_force_scoring.expected_uncertainty`;
+the result is marked ``res.scored``); Nelder-Mead from a wide
 simplex where they do not get there, unless the Gauss-Newton information is singular there
 (a minimum at infinity, reported so by the fit: the simplex would only walk along the flat
 direction). Cheaper cases (issue 37 item 5, shared prior): the standard estimate itself
@@ -135,13 +137,18 @@ class Search:
             found = self._scalar(model, x0)
             if found is not None:
                 return found
-        found, last = None, np.inf
+        found = None
         if model.prior == "shared" and self.bnds is None and np.size(x0) > 1:
             scored = score(self, model, x0, _armijo)
             if scored is not None:
-                found, last = scored[:2], scored[2]
-            else:
-                found = self._quasi_newton(model, x0)
+                # at scoring's tolerance (tau-hat > 0 there): no Newton check by the
+                # central Hessian (2 x.size solves); the uncertainty is the expected
+                # information there (random_force_scoring.expected_uncertainty) and the
+                # status the gradient measured there by the fit
+                x, res = scored[:2]
+                res.scored = True
+                return x, res
+            found = self._quasi_newton(model, x0)
         x, res = found if found is not None else self._descend(model, x0)
         tau_positive = np.isfinite(res.fun) and np.any(
             model.profiled(self.eps_std + self.scale * x)[1]
@@ -155,7 +162,7 @@ class Search:
             # equations' units): finish by Newton steps until a step is below 1e-6
             # standard errors, derivative-free where they do not get there
             x_n, val_n, steps, done = self._newton(
-                self.objective(model, second=True), self.gradient(model), x, res.fun, last
+                self.objective(model, second=True), self.gradient(model), x, res.fun
             )
             res.nit += steps
             if done:

@@ -98,6 +98,7 @@ from ..statistics.diagnostics import fd_hessian
 from ..statistics.loglik import LogLikelihood
 from ..statistics.verdict import decide
 from .random_force_gradient import profiled_gradient, second_sensitivities
+from .random_force_scoring import expected_uncertainty
 from .random_force_scoring import gauss_newton_information as _gauss_newton_information
 from .random_force_scoring import singular as _singular
 from .random_force_search import FAILURES as _FAILURES
@@ -558,7 +559,8 @@ def fit_random_force(problem, eps0, s):
     hits = at_bound(eps, s.bounds)
     exhausted, failure = res.nit >= search.maxiter, None
     lam, lam_sd = model.forces(lin, g_hat)
-    unc = _uncertainty(search.gradient(model), x, scale, standard, g_hat, model, lin)
+    unc = _uncertainty(search.gradient(model), x, scale, standard, g_hat, model, lin,
+                       scored=bool(res.get("scored")))  # fmt: skip
     message = f"{res.message} [{opt.message}]"
     if opt.converged:
         # a small gradient is not an optimum where the data no longer determine eps (an
@@ -617,18 +619,19 @@ def fit_random_force(problem, eps0, s):
     )  # fmt: skip
 
 
-def _uncertainty(grad, x, scale, standard, g_hat, model, lin):
+def _uncertainty(grad, x, scale, standard, g_hat, model, lin, scored=False):
     """Delta method of the random-force ECFM; the standard fit's where tau = 0.
 
-    With tau > 0: the observed information of the profiled marginal likelihood
-    :math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))` (central differences of its exact gradient
-    ``grad`` in the scaled parameters), which carries tau's uncertainty. Where that is not positive
-    definite (a flat valley where the discrepancy trades off against eps, or the kink
-    where :math:`\\hat\\tau(\\epsilon)` leaves zero), the expected (Gauss-Newton)
-    information :math:`J^T S^{-1} J` with :math:`S = \\sigma^2 I + \\hat\\tau^2 AA^T` held at
-    the estimate -- the standard fit's Gauss-Newton convention with the estimated
-    discrepancy added to the noise; it does not carry tau's uncertainty, and the message
-    says so and why."""
+    With tau > 0, where the search ended by Fisher scoring (``scored``): the expected
+    information of the profiled marginal likelihood at the estimate (no solve; evidence:
+    :mod:`~ecfm_uq.inverse.formulations.random_force_scoring`). Otherwise, or where that
+    is not positive definite, the observed information: central differences of ``grad`` of
+    :math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))` in the scaled parameters. Both carry
+    tau's uncertainty. Where the observed one is not positive definite (a flat valley, or
+    the kink where :math:`\\hat\\tau(\\epsilon)` leaves zero), :math:`J^T S^{-1} J` with
+    :math:`S = \\sigma^2 I + \\hat\\tau^2 AA^T` held at the estimate (the standard fit's
+    Gauss-Newton convention with the discrepancy added to the noise; it does not carry
+    tau's uncertainty, and the message says so and why)."""
     if not np.any(g_hat):
         u = standard.uncertainty
         return Uncertainty(
@@ -636,6 +639,8 @@ def _uncertainty(grad, x, scale, standard, g_hat, model, lin):
             u.intervals, u.level, u.method, u.noise_model, u.dof, u.jacobian,
         )  # fmt: skip
     eps = np.asarray(standard.eps, float) + scale * x
+    if scored and (expected := expected_uncertainty(model, eps, scale, g_hat)) is not None:
+        return expected
     z = stats.norm.ppf(0.975)
     why = None
     try:
