@@ -45,10 +45,11 @@ positive definite) the observed information is kept.
 from __future__ import annotations
 
 import numpy as np
-from scipy import linalg, optimize, stats
+from scipy import optimize, stats
 
 from ...errors import ConvergenceError, ModelEvaluationError
 from ..core.result import Uncertainty
+from .random_force_gradient import cho_factor, cho_solve
 
 __all__ = [
     "FAILURES",
@@ -86,15 +87,15 @@ def profiled_information(lin, sigma, t):
     """
     A, J = lin.A, lin.J
     S = sigma**2 * np.eye(A.shape[0]) + t * (A @ A.T)
-    chol = linalg.cho_factor(S)
-    F = J.T @ linalg.cho_solve(chol, J)
+    chol = cho_factor(S)
+    F = J.T @ cho_solve(chol, J)
     if t > 0.0 and lin.dA is not None:
         m = J.shape[1]
-        SiAA = linalg.cho_solve(chol, A @ A.T)
+        SiAA = cho_solve(chol, A @ A.T)
         SidS = []
         for i in range(m):
             dAi = lin.dA[:, :, i]
-            SidS.append(linalg.cho_solve(chol, t * (dAi @ A.T + A @ dAi.T)))
+            SidS.append(cho_solve(chol, t * (dAi @ A.T + A @ dAi.T)))
         I_et = np.array([0.5 * np.sum(SidS[i] * SiAA.T) for i in range(m)])
         I_tt = 0.5 * np.sum(SiAA * SiAA.T)
         for i in range(m):
