@@ -50,6 +50,7 @@ __all__ = ["cho_factor", "cho_solve", "profiled_gradient", "second_sensitivities
 
 _STEP = 1e-5  # relative step of the tangent central differences (error ~ step^2)
 _DENSE = 1000  # up to this many unknowns the Jacobian is assembled for its actions
+_MACHINE_EPS = np.finfo(float).eps
 
 
 def second_sensitivities(system, sol, dTh_e, dTh_l, M):
@@ -154,12 +155,16 @@ def _reml_derivative(lin, dA, dJ, sigma, s, a0):
     """:math:`ds/d\\epsilon` of the REML estimate ``s`` (implicit function theorem)."""
     r, A, J = lin.r, lin.A, lin.J
     m = J.shape[1]
-    norms = np.linalg.norm(J, axis=0)
-    live = norms > 0
-    Jn = J[:, live] / norms[live]
-    U, sv, Vt = np.linalg.svd(Jn, full_matrices=True)
-    rank = int(np.sum(sv > max(Jn.shape) * np.finfo(float).eps * sv[0])) if sv.size else 0
-    if rank < Jn.shape[1]:
+    if getattr(lin, "svd", None) is not None:
+        norms, U, sv, Vt = lin.svd  # linearize's: the same SVD of the same unit columns
+        live = norms > 0
+    else:
+        norms = np.linalg.norm(J, axis=0)
+        live = norms > 0
+        U, sv, Vt = np.linalg.svd(J[:, live] / norms[live], full_matrices=True)
+    n_live = int(np.count_nonzero(live))
+    rank = int(np.sum(sv > max(J.shape[0], n_live) * _MACHINE_EPS * sv[0])) if sv.size else 0
+    if rank < n_live:
         return None
     K = U[:, rank:]
     Q = K @ K.T
