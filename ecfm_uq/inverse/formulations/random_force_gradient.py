@@ -178,15 +178,19 @@ def _reml_derivative(lin, dA, dJ, sigma, s, a0):
     f_ss = -2.0 * (Hu @ T @ Hu) / sigma**2 + np.sum(TH * TH.T)
     if not f_ss < 0.0:
         return None  # not a strict maximum: s is not differentiable there
+    # every j at once, as stacks whose slices have the layouts of the separate products
+    # (elementwise steps and per-slice matrix products: the same bits as a loop over j)
+    dAs = np.moveaxis(dA, 2, 0)  # (m, C, F) views, each as strided as dA[:, :, j]
+    X = np.ascontiguousarray(np.moveaxis(dJ[:, live, :], 2, 0)) / norms[live]
+    E = np.ascontiguousarray(Q @ X) @ Jn_pinv
+    dQ = -np.ascontiguousarray(E + np.swapaxes(E, 1, 2))
+    dH = (dAs @ A.T + A @ np.swapaxes(dAs, 1, 2)) / a0**2
+    dT = dQ @ T + T @ dQ - np.ascontiguousarray((s * T) @ (dQ @ H + dH + H @ dQ)) @ T
+    du = dT @ r  # T J_j = 0: the contrasts do not see dr = -J_j
     ds = np.zeros(m)
     for j in range(m):
-        E = Q @ (dJ[:, live, j] / norms[live]) @ Jn_pinv
-        dQ = -(E + E.T)
-        dH = (dA[:, :, j] @ A.T + A @ dA[:, :, j].T) / a0**2
-        dT = dQ @ T + T @ dQ - s * T @ (dQ @ H + dH + H @ dQ) @ T
-        du = dT @ r  # T J_j = 0: the contrasts do not see dr = -J_j
-        f_se = (2.0 * (Hu @ du) + u @ dH @ u) / sigma**2 - np.sum(dT * H) - np.sum(T * dH)
-        ds[j] = -f_se / f_ss
+        f_se = (2.0 * (Hu @ du[j]) + u @ dH[j] @ u) / sigma**2 - np.sum(dT[j] * H)
+        ds[j] = -(f_se - np.sum(T * dH[j])) / f_ss
     return ds
 
 
