@@ -44,12 +44,13 @@ solve's factors for all the right-hand sides.
 from __future__ import annotations
 
 import numpy as np
-from scipy import linalg
+from scipy.linalg import lapack
 
-__all__ = ["profiled_gradient", "second_sensitivities"]
+__all__ = ["cho_factor", "cho_solve", "profiled_gradient", "second_sensitivities"]
 
 _STEP = 1e-5  # relative step of the tangent central differences (error ~ step^2)
 _DENSE = 1000  # up to this many unknowns the Jacobian is assembled for its actions
+_MACHINE_EPS = np.finfo(float).eps
 
 
 def second_sensitivities(system, sol, dTh_e, dTh_l, M):
@@ -133,9 +134,9 @@ def profiled_gradient(lin, dA, dJ, sigma, g, s=None, a0=None):
     """
     r, A, J = lin.r, lin.A, lin.J
     S = sigma**2 * np.eye(r.size) + (A * g) @ A.T
-    chol = linalg.cho_factor(S)
-    w = linalg.cho_solve(chol, r)
-    SiA = linalg.cho_solve(chol, A)
+    chol = cho_factor(S)
+    w = cho_solve(chol, r)
+    SiA = cho_solve(chol, A)
     grad = -J.T @ w
     grad -= np.einsum("c,cfj,f->j", w, dA, g * (A.T @ w))
     grad += np.einsum("cf,cfj->j", SiA * g, dA)
@@ -154,12 +155,16 @@ def _reml_derivative(lin, dA, dJ, sigma, s, a0):
     """:math:`ds/d\\epsilon` of the REML estimate ``s`` (implicit function theorem)."""
     r, A, J = lin.r, lin.A, lin.J
     m = J.shape[1]
-    norms = np.linalg.norm(J, axis=0)
-    live = norms > 0
-    Jn = J[:, live] / norms[live]
-    U, sv, Vt = np.linalg.svd(Jn, full_matrices=True)
-    rank = int(np.sum(sv > max(Jn.shape) * np.finfo(float).eps * sv[0])) if sv.size else 0
-    if rank < Jn.shape[1]:
+    if getattr(lin, "svd", None) is not None:
+        norms, U, sv, Vt = lin.svd  # linearize's: the same SVD of the same unit columns
+        live = norms > 0
+    else:
+        norms = np.linalg.norm(J, axis=0)
+        live = norms > 0
+        U, sv, Vt = np.linalg.svd(J[:, live] / norms[live], full_matrices=True)
+    n_live = int(np.count_nonzero(live))
+    rank = int(np.sum(sv > max(J.shape[0], n_live) * _MACHINE_EPS * sv[0])) if sv.size else 0
+    if rank < n_live:
         return None
     K = U[:, rank:]
     Q = K @ K.T
@@ -173,13 +178,46 @@ def _reml_derivative(lin, dA, dJ, sigma, s, a0):
     f_ss = -2.0 * (Hu @ T @ Hu) / sigma**2 + np.sum(TH * TH.T)
     if not f_ss < 0.0:
         return None  # not a strict maximum: s is not differentiable there
+    # every j at once, as stacks whose slices have the layouts of the separate products
+    # (elementwise steps and per-slice matrix products: the same bits as a loop over j)
+    dAs = np.moveaxis(dA, 2, 0)  # (m, C, F) views, each as strided as dA[:, :, j]
+    X = np.ascontiguousarray(np.moveaxis(dJ[:, live, :], 2, 0)) / norms[live]
+    E = np.ascontiguousarray(Q @ X) @ Jn_pinv
+    dQ = -np.ascontiguousarray(E + np.swapaxes(E, 1, 2))
+    dH = (dAs @ A.T + A @ np.swapaxes(dAs, 1, 2)) / a0**2
+    dT = dQ @ T + T @ dQ - np.ascontiguousarray((s * T) @ (dQ @ H + dH + H @ dQ)) @ T
+    du = dT @ r  # T J_j = 0: the contrasts do not see dr = -J_j
     ds = np.zeros(m)
     for j in range(m):
-        E = Q @ (dJ[:, live, j] / norms[live]) @ Jn_pinv
-        dQ = -(E + E.T)
-        dH = (dA[:, :, j] @ A.T + A @ dA[:, :, j].T) / a0**2
-        dT = dQ @ T + T @ dQ - s * T @ (dQ @ H + dH + H @ dQ) @ T
-        du = dT @ r  # T J_j = 0: the contrasts do not see dr = -J_j
-        f_se = (2.0 * (Hu @ du) + u @ dH @ u) / sigma**2 - np.sum(dT * H) - np.sum(T * dH)
-        ds[j] = -f_se / f_ss
+        f_se = (2.0 * (Hu @ du[j]) + u @ dH[j] @ u) / sigma**2 - np.sum(dT[j] * H)
+        ds[j] = -(f_se - np.sum(T * dH[j])) / f_ss
     return ds
+
+
+def cho_factor(S):
+    """The upper Cholesky factor of a float64 matrix ``S``: ``scipy.linalg.cho_factor(S)[0]``
+    (the same LAPACK ``potrf`` call, so the same bits, and the same errors: ``ValueError``
+    for a non-finite ``S``, ``LinAlgError`` where it is not positive definite) without
+    scipy's per-call checks and batching wrapper (a few microseconds, several times at
+    every point of the search)."""
+    if not np.isfinite(S).all():
+        raise ValueError("array must not contain infs or NaNs")
+    c, info = lapack.dpotrf(S, lower=0, overwrite_a=0, clean=0)
+    if info > 0:
+        raise np.linalg.LinAlgError(
+            f"{info}-th leading minor of the array is not positive definite"
+        )
+    if info < 0:
+        raise ValueError(f"LAPACK reported an illegal value in {-info}-th argument of POTRF")
+    return c
+
+
+def cho_solve(c, b):
+    """``scipy.linalg.cho_solve((c, False), b)`` for a factor of :func:`cho_factor` (the
+    same LAPACK ``potrs`` call: the same bits; ``ValueError`` for a non-finite ``b``)."""
+    if not np.isfinite(b).all():
+        raise ValueError("array must not contain infs or NaNs")
+    x, info = lapack.dpotrs(c, b, lower=0)
+    if info != 0:
+        raise ValueError(f"illegal value in {-info}th argument of internal potrs")
+    return x

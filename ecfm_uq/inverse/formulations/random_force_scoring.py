@@ -45,10 +45,11 @@ positive definite) the observed information is kept.
 from __future__ import annotations
 
 import numpy as np
-from scipy import linalg, optimize, stats
+from scipy import optimize, stats
 
 from ...errors import ConvergenceError, ModelEvaluationError
 from ..core.result import Uncertainty
+from .random_force_gradient import cho_factor, cho_solve
 
 __all__ = [
     "FAILURES",
@@ -64,6 +65,10 @@ FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError, Value
 
 _SCORE_STEP = 1e-6  # scoring ends where its next step would be below this (standard errors)
 _CONDITION = 1e12  # a metric worse conditioned than this is refused (the previous path)
+# the last profiled_information: (lin, (sigma, t), F). Fisher scoring ends at a point
+# whose information it computed, and the delta method asks for it again (a Linearization
+# is immutable, its second derivatives included, so the same object has the same F)
+_LAST_INFORMATION = [None]
 
 
 def profiled_information(lin, sigma, t):
@@ -84,17 +89,20 @@ def profiled_information(lin, sigma, t):
         :math:`F = I_{\\epsilon\\epsilon} - I_{\\epsilon t} I_{tt}^{-1} I_{t\\epsilon}`
         (module docstring), symmetric; :math:`J^T J/\\sigma^2` where ``t`` is 0.
     """
+    last = _LAST_INFORMATION[0]
+    if last is not None and last[0] is lin and last[1] == (sigma, t):
+        return last[2].copy()  # the same point again (the scoring's last, its uncertainty)
     A, J = lin.A, lin.J
     S = sigma**2 * np.eye(A.shape[0]) + t * (A @ A.T)
-    chol = linalg.cho_factor(S)
-    F = J.T @ linalg.cho_solve(chol, J)
+    chol = cho_factor(S)
+    F = J.T @ cho_solve(chol, J)
     if t > 0.0 and lin.dA is not None:
         m = J.shape[1]
-        SiAA = linalg.cho_solve(chol, A @ A.T)
+        SiAA = cho_solve(chol, A @ A.T)
         SidS = []
         for i in range(m):
             dAi = lin.dA[:, :, i]
-            SidS.append(linalg.cho_solve(chol, t * (dAi @ A.T + A @ dAi.T)))
+            SidS.append(cho_solve(chol, t * (dAi @ A.T + A @ dAi.T)))
         I_et = np.array([0.5 * np.sum(SidS[i] * SiAA.T) for i in range(m)])
         I_tt = 0.5 * np.sum(SiAA * SiAA.T)
         for i in range(m):
@@ -102,7 +110,9 @@ def profiled_information(lin, sigma, t):
                 F[i, j] += 0.5 * np.sum(SidS[i] * SidS[j].T)
         if I_tt > 0.0:
             F = F - np.outer(I_et, I_et) / I_tt
-    return 0.5 * (F + F.T)
+    F = 0.5 * (F + F.T)
+    _LAST_INFORMATION[0] = (lin, (sigma, t), F.copy())
+    return F
 
 
 def expected_uncertainty(model, eps, scale, g_hat, level=0.95):

@@ -97,7 +97,7 @@ from ..core.settings import FitSettings
 from ..statistics.diagnostics import fd_hessian
 from ..statistics.loglik import LogLikelihood
 from ..statistics.verdict import decide
-from .random_force_gradient import profiled_gradient, second_sensitivities
+from .random_force_gradient import cho_factor, cho_solve, profiled_gradient, second_sensitivities
 from .random_force_scoring import expected_uncertainty
 from .random_force_scoring import gauss_newton_information as _gauss_newton_information
 from .random_force_scoring import singular as _singular
@@ -130,6 +130,7 @@ class Linearization:
     J: np.ndarray  # M dE[theta]/deps, (C, n_eps)
     dA: np.ndarray | None = None  # dA/deps, (C, n_forces, n_eps), when asked for
     dJ: np.ndarray | None = None  # dJ/deps, (C, n_eps, n_eps), dJ[:, k, j] = d J_k / d eps_j
+    svd: tuple | None = None  # (norms, U, sv, Vt): J's column norms, SVD of its unit columns
 
 
 class RandomForceModel:
@@ -198,14 +199,15 @@ class RandomForceModel:
         # by SVD (QR without pivoting misplaces the span when a column vanishes)
         norms = np.linalg.norm(J, axis=0)
         Jn = J[:, norms > 0] / norms[norms > 0]
-        U_J, sv, _ = np.linalg.svd(Jn, full_matrices=True)
+        U_J, sv, Vt = np.linalg.svd(Jn, full_matrices=True)
         rank = int(np.sum(sv > max(Jn.shape) * np.finfo(float).eps * sv[0])) if sv.size else 0
         K = U_J[:, rank:]
         xi, V = np.linalg.eigh(K.T @ AA @ K / self.a0**2)
         q = (V.T @ (K.T @ r)) ** 2 / self.sigma**2
         return Linearization(
-            np.asarray(eps, float), r, A, mu, (U.T @ r) ** 2, np.maximum(xi, 0.0), q, J, dA, dJ
-        )
+            np.asarray(eps, float), r, A, mu, (U.T @ r) ** 2, np.maximum(xi, 0.0), q, J, dA, dJ,
+            (norms, U_J, sv, Vt),
+        )  # fmt: skip
 
     def nll(self, lin, s):
         """:math:`\\ell` at scaled variance ``s`` (:math:`\\tau^2 = s\\sigma^2/a_0^2`), up to
@@ -430,8 +432,6 @@ class RandomForceModel:
         of :math:`\\epsilon` conditional on the estimated discrepancy (generalized least
         squares), exact gradient :math:`-J^T S_0^{-1} r`. With :math:`\\hat\\tau = 0` it is
         the standard likelihood with ``sigma`` known."""
-        from scipy.linalg import cho_factor, cho_solve
-
         chol = cho_factor(self.covariance(lin, g))
         sysm = self.system
 

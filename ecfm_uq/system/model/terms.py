@@ -60,6 +60,7 @@ class Coefficient:
         self._grad = grad
         self.indices = None if indices is None else tuple(int(m) for m in indices)
         self.label = label
+        self.is_constant = False  # True from Coefficient.constant: grad(eps) is zero
 
     def value(self, eps):
         """:math:`c(\\epsilon)` as a finite float (ModelEvaluationError otherwise)."""
@@ -95,7 +96,9 @@ class Coefficient:
     def constant(cls, c):
         """:math:`c(\\epsilon) = c`."""
         c = check_real("c", c)
-        return cls(lambda eps: c, lambda eps: np.zeros(len(eps)), indices=(), label=f"{c:g}")
+        coef = cls(lambda eps: c, lambda eps: np.zeros(len(eps)), indices=(), label=f"{c:g}")
+        coef.is_constant = True
+        return coef
 
     @classmethod
     def parameter(cls, index, scale=1.0):

@@ -1,0 +1,85 @@
+"""The random-force ECFM's per-point shortcuts give the same bits as what they replace.
+
+The Cholesky factor and solves by their LAPACK calls directly (against
+``scipy.linalg.cho_factor``/``cho_solve``, and their errors), the profiled expected
+information remembered for its last point (against a fresh computation), and the REML
+derivative from linearize's SVD (against one that computes its own).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy import linalg
+
+from ecfm_uq.inverse import SteadyProblem
+from ecfm_uq.inverse.formulations import random_force_gradient as rg
+from ecfm_uq.inverse.formulations.random_force_scoring import profiled_information
+from ecfm_uq.inverse.formulations.random_forces import RandomForceModel
+from ecfm_uq.problems.reaction import ReactionRod
+
+
+def spd(n, seed=0):
+    X = np.random.default_rng(seed).standard_normal((n, n))
+    return X @ X.T + 0.1 * np.eye(n)
+
+
+@pytest.mark.parametrize("shape", [(6,), (6, 3)])
+def test_cholesky_calls_give_scipys_bits(shape):
+    S = spd(6)
+    b = np.random.default_rng(1).standard_normal(shape)
+    c = rg.cho_factor(S)
+    ref = linalg.cho_factor(S)
+    np.testing.assert_array_equal(c, ref[0])
+    np.testing.assert_array_equal(rg.cho_solve(c, b), linalg.cho_solve(ref, b))
+    np.testing.assert_allclose(S @ rg.cho_solve(c, b), b, rtol=1e-10, atol=1e-12)
+
+
+def test_cholesky_calls_refuse_what_scipy_refuses():
+    S = spd(4)
+    bad = S.copy()
+    bad[0, 1] = np.nan
+    with pytest.raises(ValueError, match="infs or NaNs"):
+        rg.cho_factor(bad)
+    with pytest.raises(np.linalg.LinAlgError, match="not positive definite"):
+        rg.cho_factor(-S)
+    with pytest.raises(ValueError, match="infs or NaNs"):
+        rg.cho_solve(rg.cho_factor(S), np.array([1.0, np.inf, 0.0, 0.0]))
+
+
+def rod_model():
+    rod = ReactionRod(6)
+    truth = np.array([1.5, 20.0])
+    clean = rod.data(truth)
+    sigma = 0.02 * float(np.abs(clean).mean())
+    v = rod.data(truth, 16.0, 0.62) + sigma * np.random.default_rng(0).standard_normal(6)
+    return RandomForceModel(SteadyProblem(rod.system, rod.M_obs, v), sigma), truth
+
+
+def test_the_information_remembered_is_a_fresh_computations_and_a_copy():
+    model, truth = rod_model()
+    lin = model.linearization(truth, second=True)
+    t = float(model.profiled(truth)[1][0])
+    assert t > 0.0
+    F1 = profiled_information(lin, model.sigma, t)
+    F1_kept = F1.copy()
+    F1[:] = 0.0  # the caller's copy: not the remembered one
+    F2 = profiled_information(lin, model.sigma, t)
+    np.testing.assert_array_equal(F2, F1_kept)
+    # another Linearization object (the same numbers) is computed afresh: the same bits
+    np.testing.assert_array_equal(profiled_information(replace(lin), model.sigma, t), F1_kept)
+    # another variance: another matrix
+    assert not np.array_equal(profiled_information(lin, model.sigma, 2.0 * t), F1_kept)
+
+
+def test_the_reml_derivative_from_linearizes_svd_is_its_own():
+    model, truth = rod_model()
+    lin = model.linearization(truth, second=True)
+    assert lin.svd is not None
+    s = float(model.profiled(truth)[1][0]) * model.a0**2 / model.sigma**2
+    ds = rg._reml_derivative(lin, lin.dA, lin.dJ, model.sigma, s, model.a0)
+    own = rg._reml_derivative(replace(lin, svd=None), lin.dA, lin.dJ, model.sigma, s, model.a0)
+    np.testing.assert_array_equal(ds, own)
+    assert np.all(np.isfinite(ds)) and np.any(ds != 0.0)
