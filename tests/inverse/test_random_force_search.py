@@ -7,6 +7,7 @@ restricted
 test's simulation -- each against an independent minimization of the profiled likelihood
 (scipy's bounded scalar minimizer, Nelder-Mead, a grid) or a direct simulation."""
 
+import dataclasses
 import functools
 from types import SimpleNamespace
 
@@ -15,7 +16,7 @@ import pytest
 from scipy import optimize
 
 from ecfm_uq.inverse import SteadyProblem, fit
-from ecfm_uq.inverse.formulations import random_force_search
+from ecfm_uq.inverse.formulations import random_force_search, random_forces
 from ecfm_uq.inverse.formulations.random_force_scoring import profiled_information
 from ecfm_uq.inverse.formulations.random_forces import _S_GRID, RandomForceModel
 from ecfm_uq.inverse.statistics.diagnostics import fd_hessian
@@ -58,7 +59,7 @@ def test_consistent_data_keep_the_standard_estimate_after_one_evaluation():
     std = res.extra["standard"]
     assert res.success and res.extra["tau"] == 0.0
     assert "tau-hat = 0 with a margin" in res.message  # the path taken
-    assert res.extra["n_solves"] == 1
+    assert res.extra["n_solves"] == 0  # the one evaluation on the standard fit's own solve
     np.testing.assert_array_equal(res.eps, std.eps)
     # independent: the profiled likelihood (a fresh model) has no lower point nearby --
     # Nelder-Mead from a start half a standard error off returns to the estimate
@@ -71,6 +72,30 @@ def test_consistent_data_keep_the_standard_estimate_after_one_evaluation():
     )  # fmt: skip
     np.testing.assert_allclose(nm.x, 0.0, atol=1e-3)  # the status test's tolerance
     assert nm.fun >= res.loss - 1e-9 * abs(res.loss)
+
+
+@pytest.mark.parametrize("seed, prior", [(0, "shared"), (2, "shared"), (2, "sparse")])
+def test_the_standard_fits_solve_at_its_estimate_is_reused_bit_for_bit(monkeypatch, seed, prior):
+    """The search starts at the standard estimate on the standard fit's own solve there:
+    every number equal to a fit that solves there again (the standard fit's solution
+    withheld), one solve fewer per model, and the solution not kept on the result."""
+    problem, truth, sigma = rod4(seed)
+    opts = {"force_prior": prior}
+    res = fit(problem, truth, formulation="ecfm-random", sigma=sigma, options=opts)
+    standard_fit = random_forces.fit_steady_problem
+    monkeypatch.setattr(
+        random_forces, "fit_steady_problem",
+        lambda *a: dataclasses.replace(standard_fit(*a), solution=None),
+    )  # fmt: skip
+    again = fit(problem, truth, formulation="ecfm-random", sigma=sigma, options=opts)
+    assert res.extra["n_solves"] == again.extra["n_solves"] - (1 if prior == "shared" else 2)
+    assert (res.extra["tau"] > 0) == (seed == 2)
+    for a, b in [(res.eps, again.eps), (res.loss, again.loss), (res.forces, again.forces),
+                 (res.uncertainty.cov, again.uncertainty.cov),
+                 (res.extra["force_stderr"], again.extra["force_stderr"]),
+                 (res.verdict.p_value, again.verdict.p_value)]:  # fmt: skip
+        np.testing.assert_array_equal(a, b)
+    assert res.message == again.message and res.extra["standard"].solution is None
 
 
 def test_tau_positive_at_the_standard_estimate_is_not_the_fast_path():

@@ -67,6 +67,9 @@ class Outcome:
     extra : Details
         The formulation's typed details (:mod:`~ecfm_uq.inverse.core.details`; the keys
         documented on :class:`~ecfm_uq.inverse.InverseResult`).
+    solution : SteadySolution or None
+        The model's solve at ``eps`` where the fit has it (the steady standard fit's), for
+        a fit built on this one to reuse; not carried to the result.
 
     The other fields are the result's (``message``, ``nit``, ``nfev``, ``njev``, the
     histories, ``state``, ``forces``, ``uncertainty``, ``verdict``, ``likelihood``,
@@ -95,6 +98,7 @@ class Outcome:
     names: list | None = None
     problem: Any = None
     extra: Details = field(default_factory=Details)
+    solution: Any = field(default=None, repr=False)
 
     @property
     def optimality(self):

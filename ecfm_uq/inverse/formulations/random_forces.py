@@ -84,11 +84,7 @@ from scipy import optimize, stats
 
 from ...errors import ConvergenceError, ModelEvaluationError
 from ...system import solve_steady
-from ..core.convergence import (
-    SCALED_GRADIENT_TOL,
-    at_bound,
-    scaled_gradient_optimality,
-)
+from ..core.convergence import SCALED_GRADIENT_TOL, at_bound, scaled_gradient_optimality
 from ..core.details import RandomForceDetails
 from ..core.finite_differences import fd_gradient
 from ..core.fitter import Outcome, holds
@@ -169,6 +165,7 @@ class RandomForceModel:
         # by the first linearization)
         self._memo = OrderedDict()
         self._last = None  # (eps bytes, solution, dTheta/deps, dTheta/dlam) of the last solve
+        self.solved = {}  # eps bytes -> a solve made before (the standard fit's), used once
 
     def linearize(self, eps, second=False):
         """:class:`Linearization` at ``eps`` (one solve and one multi-right-hand-side
@@ -176,8 +173,10 @@ class RandomForceModel:
         :math:`\\partial J/\\partial\\epsilon` too, one more back-substitution); raises the
         model's error where it cannot be solved."""
         sysm = self.system
-        sol = solve_steady(sysm, eps, strict=True, **self.problem.solve_options)
-        self.n_solves += 1
+        sol = self.solved.pop(np.asarray(eps, float).tobytes(), None)
+        if sol is None:
+            sol = solve_steady(sysm, eps, strict=True, **self.problem.solve_options)
+            self.n_solves += 1
         r = self.v - self.M @ sysm.mean(sol.Theta)
         dTh_l, dTh_e = sol.lam_sensitivity(), sol.eps_sensitivity()[0]
         A = np.asarray(self.M @ np.einsum("nkc,k->nc", dTh_l, sysm.E1))
@@ -535,6 +534,10 @@ def fit_random_force(problem, eps0, s):
         SCALED_GRADIENT_TOL if s.tol is None else s.tol,
     )  # fmt: skip
     model = RandomForceModel(problem, s.sigma, "shared", s.sigma_label)
+    # the standard fit's solve at its estimate, where the search starts (the same call: the
+    # same bits), kept off the result (it holds the factors)
+    solved, standard = standard.solution, replace(standard, solution=None)
+    model.solved = {} if solved is None else {np.asarray(solved.eps, float).tobytes(): solved}
     x, res = search.run(model, np.zeros(system.n_eps), holds(standard.opt, standard.failure),
                         also=(np.asarray(eps0, float) - eps_std) / scale)  # fmt: skip
     if opts["force_prior"] == "sparse":
@@ -543,6 +546,7 @@ def fit_random_force(problem, eps0, s):
         # valley between them, the lowest kept
         shared = model
         model = RandomForceModel(problem, s.sigma, "sparse", s.sigma_label)
+        model.solved = {} if solved is None else {np.asarray(solved.eps, float).tobytes(): solved}
         starts = [np.zeros(system.n_eps)] + ([x] if np.any(x) else [])
         x, res = search.run_sparse(model, starts)
         model.n_solves += shared.n_solves
@@ -686,12 +690,7 @@ def _verdict(T, p, g_hat, lam, lam_sd, alpha, at_bound):
     zs = np.divide(lam, lam_sd, out=np.zeros_like(lam), where=lam_sd > 0)
     peak = int(np.argmax(np.abs(lam))) if lam.size else None
     parts = [f"restricted likelihood ratio of tau = 0: T = {T:.3g}, p = {p:.3g} (exact null)"]
-    details = {
-        "tau": rms(g_hat),
-        "lr_statistic": T,
-        "peak_force_index": peak,
-        "force_z": zs,
-    }
+    details = {"tau": rms(g_hat), "lr_statistic": T, "peak_force_index": peak, "force_z": zs}
     return decide(
         "likelihood-ratio tau=0", p, alpha, parts, statistic=T, at_bound=at_bound,
         details=details,

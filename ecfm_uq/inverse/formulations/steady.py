@@ -247,6 +247,7 @@ def fit_steady_problem(problem, eps0, s):
         eps_history=out.eps_history,
         loss_history=out.loss_history,
         state=sol.Theta,
+        solution=sol if s.formulation == "standard" else None,
         forces=lam if s.formulation == "ecfm" else None,
         verdict=verdict,
         **measured(out),
