@@ -2,7 +2,7 @@
 
 The Cholesky factor and solves by their LAPACK calls directly (against
 ``scipy.linalg.cho_factor``/``cho_solve``, and their errors), the profiled expected
-information remembered for its last point (against a fresh computation), and the REML
+information the fit reports (against a fresh computation), and the REML
 derivative from linearize's SVD (against one that computes its own).
 """
 
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy import linalg
 
-from ecfm_uq.inverse import SteadyProblem
+from ecfm_uq.inverse import SteadyProblem, fit
 from ecfm_uq.inverse.formulations import random_force_gradient as rg
 from ecfm_uq.inverse.formulations.random_force_scoring import profiled_information
 from ecfm_uq.inverse.formulations.random_forces import RandomForceModel
@@ -58,20 +58,25 @@ def rod_model():
     return RandomForceModel(SteadyProblem(rod.system, rod.M_obs, v), sigma), truth
 
 
-def test_the_information_remembered_is_a_fresh_computations_and_a_copy():
+def test_the_expected_information_reported_is_a_fresh_computations():
+    """The fit's delta method takes the information Fisher scoring computed at its last
+    point (carried on the search's result, not recomputed): it is the inverse of
+    ``profiled_information`` of a fresh model at the estimate, to rounding."""
     model, truth = rod_model()
-    lin = model.linearization(truth, second=True)
-    t = float(model.profiled(truth)[1][0])
+    res = fit(model.problem, truth, formulation="ecfm-random", sigma=model.sigma)
+    assert res.uncertainty.method == "marginal-likelihood-expected"
+    fresh = RandomForceModel(model.problem, model.sigma)
+    t = float(fresh.profiled(res.eps)[1][0])
     assert t > 0.0
-    F1 = profiled_information(lin, model.sigma, t)
-    F1_kept = F1.copy()
-    F1[:] = 0.0  # the caller's copy: not the remembered one
-    F2 = profiled_information(lin, model.sigma, t)
-    np.testing.assert_array_equal(F2, F1_kept)
-    # another Linearization object (the same numbers) is computed afresh: the same bits
-    np.testing.assert_array_equal(profiled_information(replace(lin), model.sigma, t), F1_kept)
-    # another variance: another matrix
-    assert not np.array_equal(profiled_information(lin, model.sigma, 2.0 * t), F1_kept)
+    F = profiled_information(fresh.linearization(res.eps, second=True), model.sigma, t)
+    np.testing.assert_allclose(res.uncertainty.cov, np.linalg.inv(F), rtol=1e-10, atol=0)
+    se = np.sqrt(np.diag(res.uncertainty.cov))
+    np.testing.assert_array_equal(res.uncertainty.stderr, se)
+    np.testing.assert_allclose(
+        res.uncertainty.intervals,
+        res.eps[:, None] + 1.959963984540054 * np.outer(se, [-1, 1]),
+        rtol=1e-14,
+    )
 
 
 def test_the_reml_derivative_from_linearizes_svd_is_its_own():

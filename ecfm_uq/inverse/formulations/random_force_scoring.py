@@ -45,10 +45,11 @@ positive definite) the observed information is kept.
 from __future__ import annotations
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import optimize
 
 from ...errors import ConvergenceError, ModelEvaluationError
 from ..core.result import Uncertainty
+from ..statistics.uncertainty import confidence_intervals
 from .random_force_gradient import cho_factor, cho_solve
 
 __all__ = [
@@ -65,10 +66,6 @@ FAILURES = (ConvergenceError, ModelEvaluationError, np.linalg.LinAlgError, Value
 
 _SCORE_STEP = 1e-6  # scoring ends where its next step would be below this (standard errors)
 _CONDITION = 1e12  # a metric worse conditioned than this is refused (the previous path)
-# the last profiled_information: (lin, (sigma, t), F). Fisher scoring ends at a point
-# whose information it computed, and the delta method asks for it again (a Linearization
-# is immutable, its second derivatives included, so the same object has the same F)
-_LAST_INFORMATION = [None]
 
 
 def profiled_information(lin, sigma, t):
@@ -89,9 +86,6 @@ def profiled_information(lin, sigma, t):
         :math:`F = I_{\\epsilon\\epsilon} - I_{\\epsilon t} I_{tt}^{-1} I_{t\\epsilon}`
         (module docstring), symmetric; :math:`J^T J/\\sigma^2` where ``t`` is 0.
     """
-    last = _LAST_INFORMATION[0]
-    if last is not None and last[0] is lin and last[1] == (sigma, t):
-        return last[2].copy()  # the same point again (the scoring's last, its uncertainty)
     A, J = lin.A, lin.J
     S = sigma**2 * np.eye(A.shape[0]) + t * (A @ A.T)
     chol = cho_factor(S)
@@ -110,57 +104,42 @@ def profiled_information(lin, sigma, t):
                 F[i, j] += 0.5 * np.sum(SidS[i] * SidS[j].T)
         if I_tt > 0.0:
             F = F - np.outer(I_et, I_et) / I_tt
-    F = 0.5 * (F + F.T)
-    _LAST_INFORMATION[0] = (lin, (sigma, t), F.copy())
-    return F
+    return 0.5 * (F + F.T)
 
 
-def expected_uncertainty(model, eps, scale, g_hat, level=0.95):
+def expected_uncertainty(F, eps, scale, level=0.95):
     """The delta method from the profiled expected information at the estimate.
 
     Parameters
     ----------
-    model : RandomForceModel
-        Shared prior; its linearization at ``eps`` with second derivatives is remembered
-        from the gradient measured there (no solve).
+    F : (n_eps, n_eps) ndarray
+        :func:`profiled_information` at ``eps``: the one Fisher scoring computed at the
+        point it returned (``res.information`` of :func:`score`; no solve).
     eps : (n_eps,) ndarray
         The estimate.
     scale : (n_eps,) ndarray
         The search's coordinates (standard errors of the standard fit): ``F`` is checked
         and inverted in them.
-    g_hat : ndarray
-        The force variances at ``eps`` (all :math:`\\hat\\tau^2 > 0`).
     level : float
         Of the normal intervals.
 
     Returns
     -------
     Uncertainty or None
-        :math:`F^{-1}` (:func:`profiled_information`), ``method``
-        ``"marginal-likelihood-expected"``; ``None`` where :math:`\\hat\\tau` is 0, the
-        linearization fails, or ``F`` in the scaled coordinates is not positive definite
-        or is conditioned worse than ``_CONDITION`` (the caller keeps the observed
-        information).
+        :math:`F^{-1}`, ``method`` ``"marginal-likelihood-expected"``; ``None`` where
+        ``F`` in the scaled coordinates is not positive definite or is conditioned worse
+        than ``_CONDITION`` (the caller keeps the observed information).
     """
-    if not np.any(g_hat):
-        return None
-    try:
-        lin = model.linearization(eps, second=True)
-        F = profiled_information(lin, model.sigma, float(np.ravel(g_hat)[0]))
-    except FAILURES:
-        return None
     Fs = F * np.outer(scale, scale)
     w = np.linalg.eigvalsh(Fs)
     if not (np.all(np.isfinite(w)) and w[0] > 0 and w[-1] < _CONDITION * w[0]):
         return None
     cov = np.linalg.inv(Fs) * np.outer(scale, scale)
     cov = 0.5 * (cov + cov.T)
-    se = np.sqrt(np.diag(cov))
-    z = stats.norm.ppf(0.5 + 0.5 * level)
+    se, intervals = confidence_intervals(eps, cov, level)
     return Uncertainty(
         True, "expected information of the marginal likelihood (tau profiled out)", cov, se,
-        np.column_stack([eps - z * se, eps + z * se]), level, "marginal-likelihood-expected",
-        "known",
+        intervals, level, "marginal-likelihood-expected", "known",
     )  # fmt: skip
 
 
@@ -219,15 +198,16 @@ def score(search, model, x0, armijo):
             F = profiled_information(lin, model.sigma, float(g_hat[0]))
         except FAILURES:
             return None
-        F = F * np.outer(search.scale, search.scale)
-        w, V = np.linalg.eigh(F)
+        Fs = F * np.outer(search.scale, search.scale)
+        w, V = np.linalg.eigh(Fs)
         if not (np.all(np.isfinite(w)) and w[0] > 0 and w[-1] < _CONDITION * w[0]):
             return None
         step = -V @ ((V.T @ g) / w)
         size = float(np.max(np.abs(step)))
         if search.optimal(g, x) and size < _SCORE_STEP:
+            # F travels with the point: the delta method's expected information there
             return x, optimize.OptimizeResult(
-                x=x, fun=val, nit=k, njev=k + 1, success=True,
+                x=x, fun=val, nit=k, njev=k + 1, success=True, information=F,
                 message=f"Fisher scoring from the standard estimate ({k} steps)",
             ), size  # fmt: skip
         found = armijo(p, x, step, val, float(g @ step))

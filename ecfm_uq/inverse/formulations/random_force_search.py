@@ -13,8 +13,8 @@ start, else L-BFGS-B with restarts. Then, where :math:`\\hat\\tau > 0` (a long f
 where a small gradient does not mean close), Newton steps with the Hessian by differences
 of the gradient until a step is below 1e-6 standard errors (not after scoring ended at its
 tolerance: its own steps are Newton's in the expected information, which then gives the
-uncertainty, :func:`~ecfm_uq.inverse.formulations.random_force_scoring.expected_uncertainty`;
-the result is marked ``res.scored``); Nelder-Mead from a wide
+uncertainty, :func:`~ecfm_uq.inverse.formulations.random_force_scoring.expected_uncertainty`,
+from ``res.information``); Nelder-Mead from a wide
 simplex where they do not get there, unless the Gauss-Newton information is singular there
 (a minimum at infinity, reported so by the fit: the simplex would only walk along the flat
 direction). Cheaper cases (issue 37 item 5, shared prior): the standard estimate itself
@@ -143,11 +143,9 @@ class Search:
             if scored is not None:
                 # at scoring's tolerance (tau-hat > 0 there): no Newton check by the
                 # central Hessian (2 x.size solves); the uncertainty is the expected
-                # information there (random_force_scoring.expected_uncertainty) and the
-                # status the gradient measured there by the fit
-                x, res = scored[:2]
-                res.scored = True
-                return x, res
+                # information there (res.information, random_force_scoring.
+                # expected_uncertainty) and the status the gradient measured there by the fit
+                return scored[:2]
             found = self._quasi_newton(model, x0)
         x, res = found if found is not None else self._descend(model, x0)
         tau_positive = np.isfinite(res.fun) and np.any(

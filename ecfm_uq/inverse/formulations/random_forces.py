@@ -537,7 +537,8 @@ def fit_random_force(problem, eps0, s):
     # the standard fit's solve at its estimate, where the search starts (the same call: the
     # same bits), kept off the result (it holds the factors)
     solved, standard = standard.solution, replace(standard, solution=None)
-    model.solved = {} if solved is None else {np.asarray(solved.eps, float).tobytes(): solved}
+    seed = {} if solved is None else {np.asarray(solved.eps, float).tobytes(): solved}
+    model.solved = dict(seed)
     x, res = search.run(model, np.zeros(system.n_eps), holds(standard.opt, standard.failure),
                         also=(np.asarray(eps0, float) - eps_std) / scale)  # fmt: skip
     if opts["force_prior"] == "sparse":
@@ -546,7 +547,7 @@ def fit_random_force(problem, eps0, s):
         # valley between them, the lowest kept
         shared = model
         model = RandomForceModel(problem, s.sigma, "sparse", s.sigma_label)
-        model.solved = {} if solved is None else {np.asarray(solved.eps, float).tobytes(): solved}
+        model.solved = dict(seed)
         starts = [np.zeros(system.n_eps)] + ([x] if np.any(x) else [])
         x, res = search.run_sparse(model, starts)
         model.n_solves += shared.n_solves
@@ -564,7 +565,7 @@ def fit_random_force(problem, eps0, s):
     exhausted, failure = res.nit >= search.maxiter, None
     lam, lam_sd = model.forces(lin, g_hat)
     unc = _uncertainty(search.gradient(model), x, scale, standard, g_hat, model, lin,
-                       scored=bool(res.get("scored")))  # fmt: skip
+                       res.get("information"))  # fmt: skip
     message = f"{res.message} [{opt.message}]"
     if opt.converged:
         # a small gradient is not an optimum where the data no longer determine eps (an
@@ -623,11 +624,11 @@ def fit_random_force(problem, eps0, s):
     )  # fmt: skip
 
 
-def _uncertainty(grad, x, scale, standard, g_hat, model, lin, scored=False):
+def _uncertainty(grad, x, scale, standard, g_hat, model, lin, information=None):
     """Delta method of the random-force ECFM; the standard fit's where tau = 0.
 
-    With tau > 0, where the search ended by Fisher scoring (``scored``): the expected
-    information of the profiled marginal likelihood at the estimate (no solve; evidence:
+    With tau > 0, where the search ended by Fisher scoring: its expected information
+    of the profiled marginal likelihood at the estimate (``information``; evidence:
     :mod:`~ecfm_uq.inverse.formulations.random_force_scoring`). Otherwise, or where that
     is not positive definite, the observed information: central differences of ``grad`` of
     :math:`\\ell(\\epsilon, \\hat\\tau(\\epsilon))` in the scaled parameters. Both carry
@@ -643,7 +644,8 @@ def _uncertainty(grad, x, scale, standard, g_hat, model, lin, scored=False):
             u.intervals, u.level, u.method, u.noise_model, u.dof, u.jacobian,
         )  # fmt: skip
     eps = np.asarray(standard.eps, float) + scale * x
-    if scored and (expected := expected_uncertainty(model, eps, scale, g_hat)) is not None:
+    expected = None if information is None else expected_uncertainty(information, eps, scale)
+    if expected is not None:
         return expected
     z = stats.norm.ppf(0.975)
     why = None
