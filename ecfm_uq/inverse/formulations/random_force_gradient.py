@@ -44,9 +44,10 @@ solve's factors for all the right-hand sides.
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import lapack
 
-__all__ = ["cho_factor", "cho_solve", "profiled_gradient", "second_sensitivities"]
+from ...system.solve.factors import cho_factor, cho_solve
+
+__all__ = ["profiled_gradient", "second_sensitivities"]
 
 _STEP = 1e-5  # relative step of the tangent central differences (error ~ step^2)
 _DENSE = 1000  # up to this many unknowns the Jacobian is assembled for its actions
@@ -192,32 +193,3 @@ def _reml_derivative(lin, dA, dJ, sigma, s, a0):
         f_se = (2.0 * (Hu @ du[j]) + u @ dH[j] @ u) / sigma**2 - np.sum(dT[j] * H)
         ds[j] = -(f_se - np.sum(T * dH[j])) / f_ss
     return ds
-
-
-def cho_factor(S):
-    """The upper Cholesky factor of a float64 matrix ``S``: ``scipy.linalg.cho_factor(S)[0]``
-    (the same LAPACK ``potrf`` call, so the same bits, and the same errors: ``ValueError``
-    for a non-finite ``S``, ``LinAlgError`` where it is not positive definite) without
-    scipy's per-call checks and batching wrapper (a few microseconds, several times at
-    every point of the search)."""
-    if not np.isfinite(S).all():
-        raise ValueError("array must not contain infs or NaNs")
-    c, info = lapack.dpotrf(S, lower=0, overwrite_a=0, clean=0)
-    if info > 0:
-        raise np.linalg.LinAlgError(
-            f"{info}-th leading minor of the array is not positive definite"
-        )
-    if info < 0:
-        raise ValueError(f"LAPACK reported an illegal value in {-info}-th argument of POTRF")
-    return c
-
-
-def cho_solve(c, b):
-    """``scipy.linalg.cho_solve((c, False), b)`` for a factor of :func:`cho_factor` (the
-    same LAPACK ``potrs`` call: the same bits; ``ValueError`` for a non-finite ``b``)."""
-    if not np.isfinite(b).all():
-        raise ValueError("array must not contain infs or NaNs")
-    x, info = lapack.dpotrs(c, b, lower=0)
-    if info != 0:
-        raise ValueError(f"illegal value in {-info}th argument of internal potrs")
-    return x

@@ -48,9 +48,9 @@ import numpy as np
 from scipy import optimize
 
 from ...errors import ConvergenceError, ModelEvaluationError
+from ...system.solve.factors import cho_factor, cho_solve
 from ..core.result import Uncertainty
 from ..statistics.uncertainty import confidence_intervals
-from .random_force_gradient import cho_factor, cho_solve
 
 __all__ = [
     "FAILURES",

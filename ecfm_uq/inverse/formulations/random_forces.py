@@ -84,6 +84,7 @@ from scipy import optimize, stats
 
 from ...errors import ConvergenceError, ModelEvaluationError
 from ...system import solve_steady
+from ...system.solve.factors import cho_factor, cho_solve
 from ..core.convergence import SCALED_GRADIENT_TOL, at_bound, scaled_gradient_optimality
 from ..core.details import RandomForceDetails
 from ..core.finite_differences import fd_gradient
@@ -93,7 +94,7 @@ from ..core.settings import FitSettings
 from ..statistics.diagnostics import fd_hessian
 from ..statistics.loglik import LogLikelihood
 from ..statistics.verdict import decide
-from .random_force_gradient import cho_factor, cho_solve, profiled_gradient, second_sensitivities
+from .random_force_gradient import profiled_gradient, second_sensitivities
 from .random_force_scoring import expected_uncertainty
 from .random_force_scoring import gauss_newton_information as _gauss_newton_information
 from .random_force_scoring import singular as _singular

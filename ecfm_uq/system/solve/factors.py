@@ -1,6 +1,6 @@
 """Direct factors: objects with ``solve(rhs, rtol=None)`` and ``solve_transpose``.
 
-Dense LU, sparse LU, the decoupled block factors of a linear Galerkin system and the
+Dense LU (and a dense Cholesky factor and solve by LAPACK directly), sparse LU, the decoupled block factors of a linear Galerkin system and the
 Schur complement of the ECFM bordered system (paper Eq. ecfm_solve).
 """
 
@@ -78,6 +78,35 @@ def _lu_solve(lu, rhs, trans):
         if info == 0:
             return x
     return sla.lu_solve(lu, rhs, trans=trans, check_finite=False)
+
+
+def cho_factor(S):
+    """The upper Cholesky factor of a float64 matrix ``S``: ``scipy.linalg.cho_factor(S)[0]``
+    (the same LAPACK ``potrf`` call, so the same bits, and the same errors: ``ValueError``
+    for a non-finite ``S``, ``LinAlgError`` where it is not positive definite) without
+    scipy's per-call checks and batching wrapper (a few microseconds, several times at
+    every point of the random-force ECFM's search)."""
+    if not np.isfinite(S).all():
+        raise ValueError("array must not contain infs or NaNs")
+    c, info = lapack.dpotrf(S, lower=0, overwrite_a=0, clean=0)
+    if info > 0:
+        raise np.linalg.LinAlgError(
+            f"{info}-th leading minor of the array is not positive definite"
+        )
+    if info < 0:
+        raise ValueError(f"LAPACK reported an illegal value in {-info}-th argument of POTRF")
+    return c
+
+
+def cho_solve(c, b):
+    """``scipy.linalg.cho_solve((c, False), b)`` for a factor of :func:`cho_factor` (the
+    same LAPACK ``potrs`` call: the same bits; ``ValueError`` for a non-finite ``b``)."""
+    if not np.isfinite(b).all():
+        raise ValueError("array must not contain infs or NaNs")
+    x, info = lapack.dpotrs(c, b, lower=0)
+    if info != 0:
+        raise ValueError(f"illegal value in {-info}th argument of internal potrs")
+    return x
 
 
 class SparseFactor:
