@@ -75,6 +75,7 @@ verdict is the same test of :math:`\\tau = 0` at the estimate: one rule for both
 
 from __future__ import annotations
 
+import contextlib
 import functools
 from collections import OrderedDict
 from dataclasses import dataclass, replace
@@ -234,13 +235,12 @@ class RandomForceModel:
             lo, hi = _S_GRID[k - 1], _S_GRID[min(k + 1, _S_GRID.size - 1)]
             slope = self._restricted_slope(lin)
             if slope(lo) > 0.0 > slope(hi):
-                # the stationary point to machine precision (a minimizer of a flat maximum
-                # finds it to sqrt(machine eps) only, too coarse for finite differences
-                # of the profiled likelihood in eps)
-                s_hat = float(
-                    optimize.brentq(slope, lo, hi, xtol=1e-300, rtol=4 * np.finfo(float).eps)
-                )
-                return s_hat, self.nll(lin, s_hat)
+                # the stationary point to machine precision (a bounded minimizer: sqrt(eps),
+                # too coarse for differences of p(eps)); the bounded maximum below where
+                # rounding in the slope keeps Brent from it (eps run far off on a ridge)
+                with contextlib.suppress(RuntimeError):
+                    s = optimize.brentq(slope, lo, hi, xtol=1e-300, rtol=4 * np.finfo(float).eps)
+                    return float(s), self.nll(lin, float(s))
             res = optimize.minimize_scalar(
                 lambda x: -self.restricted_drop(lin.q, lin.xi, np.array([x]))[0],
                 bounds=(lo, hi), method="bounded", options={"xatol": 1e-10 * hi},
