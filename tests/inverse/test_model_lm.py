@@ -146,3 +146,51 @@ def test_a_model_in_pascals_ends_where_minpack_run_to_round_off_does():
     assert res.status is FitStatus.CONVERGED, res.message
     np.testing.assert_allclose(res.eps, ref, rtol=LM_STEP_TOL)
     np.testing.assert_allclose(res.uncertainty.stderr, np.sqrt(np.diag(cov)), rtol=1e-6)
+
+
+def test_minpacks_jacobian_columns_stay_out_of_the_path():
+    """With one-sided differences MINPACK (lmdif) evaluates the p columns of its Jacobian
+    right after each accepted point; the fit counts them as one Jacobian per iterate and
+    keeps them out of its path. Truth: scipy's ``leastsq`` with the same settings, its
+    calls recorded and the columns told apart here by their definition (the point before
+    them moved by sqrt(machine eps)|x_j| in coordinate j alone, j = 0, 1, ... in turn)."""
+    x = np.linspace(-3.0, 3.0, 40)
+
+    def peak(e):
+        return e[0] * np.exp(-0.5 * ((x - e[1]) / e[2]) ** 2) + e[3]
+
+    y = peak([2.0, 0.3, 0.8, 0.5]) + 0.05 * np.random.default_rng(1).standard_normal(x.size)
+    start = np.array([1.5, 0.0, 1.0, 0.3])
+    res = fit(ModelProblem(peak, y), start)
+    calls = []
+
+    def recorded(e):
+        calls.append(np.array(e))
+        return peak(e) - y
+
+    from ecfm_uq.inverse.core.levenberg_marquardt import LM_FTOL
+
+    info = optimize.leastsq(recorded, start, ftol=LM_FTOL, xtol=1e-15, gtol=1e-15,
+                            full_output=True)[2]  # fmt: skip
+    while calls[1].tobytes() == start.tobytes():  # leastsq's shape checks at the start
+        calls.pop(0)
+    h = np.sqrt(np.finfo(float).eps)
+    path, jacobians, base, column = [], 0, None, None
+    for e in calls:
+        if base is not None:
+            j = 0 if column is None else column + 1
+            moved = base.copy()
+            moved[j] = base[j] + (h * abs(base[j]) or h)
+            if e.tobytes() == moved.tobytes():
+                column = None if j == e.size - 1 else j
+                jacobians += j == e.size - 1
+                continue
+        base, column = e, None
+        path.append(e)
+    losses = [0.5 * float(np.sum((peak(e) - y) ** 2)) for e in path]
+    improving = [e for k, e in enumerate(path) if losses[k] < min(losses[:k], default=np.inf)]
+    assert res.success and "brought below" not in res.message, res.message
+    assert res.nit == jacobians >= 3
+    np.testing.assert_array_equal(res.eps_history, np.array(improving))
+    # MINPACK's evaluations and the status test's central differences, 2 per parameter
+    assert len(calls) == info["nfev"] and res.nfev == info["nfev"] + 2 * start.size

@@ -29,6 +29,7 @@ _ROOT_EPS = float(np.sqrt(np.finfo(float).eps))
 
 #: options of the Levenberg-Marquardt driver (MINPACK's lmdif/lmder: :mod:`.minpack`)
 LM_KEYWORDS = ("polish", "ftol", "xtol", "gtol", "x_scale")
+_LM_OPTIONS = frozenset(LM_KEYWORDS)
 #: MINPACK's default ``ftol`` here (the relative decrease of the sum of squares that ends
 #: it): 1e-10, where the status test holds at its end on the calibration benchmark's
 #: problems and on the NIST StRD fits; the estimate is then brought to :data:`LM_STEP_TOL`
@@ -91,8 +92,8 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     polish = bool(options.pop("polish", True))
     if options.pop("x_scale", "jac") != "jac":
         raise ValueError("least_squares_lm scales by the Jacobian only (x_scale='jac')")
-    unknown = sorted(set(options) - set(LM_KEYWORDS))
-    if unknown:
+    if not options.keys() <= _LM_OPTIONS:
+        unknown = sorted(set(options) - _LM_OPTIONS)
         raise TypeError(f"`options` {unknown} are not options of Levenberg-Marquardt")
     tol = OFFSET_TOL if tol is None else tol
     eps0 = np.array(eps0, dtype=float)
@@ -134,12 +135,13 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
     # of squares), kept with its evaluation: the final point costs no model call
     best_loss, best_key, best_ev = np.inf, None, None
     # MINPACK's differencing (lmdif's fdjac2): column j at base + h_j e_j, h_j =
-    # sqrt(machine eps) |base_j| (sqrt(eps) at 0), right after each iterate; recognized
-    # bit for bit, they count as one Jacobian per iterate and stay out of the path. The
-    # expected point's bytes are spliced from the base's (Python floats are IEEE doubles:
-    # the same sum as MINPACK's), one 8-byte slot per column, without an array copy.
+    # sqrt(machine eps) |base_j| (sqrt(eps) at 0), right after each iterate, the p columns
+    # in one run (fdjac2 loops over them without a break). Column 0 is recognized bit for
+    # bit (its point's bytes spliced from the base's: Python floats are IEEE doubles, the
+    # same sum as MINPACK's), the p - 1 after it counted down; they count as one Jacobian
+    # per iterate and stay out of the path.
     root_eps = _ROOT_EPS
-    fd_base, fd_bytes, fd_j, fd_next, fd_njev = None, b"", 0, None, 0
+    fd_next, fd_left, fd_njev = None, 0, 0
 
     # the residual's values alone where MINPACK differences them (its `plain` when it has
     # one: (r, r @ r, y, fresh) with y possibly the model's own array, no Jacobian
@@ -178,17 +180,15 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
         return r
 
     def fun_differenced(x):  # lmdif: the residual alone, columns recognized
-        nonlocal best_loss, best_key, best_ev, fd_base, fd_bytes, fd_j, fd_next, fd_njev, nfev
-        key = x.tobytes()
-        if key == fd_next:  # a column of MINPACK's Jacobian: out of the path
-            fd_j += 1
-            if fd_j < p:  # the point of the next column
-                bj = fd_base[fd_j]
-                e = _pack_double(bj + (root_eps * abs(bj) or root_eps))
-                fd_next = fd_bytes[: 8 * fd_j] + e + fd_bytes[8 * fd_j + 8 :]
-            else:
+        nonlocal best_loss, best_key, best_ev, fd_next, fd_left, fd_njev, nfev
+        if not fd_left:
+            key = x.tobytes()
+            if key == fd_next:  # column 0 of MINPACK's Jacobian: p columns to come
+                fd_left, fd_next = p, None
+        if fd_left:  # a column of MINPACK's Jacobian: out of the path
+            fd_left -= 1
+            if not fd_left:
                 fd_njev += 1
-                fd_next = None
             nfev += 1
             try:
                 return values(x.copy())[0]
@@ -196,8 +196,7 @@ def least_squares_lm(residual, eps0, tol, maxiter, options, check=None, differen
                 failures.append(str(e))
                 return rejected()
         # an iterate or a trial point: the base of the columns that may follow
-        fd_base, fd_bytes, fd_j = x.tolist(), key, 0
-        bj = fd_base[0]
+        bj = x.item(0)
         fd_next = _pack_double(bj + (root_eps * abs(bj) or root_eps)) + key[8:]
         if key == first_key:
             ev = first

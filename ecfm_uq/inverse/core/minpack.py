@@ -13,6 +13,8 @@ its overhead back).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import scipy.optimize as sopt
 
@@ -27,8 +29,10 @@ __all__ = ["lm", "minpack_message"]
 _EPS = float(np.finfo(float).eps)
 
 
+@functools.lru_cache(maxsize=64)
 def minpack_message(info, ftol, xtol, gtol, maxfev):
-    """MINPACK's sentence for its return code ``info`` (the text ``leastsq`` reports)."""
+    """MINPACK's sentence for its return code ``info`` (the text ``leastsq`` reports;
+    remembered: a fit's settings repeat, and the formatting is a few microseconds)."""
     if info == 1:
         return f"Both actual and predicted relative reductions in the sum of squares\n  are at most {ftol:f}"
     if info == 2:

@@ -22,7 +22,6 @@ point reached).
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
@@ -310,12 +309,13 @@ class ModelProblem(InverseProblem):
         ones = self._ones
         flat = len(shape) == 1
 
-        def values(eps, at_start, square=False):
+        def values(eps, at_start=False, square=True):
             """``(r, ss, y, fresh)``: the whitened residual, its sum of squares when
             ``square`` (else ``None``), the predictions and whether ``y`` is a new array
             (else the model's own, which a caller copies before keeping it); predict's
             checks, the finiteness test by one inner product (the sum of squares when
-            asked for: its overflow is then the caller's to silence)."""
+            asked for: its overflow is then the caller's to silence). Its defaults are
+            ``plain``'s."""
             try:
                 y = model(eps)
             except Exception as e:  # a user callback: report any failure with its call
@@ -341,7 +341,7 @@ class ModelProblem(InverseProblem):
             nonlocal first
             # the first call (at eps0) raises the user's errors: nothing was computed yet
             at_start, first = first, False
-            r, _, y, fresh = values(eps, at_start)
+            r, _, y, fresh = values(eps, at_start, False)
             if not fresh:
                 y = y.copy()
 
@@ -358,7 +358,7 @@ class ModelProblem(InverseProblem):
         residual.jacobian_at = jacobian_at
         # ``(r, r @ r, y, fresh)`` at a point after the first, for MINPACK's
         # differencing: no Jacobian closure (the driver silences the squares' overflow)
-        residual.plain = functools.partial(values, at_start=False, square=True)
+        residual.plain = values
         mode = method or self.jac
         residual.jacobian_evaluations = (
             0 if callable(mode) or typical is None else _STENCIL_POINTS[mode] * len(typical)
