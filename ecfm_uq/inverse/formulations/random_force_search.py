@@ -421,6 +421,7 @@ class Search:
             # within that fraction of a standard error
             g = last["g"]
             if g is not None and g.size and self.optimal(g, intermediate_result.x):
+                last["stopped"] = True
                 raise StopIteration
 
         nit, njev, maxiter = 0, 0, self.maxiter
@@ -428,11 +429,14 @@ class Search:
             # the standard errors of a consistent fit can be a poor scale once tau > 0
             # (the optimum may lie many of them away): a stalled line search restarts
             # from where it stopped, with a fresh quasi-Newton memory
+            last["stopped"] = False
             res = optimize.minimize(
                 fun, x, jac=True, method="L-BFGS-B", bounds=self.bnds,
                 callback=stop_when_optimal,
                 options={"maxiter": maxiter - nit, "ftol": 1e-10, "gtol": 1e-6},
             )  # fmt: skip
+            if last["stopped"]:  # our test's stop, in our words, not scipy's StopIteration
+                res.message = "L-BFGS-B stopped by the gradient test (standard-error units)"
             if last["g"] is not None and self.optimal(last["g"], res.x):
                 res.success = True
             moved = np.max(np.abs(res.x - x)) if x.size else 0.0
