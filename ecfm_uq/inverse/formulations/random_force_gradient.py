@@ -47,11 +47,30 @@ import numpy as np
 
 from ...system.solve.factors import cho_factor, cho_solve
 
-__all__ = ["profiled_gradient", "second_sensitivities"]
+__all__ = ["profiled_gradient", "second_sensitivities", "unit_column_svd"]
 
 _STEP = 1e-5  # relative step of the tangent central differences (error ~ step^2)
 _DENSE = 1000  # up to this many unknowns the Jacobian is assembled for its actions
 _MACHINE_EPS = np.finfo(float).eps
+
+
+def unit_column_svd(J):
+    """The span of ``J`` from its unit columns: ``(norms, U, sv, Vt, rank)``, ``J``'s column
+    norms, the full SVD of its nonzero columns scaled to unit norm and its numerical rank.
+
+    The unit columns make the rank independent of the parameters' units and magnitudes (a
+    parameter whose effect is merely small, e.g. a reaction rate 10^eps0 far below the
+    diffusion, still explains its direction); the SVD finds the span where a column
+    vanishes (QR without pivoting misplaces it). The error contrasts of
+    :meth:`~ecfm_uq.inverse.formulations.random_forces.RandomForceModel.linearize` and the
+    REML derivative here both stand on this one factorization.
+    """
+    norms = np.linalg.norm(J, axis=0)
+    live = norms > 0
+    Jn = J[:, live] / norms[live]
+    U, sv, Vt = np.linalg.svd(Jn, full_matrices=True)
+    rank = int(np.sum(sv > max(Jn.shape) * _MACHINE_EPS * sv[0])) if sv.size else 0
+    return norms, U, sv, Vt, rank
 
 
 def second_sensitivities(system, sol, dTh_e, dTh_l, M):
@@ -156,16 +175,9 @@ def _reml_derivative(lin, dA, dJ, sigma, s, a0):
     """:math:`ds/d\\epsilon` of the REML estimate ``s`` (implicit function theorem)."""
     r, A, J = lin.r, lin.A, lin.J
     m = J.shape[1]
-    if getattr(lin, "svd", None) is not None:
-        norms, U, sv, Vt = lin.svd  # linearize's: the same SVD of the same unit columns
-        live = norms > 0
-    else:
-        norms = np.linalg.norm(J, axis=0)
-        live = norms > 0
-        U, sv, Vt = np.linalg.svd(J[:, live] / norms[live], full_matrices=True)
-    n_live = int(np.count_nonzero(live))
-    rank = int(np.sum(sv > max(J.shape[0], n_live) * _MACHINE_EPS * sv[0])) if sv.size else 0
-    if rank < n_live:
+    norms, U, sv, Vt, rank = lin.svd  # linearize's unit_column_svd(J)
+    live = norms > 0
+    if rank < np.count_nonzero(live):
         return None
     K = U[:, rank:]
     Q = K @ K.T

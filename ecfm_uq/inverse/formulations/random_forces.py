@@ -95,7 +95,7 @@ from ..core.settings import FitSettings
 from ..statistics.diagnostics import fd_hessian
 from ..statistics.loglik import LogLikelihood
 from ..statistics.verdict import decide
-from .random_force_gradient import profiled_gradient, second_sensitivities
+from .random_force_gradient import profiled_gradient, second_sensitivities, unit_column_svd
 from .random_force_scoring import expected_uncertainty
 from .random_force_scoring import gauss_newton_information as _gauss_newton_information
 from .random_force_scoring import singular as _singular
@@ -128,7 +128,7 @@ class Linearization:
     J: np.ndarray  # M dE[theta]/deps, (C, n_eps)
     dA: np.ndarray | None = None  # dA/deps, (C, n_forces, n_eps), when asked for
     dJ: np.ndarray | None = None  # dJ/deps, (C, n_eps, n_eps), dJ[:, k, j] = d J_k / d eps_j
-    svd: tuple | None = None  # (norms, U, sv, Vt): J's column norms, SVD of its unit columns
+    svd: tuple | None = None  # unit_column_svd(J): (norms, U, sv, Vt, rank)
 
 
 class RandomForceModel:
@@ -193,21 +193,16 @@ class RandomForceModel:
             self.a0 = float(np.sqrt(max(np.trace(AA) / AA.shape[0], 1e-300)))
         mu, U = np.linalg.eigh(AA / self.a0**2)
         mu = np.maximum(mu, 0.0)
-        # error contrasts: the residual's components orthogonal to what eps can explain.
-        # The span of J is found from its unit columns (a parameter whose effect is merely
-        # small, e.g. a reaction rate 10^eps0 far below the diffusion, still explains its
-        # direction: the rank must not depend on the parameters' units or magnitudes) and
-        # by SVD (QR without pivoting misplaces the span when a column vanishes)
-        norms = np.linalg.norm(J, axis=0)
-        Jn = J[:, norms > 0] / norms[norms > 0]
-        U_J, sv, Vt = np.linalg.svd(Jn, full_matrices=True)
-        rank = int(np.sum(sv > max(Jn.shape) * np.finfo(float).eps * sv[0])) if sv.size else 0
+        # error contrasts: the residual's components orthogonal to what eps can explain
+        # (the span of J from its unit columns, by SVD: unit_column_svd)
+        svd = unit_column_svd(J)
+        U_J, rank = svd[1], svd[4]
         K = U_J[:, rank:]
         xi, V = np.linalg.eigh(K.T @ AA @ K / self.a0**2)
         q = (V.T @ (K.T @ r)) ** 2 / self.sigma**2
         return Linearization(
             np.asarray(eps, float), r, A, mu, (U.T @ r) ** 2, np.maximum(xi, 0.0), q, J, dA, dJ,
-            (norms, U_J, sv, Vt),
+            svd,
         )  # fmt: skip
 
     def nll(self, lin, s):
