@@ -68,6 +68,12 @@ _SCORE_STEP = 1e-6  # scoring ends where its next step would be below this (stan
 _CONDITION = 1e12  # a metric worse conditioned than this is refused (the previous path)
 
 
+def _usable(w):
+    """Whether a metric with eigenvalues ``w`` (ascending) is positive definite and
+    conditioned better than ``_CONDITION``: scoring steps in it, the delta method inverts it."""
+    return bool(np.all(np.isfinite(w)) and w[0] > 0 and w[-1] < _CONDITION * w[0])
+
+
 def profiled_information(lin, sigma, t):
     """The expected information of :math:`\\epsilon` with :math:`t = \\tau^2` profiled out.
 
@@ -132,7 +138,7 @@ def expected_uncertainty(F, eps, scale, level=0.95):
     """
     Fs = F * np.outer(scale, scale)
     w = np.linalg.eigvalsh(Fs)
-    if not (np.all(np.isfinite(w)) and w[0] > 0 and w[-1] < _CONDITION * w[0]):
+    if not _usable(w):
         return None
     cov = np.linalg.inv(Fs) * np.outer(scale, scale)
     cov = 0.5 * (cov + cov.T)
@@ -200,7 +206,7 @@ def score(search, model, x0, armijo):
             return None
         Fs = F * np.outer(search.scale, search.scale)
         w, V = np.linalg.eigh(Fs)
-        if not (np.all(np.isfinite(w)) and w[0] > 0 and w[-1] < _CONDITION * w[0]):
+        if not _usable(w):
             return None
         step = -V @ ((V.T @ g) / w)
         size = float(np.max(np.abs(step)))
