@@ -32,10 +32,10 @@ def test_dense_factor_solves_give_scipys_bits(shape):
     np.testing.assert_allclose(J @ f.solve(bc), bc, atol=1e-12)
 
 
-def term_sum(system, Theta, eps):
+def term_sum(system, Theta, eps, t=None):
     D = np.zeros((system.N * system.P, system.n_eps))
     for term in system.terms:
-        D += term.eps_jacobian(Theta, eps)
+        D += term.eps_jacobian(Theta, eps, t)
     return D
 
 
@@ -62,3 +62,19 @@ def test_eps_jacobian_without_eps_free_terms_is_the_full_sums():
     ])  # fmt: skip
     np.testing.assert_allclose(system.eps_jacobian(Theta, eps), fd, rtol=1e-6, atol=1e-6)
     assert not Coefficient(lambda e: 1.0, lambda e: np.zeros(2)).is_constant
+
+
+def test_eps_jacobian_skips_a_quadratic_term_with_a_constant_coefficient():
+    """Burgers' convection (coefficient 1) beside its eps-dependent diffusion: the sum
+    without the convection's zero columns is the full sum, bit for bit."""
+    from ecfm_uq.problems.burgers import BurgersModel
+
+    system = BurgersModel(n_modes=12, n_steps=5).system
+    kinds = {type(t).__name__: t for t in system.terms}
+    assert kinds["QuadraticTerm"].coef.is_constant
+    eps = np.array([0.2, 0.9])[: system.n_eps]
+    Theta = np.random.default_rng(3).standard_normal((system.N, system.P))
+    assert not np.any(kinds["QuadraticTerm"].eps_jacobian(Theta, eps, 0.5))
+    np.testing.assert_array_equal(
+        system.eps_jacobian(Theta, eps, 0.5), term_sum(system, Theta, eps, 0.5)
+    )

@@ -401,8 +401,8 @@ class GalerkinSystem:
 
 
 def _eps_free(term):
-    """Whether a term does not depend on eps: a linear term with a constant coefficient,
-    a load without a derivative."""
-    if isinstance(term, LinearTerm):
+    """Whether a term does not depend on eps: a linear or quadratic term with a constant
+    coefficient, a load without a derivative."""
+    if isinstance(term, LinearTerm | QuadraticTerm):
         return term.coef.is_constant
     return isinstance(term, LoadTerm) and term.dF is None
