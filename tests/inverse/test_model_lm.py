@@ -148,19 +148,36 @@ def test_a_model_in_pascals_ends_where_minpack_run_to_round_off_does():
     np.testing.assert_allclose(res.uncertainty.stderr, np.sqrt(np.diag(cov)), rtol=1e-6)
 
 
-def test_minpacks_jacobian_columns_stay_out_of_the_path():
-    """With one-sided differences MINPACK (lmdif) evaluates the p columns of its Jacobian
-    right after each accepted point; the fit counts them as one Jacobian per iterate and
-    keeps them out of its path. Truth: scipy's ``leastsq`` with the same settings, its
-    calls recorded and the columns told apart here by their definition (the point before
-    them moved by sqrt(machine eps)|x_j| in coordinate j alone, j = 0, 1, ... in turn)."""
+def _peak_on_a_background():
     x = np.linspace(-3.0, 3.0, 40)
 
     def peak(e):
         return e[0] * np.exp(-0.5 * ((x - e[1]) / e[2]) ** 2) + e[3]
 
     y = peak([2.0, 0.3, 0.8, 0.5]) + 0.05 * np.random.default_rng(1).standard_normal(x.size)
-    start = np.array([1.5, 0.0, 1.0, 0.3])
+    return peak, y, np.array([1.5, 0.0, 1.0, 0.3])
+
+
+def _relaxation_in_seconds():
+    """One parameter in SI units: a relaxation rate k ~ 2.5e9 1/s read over nanoseconds."""
+    t = np.linspace(0.0, 2e-9, 30)
+
+    def relax(e):
+        return 3e-3 * np.exp(-e[0] * t)
+
+    y = relax([2.5e9]) * (1 + 0.01 * np.random.default_rng(4).standard_normal(t.size))
+    return relax, y, np.array([1.0e9])
+
+
+@pytest.mark.parametrize("problem", [_peak_on_a_background, _relaxation_in_seconds])
+def test_minpacks_jacobian_columns_stay_out_of_the_path(problem):
+    """With one-sided differences MINPACK (lmdif) evaluates the p columns of its Jacobian
+    right after each accepted point; the fit counts them as one Jacobian per iterate and
+    keeps them out of its path (p = 4, and p = 1 in SI units: a Jacobian of one column).
+    Truth: scipy's ``leastsq`` with the same settings, its calls recorded and the columns
+    told apart here by their definition (the point before them moved by sqrt(machine
+    eps)|x_j| in coordinate j alone, j = 0, 1, ... in turn)."""
+    peak, y, start = problem()
     res = fit(ModelProblem(peak, y), start)
     calls = []
 
